@@ -1,0 +1,141 @@
+"""In-memory form of one recorded run, whatever it was read from.
+
+Conventions used everywhere in the project:
+
+* Times are float64 seconds relative to ``Recording.t0`` (the absolute UNIX
+  time of the first message, also in seconds). TUM files written by the
+  project carry absolute stamps ``t0 + t``.
+* The world frame is ENU-like and planar: x east, y north, yaw measured from
+  the x axis counter-clockwise, in radians, wrapped to (-pi, pi].
+* The body frame follows REP-103: x forward, y left, z up.
+* Component names (the diagnosis vocabulary) are the paper's:
+  ``ODO`` (track odometry), ``IMU_GYRO`` (gyroscope), ``IMU_YAW`` (compass),
+  ``SM`` (laser scan matching), ``GPS``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+COMPONENTS: tuple[str, ...] = ("ODO", "IMU_GYRO", "IMU_YAW", "SM", "GPS")
+
+Interval = tuple[float, float]
+
+
+@dataclass
+class Trajectory:
+    """Planar poses over time: ``t`` (n,) s, ``x``/``y`` (n,) m, ``yaw`` (n,) rad."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    yaw: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def xy(self) -> np.ndarray:
+        """Positions as an (n, 2) array."""
+        return np.column_stack([self.x, self.y])
+
+
+@dataclass
+class Scans:
+    """2D laser scans.
+
+    ``ranges`` is (n, beams) float32 in metres; a beam without a return is
+    ``inf`` (REP-117) or NaN, or a value outside [range_min, range_max].
+    ``angles`` (beams,) are the beam angles in the laser frame, rad.
+    """
+
+    t: np.ndarray
+    ranges: np.ndarray
+    angles: np.ndarray
+    range_min: float
+    range_max: float
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass
+class Gyro:
+    """Yaw rate about the body z axis: ``rate`` (n,) rad/s."""
+
+    t: np.ndarray
+    rate: np.ndarray
+
+
+@dataclass
+class Compass:
+    """Heading of the robot in the world frame, ``yaw`` (n,) rad.
+
+    ``field`` (n, 3) is the raw magnetic field in the body frame in tesla when
+    the heading came from a magnetometer (None when it came from an IMU's
+    orientation estimate); plausibility observers use its strength and dip.
+    """
+
+    t: np.ndarray
+    yaw: np.ndarray
+    field: np.ndarray | None = None
+
+
+@dataclass
+class Gps:
+    """GPS fixes projected to the local world frame about a datum.
+
+    ``x``/``y`` (n,) m; ``sigma`` (n,) m, the horizontal standard deviation
+    reported by the receiver; ``status`` (n,) int, NavSatStatus (0 fix,
+    1 SBAS, 2 GBAS; fixes without a position are dropped by the readers).
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    sigma: np.ndarray
+    status: np.ndarray
+
+
+@dataclass
+class MagneticReference:
+    """The undisturbed local Earth field: strength (T), dip (rad, positive
+    downward, as in the northern hemisphere) and declination (rad, east
+    positive)."""
+
+    strength_T: float
+    dip_rad: float
+    declination_rad: float = 0.0
+
+
+@dataclass
+class Recording:
+    """One run: every stream is optional, since real robots differ.
+
+    ``odometry`` is the pose integrated by the robot's odometry in its own
+    ``odom`` frame. ``faults`` maps a component name to the intervals (s, in
+    the recording's time) where its output is physically wrong beyond its
+    nominal noise; it is known only for simulated runs.
+    """
+
+    name: str
+    t0: float = 0.0
+    scans: Scans | None = None
+    gyro: Gyro | None = None
+    compass: Compass | None = None
+    odometry: Trajectory | None = None
+    gps: Gps | None = None
+    groundtruth: Trajectory | None = None
+    faults: dict[str, list[Interval]] = field(default_factory=dict)
+    magnetic_reference: MagneticReference | None = None
+
+    @property
+    def duration(self) -> float:
+        """Time from the first to the last message of any stream, s."""
+        ends = [
+            s.t[-1]
+            for s in (self.scans, self.gyro, self.compass, self.odometry, self.gps, self.groundtruth)
+            if s is not None and len(s.t)
+        ]
+        return float(max(ends)) if ends else 0.0
