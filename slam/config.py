@@ -152,14 +152,26 @@ class BackendConfig(Strict):
     ``initial_pose``: ``groundtruth`` anchors the first keyframe at the
     reference's first pose (so unaligned ATE is meaningful), ``origin`` at
     (0, 0) with the first compass heading if any, else yaw 0.
+
+    ``optimizer``: batch Levenberg-Marquardt, incremental iSAM2, or GTSAM's
+    graduated non-convexity with a truncated-least-squares or Geman-McClure
+    loss. ``robust_kernel`` wraps every measurement factor's noise in an
+    M-estimator with parameter ``robust_param`` (in sigmas).
+    ``fallback_inflation``: when validation excludes every translational
+    factor of a step, the least penalised one stays with its sigma times
+    this, so the graph stays connected.
     """
 
-    optimizer: Literal["batch", "isam2"] = "batch"
+    optimizer: Literal["batch", "isam2", "gnc_tls", "gnc_gm"] = "batch"
     initial_pose: Literal["groundtruth", "origin"] = "groundtruth"
     initial_sigma_xy_m: float = Field(0.01, gt=0.0)
     initial_sigma_yaw_deg: float = Field(0.5, gt=0.0)
     max_iterations: int = Field(100, ge=1)
     relative_error_tol: float = Field(1e-6, gt=0.0)
+    robust_kernel: Literal["none", "huber", "cauchy", "dcs"] = "none"
+    robust_param: float = Field(1.345, gt=0.0)
+    gnc_inlier_probability: float | None = Field(None, gt=0.0, lt=1.0)
+    fallback_inflation: float = Field(10.0, ge=1.0)
     factors: FactorsConfig = FactorsConfig()
 
 

@@ -1,0 +1,239 @@
+"""GTSAM Pose2 back-end over keyframes.
+
+The graph is built step by step: step ``k`` adds the factors that end at
+keyframe ``k`` (between factors from k-1, priors at k). Batch optimisation
+(Levenberg-Marquardt or GTSAM's graduated non-convexity) adds all steps and
+solves once; iSAM2 adds one step at a time as it would run on the robot.
+
+Each factor's noise is scaled per step by a *weight* (a sigma multiplier)
+that sensor validation decides: 1 keeps the configured noise, k > 1
+inflates it, ``inf`` excludes the factor.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from slam.config import BackendConfig
+from slam.factors import (
+    between_factor,
+    gaussian,
+    pose_key,
+    position_prior_factor,
+    yaw_increment_factor,
+    yaw_prior_factor,
+)
+from slam.measurements import FACTOR_TYPES, Measurements
+from slam.recording import Trajectory
+
+log = logging.getLogger(__name__)
+
+FactorWeights = dict[str, np.ndarray]
+"""Per factor type, a sigma multiplier per step (K,); ``inf`` excludes."""
+
+
+def unit_weights(n_steps: int) -> FactorWeights:
+    """Every factor included with its configured noise."""
+    return {f: np.ones(n_steps) for f in FACTOR_TYPES}
+
+
+@dataclass
+class BackendResult:
+    """Optimised keyframe poses and bookkeeping.
+
+    ``factor_counts``: factors of each type in the graph. ``fallback_steps``:
+    steps where every translational factor was excluded and the least
+    penalised one was kept, inflated, so the graph stays connected.
+    """
+
+    trajectory: Trajectory
+    build_time_s: float
+    optimise_time_s: float
+    factor_counts: dict[str, int] = field(default_factory=dict)
+    fallback_steps: int = 0
+    iterations: int = 0
+
+
+def _robust_kernel(config: BackendConfig):
+    kernel, c = config.robust_kernel, config.robust_param
+    if kernel == "none":
+        return None
+    est = gtsam.noiseModel.mEstimator
+    return {"huber": est.Huber, "cauchy": est.Cauchy, "dcs": est.DCS}[kernel].Create(c)
+
+
+class GraphBuilder:
+    """Turns measurements and weights into GTSAM factors, one step at a time."""
+
+    BETWEEN = ("odometry", "scan_matching")
+
+    def __init__(self, meas: Measurements, weights: FactorWeights, config: BackendConfig):
+        self.meas = meas
+        self.weights = weights
+        self.config = config
+        self.robust = _robust_kernel(config)
+        self.counts = {f: 0 for f in FACTOR_TYPES}
+        self.fallback_steps = 0
+
+    def _weight(self, factor: str, k: int) -> float:
+        w = self.weights.get(factor)
+        return 1.0 if w is None else float(w[k])
+
+    def _available(self, factor: str, k: int) -> bool:
+        m = self.meas.get(factor)
+        return m is not None and bool(m.valid[k])
+
+    def _between_weights(self, k: int) -> dict[str, float]:
+        """Weights of the between factors at step k; if all are excluded,
+        keep the least penalised one inflated by ``fallback_inflation``."""
+        present = {f: self._weight(f, k) for f in self.BETWEEN if self._available(f, k)}
+        if not present or any(np.isfinite(w) for w in present.values()):
+            return present
+        self.fallback_steps += 1
+        keep = "odometry" if "odometry" in present else next(iter(present))
+        return {keep: self.config.fallback_inflation}
+
+    def step(self, k: int) -> list[gtsam.NonlinearFactor]:
+        """Factors of step ``k``; step 0 holds only what is measured at k = 0."""
+        m, out = self.meas, []
+        if k > 0:
+            for factor, w in self._between_weights(k).items():
+                if np.isfinite(w):
+                    meas = m.get(factor)
+                    out.append(between_factor(k, meas.delta[k], gaussian(meas.sigma[k] * w, self.robust)))
+                    self.counts[factor] += 1
+            if self._available("gyro", k) and np.isfinite(w := self._weight("gyro", k)):
+                out.append(yaw_increment_factor(k, m.gyro.value[k], gaussian([m.gyro.sigma[k] * w], self.robust)))
+                self.counts["gyro"] += 1
+        if self._available("compass", k) and np.isfinite(w := self._weight("compass", k)):
+            out.append(yaw_prior_factor(k, m.compass.value[k], gaussian([m.compass.sigma[k] * w], self.robust)))
+            self.counts["compass"] += 1
+        if self._available("gps", k) and np.isfinite(w := self._weight("gps", k)):
+            s = m.gps.sigma[k] * w
+            out.append(position_prior_factor(k, m.gps.xy[k], gaussian([s, s], self.robust)))
+            self.counts["gps"] += 1
+        return out
+
+    def anchor(self, pose0: np.ndarray) -> gtsam.NonlinearFactor:
+        """Prior that fixes the graph's frame at the first keyframe."""
+        c = self.config
+        sig = np.array([c.initial_sigma_xy_m, c.initial_sigma_xy_m, np.radians(c.initial_sigma_yaw_deg)])
+        return gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(*pose0), gaussian(sig))
+
+    def predict(self, k: int, previous: gtsam.Pose2) -> gtsam.Pose2:
+        """Initial guess of keyframe k from k-1: odometry, else scan matching,
+        else the gyro's yaw increment, else standing still."""
+        for factor in self.BETWEEN:
+            if self._available(factor, k):
+                return previous.compose(gtsam.Pose2(*self.meas.get(factor).delta[k]))
+        if self._available("gyro", k):
+            return previous.compose(gtsam.Pose2(0.0, 0.0, self.meas.gyro.value[k]))
+        return previous
+
+
+def _to_trajectory(t: np.ndarray, values: gtsam.Values) -> Trajectory:
+    poses = np.array([[p.x(), p.y(), p.theta()] for p in (values.atPose2(pose_key(k)) for k in range(len(t)))])
+    return Trajectory(t=t.copy(), x=poses[:, 0], y=poses[:, 1], yaw=poses[:, 2])
+
+
+def _optimise_batch(graph, initial, config: BackendConfig, anchor_index: int):
+    if config.optimizer.startswith("gnc"):
+        params = gtsam.GncLMParams()
+        params.setLossType(gtsam.GncLossType.TLS if config.optimizer == "gnc_tls" else gtsam.GncLossType.GM)
+        params.setKnownInliers([anchor_index])
+        params.setMaxIterations(config.max_iterations)
+        optimizer = gtsam.GncLMOptimizer(graph, initial, params)
+        if config.gnc_inlier_probability is not None:
+            optimizer.setInlierCostThresholdsAtProbability(config.gnc_inlier_probability)
+        return optimizer.optimize(), 0
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(config.max_iterations)
+    params.setRelativeErrorTol(config.relative_error_tol)
+    optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
+    result = optimizer.optimize()
+    return result, optimizer.iterations()
+
+
+def optimise(
+    meas: Measurements,
+    initial_pose: np.ndarray,
+    config: BackendConfig,
+    weights: FactorWeights | None = None,
+    progress: bool = False,
+) -> BackendResult:
+    """Build the keyframe graph and optimise it (batch, GNC or iSAM2).
+
+    ``initial_pose`` (x, y, yaw) anchors keyframe 0 in the world frame.
+    """
+    n = len(meas)
+    builder = GraphBuilder(meas, weights if weights is not None else unit_weights(n), config)
+    steps = range(n)
+    if progress:
+        from tqdm import tqdm
+
+        steps = tqdm(steps, desc="graph", unit="kf", leave=False)
+
+    if config.optimizer == "isam2":
+        return _optimise_isam2(builder, meas, np.asarray(initial_pose, float), steps)
+
+    start = time.perf_counter()
+    graph, initial = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    graph.add(builder.anchor(initial_pose))
+    pose = gtsam.Pose2(*initial_pose)
+    for k in steps:
+        if k > 0:
+            pose = builder.predict(k, pose)
+        initial.insert(pose_key(k), pose)
+        for factor in builder.step(k):
+            graph.add(factor)
+    built = time.perf_counter()
+    result, iterations = _optimise_batch(graph, initial, config, anchor_index=0)
+    done = time.perf_counter()
+    if builder.fallback_steps:
+        log.warning("%d steps had every translational factor excluded; kept one inflated", builder.fallback_steps)
+    return BackendResult(
+        trajectory=_to_trajectory(meas.t, result),
+        build_time_s=built - start,
+        optimise_time_s=done - built,
+        factor_counts=dict(builder.counts),
+        fallback_steps=builder.fallback_steps,
+        iterations=iterations,
+    )
+
+
+def _optimise_isam2(builder: GraphBuilder, meas: Measurements, initial_pose: np.ndarray, steps) -> BackendResult:
+    params = gtsam.ISAM2Params()
+    isam = gtsam.ISAM2(params)
+    build_s = opt_s = 0.0
+    latest = gtsam.Pose2(*initial_pose)
+    for k in steps:
+        t0 = time.perf_counter()
+        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        if k == 0:
+            graph.add(builder.anchor(initial_pose))
+        else:
+            latest = builder.predict(k, latest)
+        values.insert(pose_key(k), latest)
+        for factor in builder.step(k):
+            graph.add(factor)
+        t1 = time.perf_counter()
+        isam.update(graph, values)
+        latest = isam.calculateEstimatePose2(pose_key(k))
+        t2 = time.perf_counter()
+        build_s += t1 - t0
+        opt_s += t2 - t1
+    t1 = time.perf_counter()
+    estimate = isam.calculateEstimate()
+    opt_s += time.perf_counter() - t1
+    return BackendResult(
+        trajectory=_to_trajectory(meas.t, estimate),
+        build_time_s=build_s,
+        optimise_time_s=opt_s,
+        factor_counts=dict(builder.counts),
+        fallback_steps=builder.fallback_steps,
+    )

@@ -1,0 +1,102 @@
+"""Laser front-end: KISS-ICP on 2D scans.
+
+Each scan becomes points at z = 0 in the laser frame (beams without a return
+or outside [min_range, max_range] dropped) and is registered by KISS-ICP
+against its local map. The result is one planar pose per scan in the frame
+of the first scan; relative poses between keyframes and the scan-matching
+yaw and distance streams for validation come from it.
+
+KISS-ICP reports no quality of its own: with no points in range it returns
+its constant-velocity prediction, with one straight wall it slides along it.
+That silent failure is what sensor validation is for, so the front-end does
+not try to detect it.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from slam.config import FrontendConfig
+from slam.recording import Scans, Trajectory
+
+log = logging.getLogger(__name__)
+
+
+def scan_points(ranges: np.ndarray, angles: np.ndarray, min_range: float, max_range: float) -> np.ndarray:
+    """Points (m, 3) of one scan in the laser frame, z = 0.
+
+    Beams that are not finite or fall outside [min_range, max_range) are
+    dropped: a beam at the maximum range is a "no return" on many scanners.
+    """
+    r = np.asarray(ranges, dtype=np.float64)
+    keep = np.isfinite(r) & (r >= min_range) & (r < max_range)
+    rk, ak = r[keep], angles[keep]
+    return np.column_stack([rk * np.cos(ak), rk * np.sin(ak), np.zeros_like(rk)])
+
+
+@dataclass
+class FrontendResult:
+    """Scan-matching output.
+
+    ``poses``: KISS-ICP pose of every scan (planar projection, frame of the
+    first scan). ``n_points``: points in range per scan. ``time_s``: wall
+    time of the registration.
+    """
+
+    poses: Trajectory
+    n_points: np.ndarray
+    time_s: float
+
+
+class ScanMatcher:
+    """KISS-ICP configured for a 2D scanner."""
+
+    def __init__(self, config: FrontendConfig, range_max: float):
+        from kiss_icp.config import KISSConfig
+        from kiss_icp.kiss_icp import KissICP
+
+        self.config = config
+        self.max_range = min(config.max_range_m, range_max)
+        kiss = KISSConfig()
+        kiss.data.max_range = self.max_range
+        kiss.data.min_range = config.min_range_m
+        kiss.data.deskew = False  # 2D scanners give no per-point stamps
+        kiss.mapping.voxel_size = config.voxel_size_m
+        kiss.mapping.max_points_per_voxel = config.max_points_per_voxel
+        kiss.adaptive_threshold.initial_threshold = config.initial_threshold_m
+        kiss.adaptive_threshold.min_motion_th = config.min_motion_m
+        kiss.registration.max_num_iterations = config.max_iterations
+        kiss.registration.max_num_threads = 1
+        self._icp = KissICP(kiss)
+
+    def register(self, points: np.ndarray) -> tuple[float, float, float]:
+        """Register one scan; returns the planar pose (x, y, yaw) of the laser."""
+        self._icp.register_frame(points, np.zeros(len(points)))
+        pose = self._icp.last_pose
+        return float(pose[0, 3]), float(pose[1, 3]), float(np.arctan2(pose[1, 0], pose[0, 0]))
+
+
+def run_frontend(scans: Scans, config: FrontendConfig, progress: bool = False) -> FrontendResult:
+    """Register every scan with KISS-ICP; see :class:`FrontendResult`."""
+    matcher = ScanMatcher(config, scans.range_max)
+    n = len(scans)
+    xyyaw = np.zeros((n, 3))
+    n_points = np.zeros(n, dtype=np.int64)
+    start = time.perf_counter()
+    iterator = range(n)
+    if progress:
+        from tqdm import tqdm
+
+        iterator = tqdm(iterator, desc="scan matching", unit="scan", leave=False)
+    for i in iterator:
+        pts = scan_points(scans.ranges[i], scans.angles, config.min_range_m, matcher.max_range)
+        n_points[i] = len(pts)
+        xyyaw[i] = matcher.register(pts)
+    elapsed = time.perf_counter() - start
+    log.info("KISS-ICP registered %d scans in %.2f s", n, elapsed)
+    poses = Trajectory(t=scans.t.copy(), x=xyyaw[:, 0], y=xyyaw[:, 1], yaw=xyyaw[:, 2])
+    return FrontendResult(poses=poses, n_points=n_points, time_s=elapsed)

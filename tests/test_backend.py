@@ -1,0 +1,127 @@
+"""Factors and the back-end on small hand-built graphs with known answers."""
+
+import gtsam
+import numpy as np
+import pytest
+
+from slam.backend import optimise, unit_weights
+from slam.config import BackendConfig
+from slam.factors import pose_key, yaw_increment_factor
+from slam.measurements import BetweenMeasurement, Measurements, PositionMeasurement, ScalarMeasurement, relative_poses
+
+
+def _between(deltas, sigma=(0.1, 0.1, 0.01)):
+    k = len(deltas)
+    return BetweenMeasurement(
+        delta=np.asarray(deltas, float), sigma=np.tile(sigma, (k, 1)), valid=np.r_[False, np.ones(k - 1, bool)]
+    )
+
+
+def _scalar(values, sigma, valid=None):
+    values = np.asarray(values, float)
+    valid = np.ones(len(values), bool) if valid is None else np.asarray(valid)
+    return ScalarMeasurement(value=values, sigma=np.full(len(values), sigma), valid=valid)
+
+
+def test_three_poses_odometry_only_reproduce_the_chain():
+    deltas = [[0, 0, 0], [1.0, 0, np.pi / 2], [1.0, 0, 0]]
+    meas = Measurements(t=np.arange(3.0), scan_index=None, odometry=_between(deltas))
+    res = optimise(meas, np.zeros(3), BackendConfig())
+    traj = res.trajectory
+    np.testing.assert_allclose(traj.x, [0, 1, 1], atol=1e-6)
+    np.testing.assert_allclose(traj.y, [0, 0, 1], atol=1e-6)
+    np.testing.assert_allclose(traj.yaw, [0, np.pi / 2, np.pi / 2], atol=1e-6)
+    assert res.factor_counts["odometry"] == 2
+
+
+def test_two_between_sources_are_fused_by_their_information():
+    # Odometry says 1.0 m (sigma 0.1), scan matching 1.3 m (sigma 0.2):
+    # the weighted mean is (1.0/0.01 + 1.3/0.04) / (1/0.01 + 1/0.04) = 1.06.
+    odo = _between([[0, 0, 0], [1.0, 0, 0]], sigma=(0.1, 0.1, 0.01))
+    sm = _between([[0, 0, 0], [1.3, 0, 0]], sigma=(0.2, 0.2, 0.01))
+    meas = Measurements(t=np.arange(2.0), scan_index=None, odometry=odo, scan_matching=sm)
+    cfg = BackendConfig(initial_sigma_xy_m=1e-4)
+    x1 = optimise(meas, np.zeros(3), cfg).trajectory.x[1]
+    assert x1 == pytest.approx(1.06, abs=1e-4)
+
+
+def test_compass_prior_and_gyro_increment_fuse_yaw():
+    # Anchor yaw 0 (sigma 0.5 deg), gyro says +0.1 rad (sigma 0.01), compass
+    # says 0.2 rad at keyframe 1 (sigma 0.01): yaw1 is near the mean 0.15.
+    meas = Measurements(
+        t=np.arange(2.0),
+        scan_index=None,
+        odometry=_between([[0, 0, 0], [0.5, 0, 0.1]], sigma=(0.05, 0.05, 10.0)),
+        gyro=_scalar([0.0, 0.1], 0.01, valid=[False, True]),
+        compass=_scalar([0.0, 0.2], 0.01, valid=[False, True]),
+    )
+    cfg = BackendConfig(initial_sigma_yaw_deg=1e-3)
+    yaw1 = optimise(meas, np.zeros(3), cfg).trajectory.yaw[1]
+    assert yaw1 == pytest.approx(0.15, abs=1e-3)
+
+
+def test_gps_prior_pulls_position_and_weights_exclude_it():
+    odo = _between([[0, 0, 0], [1, 0, 0], [1, 0, 0]], sigma=(0.1, 0.1, 0.001))
+    gps = PositionMeasurement(xy=np.array([[0, 0], [1, 0], [2.3, 0]]), sigma=np.full(3, 0.1), valid=np.ones(3, bool))
+    meas = Measurements(t=np.arange(3.0), scan_index=None, odometry=odo, gps=gps)
+    cfg = BackendConfig(initial_sigma_xy_m=1e-4)
+    # x2: odometry says 2.0 (sigma 0.1 from x1), GPS says 2.3 (sigma 0.1),
+    # x1 also pulled by its own GPS at 1.0; the least-squares answer is 2.2.
+    # (x1 = 1 + (x2-2.0)/3..: solve the 2x2 normal equations by hand.)
+    a = np.array([[3.0, -1.0], [-1.0, 2.0]])  # rows: x1, x2 (unit information)
+    b = np.array([1.0 + 1.0 - 1.0, 1.0 + 2.3])
+    x1_exp, x2_exp = np.linalg.solve(a, b)
+    traj = optimise(meas, np.zeros(3), cfg).trajectory
+    assert traj.x[1] == pytest.approx(x1_exp, abs=1e-4)
+    assert traj.x[2] == pytest.approx(x2_exp, abs=1e-4)
+    weights = unit_weights(3)
+    weights["gps"][:] = np.inf
+    res = optimise(meas, np.zeros(3), cfg, weights)
+    assert res.trajectory.x[2] == pytest.approx(2.0, abs=1e-4)
+    assert res.factor_counts["gps"] == 0
+
+
+def test_excluding_every_translational_factor_keeps_one_inflated():
+    odo = _between([[0, 0, 0], [1, 0, 0], [1, 0, 0]])
+    meas = Measurements(t=np.arange(3.0), scan_index=None, odometry=odo)
+    weights = unit_weights(3)
+    weights["odometry"][2] = np.inf
+    res = optimise(meas, np.zeros(3), BackendConfig(), weights)
+    assert res.fallback_steps == 1
+    assert res.trajectory.x[2] == pytest.approx(2.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("optimizer", ["batch", "isam2", "gnc_tls", "gnc_gm"])
+def test_every_optimizer_solves_a_consistent_graph(optimizer):
+    rng = np.random.default_rng(0)
+    truth = np.cumsum(np.column_stack([np.full(20, 0.5), np.zeros(20), rng.normal(0, 0.1, 20)]), axis=0)
+    truth[:, :2] = 0
+    for k in range(1, 20):  # integrate a curvy path
+        c, s = np.cos(truth[k - 1, 2]), np.sin(truth[k - 1, 2])
+        truth[k, 0] = truth[k - 1, 0] + 0.5 * c
+        truth[k, 1] = truth[k - 1, 1] + 0.5 * s
+    deltas = np.zeros_like(truth)
+    deltas[1:] = relative_poses(truth[:-1], truth[1:])
+    meas = Measurements(t=np.arange(20.0), scan_index=None, odometry=_between(deltas))
+    traj = optimise(meas, truth[0], BackendConfig(optimizer=optimizer)).trajectory
+    np.testing.assert_allclose(np.column_stack([traj.x, traj.y]), truth[:, :2], atol=1e-5)
+
+
+def test_yaw_increment_factor_jacobians_match_numerical_derivatives():
+    factor = yaw_increment_factor(1, 0.3, gtsam.noiseModel.Isotropic.Sigma(1, 1.0))
+    values = gtsam.Values()
+    values.insert(pose_key(0), gtsam.Pose2(0.2, -0.1, 0.4))
+    values.insert(pose_key(1), gtsam.Pose2(1.0, 0.5, 0.9))
+    jac = factor.linearize(values).jacobian()[0]  # [H0 | H1], whitened (sigma 1)
+    eps = 1e-6
+    numeric = np.zeros((1, 6))
+    for j, key in enumerate([pose_key(0), pose_key(1)]):
+        for d in range(3):
+            for sign in (+1, -1):
+                v = gtsam.Values(values)
+                xi = np.zeros(3)
+                xi[d] = sign * eps
+                v.update(key, values.atPose2(key).retract(xi))
+                numeric[0, 3 * j + d] += sign * factor.unwhitenedError(v)[0] / (2 * eps)
+    np.testing.assert_allclose(jac, numeric, atol=1e-6)
+    assert factor.unwhitenedError(values)[0] == pytest.approx(0.9 - 0.4 - 0.3)
