@@ -1,0 +1,276 @@
+"""One recorded run, end to end: read, scan matching, keyframes,
+measurements, validation, graph optimisation, evaluation, results.
+
+:class:`MappingPipeline.run` reads like the table of contents; every step is
+a method. The result folder is written into a temporary sibling and renamed
+into place at the end, so a killed run leaves a complete folder or none.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from slam.backend import BackendResult, FactorWeights, optimise, unit_weights
+from slam.config import PipelineConfig, dump_config
+from slam.errors import GslamError
+from slam.frontend import FrontendResult, run_frontend, scan_points
+from slam.measurements import Measurements, build_measurements, interpolate_poses, select_keyframes
+from slam.recording import Recording, Trajectory
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class MapResult:
+    """What ``gslam map`` produced: the folder, the metrics and the estimate."""
+
+    out_dir: Path
+    metrics: dict[str, Any]
+    trajectory: Trajectory
+    recording: Recording | None = None
+
+
+@dataclass
+class _Timings:
+    read_s: float = 0.0
+    frontend_s: float = 0.0
+    validation_s: float = 0.0
+    graph_build_s: float = 0.0
+    optimise_s: float = 0.0
+    write_s: float = 0.0
+    extra: dict[str, float] = field(default_factory=dict)
+
+
+class MappingPipeline:
+    """Map one run with the given config; see :meth:`run`.
+
+    ``weights_hook`` is how sensor validation plugs in: it receives the
+    pipeline after the measurements are built and returns per-step factor
+    weights (and may add files and metrics through ``self.extra_outputs``
+    and ``self.extra_metrics``).
+    """
+
+    def __init__(
+        self,
+        input_path: str | Path,
+        config: PipelineConfig,
+        out_dir: str | Path,
+        progress: bool = False,
+        weights_hook=None,
+        recording: Recording | None = None,
+    ):
+        self.input_path = Path(input_path)
+        self.config = config
+        self.out_dir = Path(out_dir)
+        self.progress = progress
+        self.weights_hook = weights_hook
+        self.recording = recording
+        self.timings = _Timings()
+        self.frontend: FrontendResult | None = None
+        self.measurements: Measurements | None = None
+        self.weights: FactorWeights | None = None
+        self.backend: BackendResult | None = None
+        self.metrics: dict[str, Any] = {}
+        self.extra_metrics: dict[str, Any] = {}
+        self.extra_outputs: dict[str, str] = {}
+
+    # -- the table of contents ------------------------------------------------
+
+    def run(self) -> MapResult:
+        start = time.perf_counter()
+        self.read()
+        self.match_scans()
+        self.build_measurements()
+        self.validate()
+        self.optimise()
+        self.evaluate()
+        self.metrics["runtime_s"] = round(time.perf_counter() - start, 4)
+        self.write()
+        return MapResult(self.out_dir, self.metrics, self.backend.trajectory, self.recording)
+
+    # -- steps ----------------------------------------------------------------
+
+    def read(self) -> None:
+        t = time.perf_counter()
+        if self.recording is None:
+            from slam.io.readers import read_recording
+
+            self.recording = read_recording(self.input_path, self.config.input)
+        self.timings.read_s = time.perf_counter() - t
+        rec = self.recording
+        log.info("read %s: %.1f s of data", rec.name, rec.duration)
+
+    def match_scans(self) -> None:
+        rec, cfg = self.recording, self.config
+        if rec.scans is None or not cfg.frontend.enabled or not cfg.backend.factors.scan_matching.enabled:
+            return
+        self.frontend = run_frontend(rec.scans, cfg.frontend, progress=self.progress)
+        self.timings.frontend_s = self.frontend.time_s
+
+    def build_measurements(self) -> None:
+        rec, cfg = self.recording, self.config
+        candidates, scan_index = self._keyframe_candidates()
+        chosen = select_keyframes(candidates, rec.odometry, cfg.keyframes)
+        if len(chosen) < 2:
+            raise GslamError(f"{self.input_path}: fewer than 2 keyframes; the run is too short")
+        t = candidates[chosen]
+        scan_idx = scan_index[chosen] if scan_index is not None else None
+        sm = self.frontend.poses if self.frontend is not None else None
+        self.measurements = build_measurements(rec, t, cfg.backend.factors, scan_idx, sm)
+
+    def validate(self) -> None:
+        n = len(self.measurements)
+        if self.weights_hook is None:
+            self.weights = unit_weights(n)
+            return
+        t = time.perf_counter()
+        self.weights = self.weights_hook(self)
+        self.timings.validation_s = time.perf_counter() - t
+
+    def optimise(self) -> None:
+        pose0 = self._initial_pose()
+        self.backend = optimise(
+            self.measurements, pose0, self.config.backend, self.weights, progress=self.progress
+        )
+        self.timings.graph_build_s = self.backend.build_time_s
+        self.timings.optimise_s = self.backend.optimise_time_s
+
+    def evaluate(self) -> None:
+        rec, est = self.recording, self.backend.trajectory
+        m: dict[str, Any] = {"input": str(self.input_path), "n_poses": len(est), "duration_s": round(rec.duration, 3)}
+        if rec.groundtruth is not None:
+            from slam.evaluation import evaluate
+
+            ev = self.config.evaluation
+            m.update(evaluate(est, rec.groundtruth, ev.rpe_deltas_m, ev.max_time_offset_s))
+        m["factor_counts"] = self.backend.factor_counts
+        m["fallback_steps"] = self.backend.fallback_steps
+        m.update(self.extra_metrics)
+        self.metrics = m
+
+    def write(self) -> None:
+        """Write the result folder atomically (temp sibling, then rename)."""
+        t = time.perf_counter()
+        out = self.out_dir
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+        try:
+            self._write_into(tmp)
+            self.timings.write_s = time.perf_counter() - t
+            self._add_timings()
+            (tmp / "metrics.json").write_text(json.dumps(self.metrics, indent=2) + "\n")
+            _replace_dir(tmp, out)
+        finally:
+            if tmp.exists():
+                shutil.rmtree(tmp, ignore_errors=True)
+
+    # -- details --------------------------------------------------------------
+
+    def _keyframe_candidates(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """Keyframes sit on scan times when scan matching runs, else on
+        odometry, gyro or compass times (the first stream present)."""
+        rec = self.recording
+        if self.frontend is not None:
+            return rec.scans.t, np.arange(len(rec.scans))
+        for stream in (rec.odometry, rec.gyro, rec.compass):
+            if stream is not None:
+                return stream.t, None
+        raise GslamError(f"{self.input_path}: no odometry, gyro, compass or laser stream to map with")
+
+    def _initial_pose(self) -> np.ndarray:
+        rec, cfg, t0 = self.recording, self.config.backend, self.measurements.t[:1]
+        if cfg.initial_pose == "groundtruth":
+            if rec.groundtruth is not None:
+                return interpolate_poses(rec.groundtruth, t0)[0]
+            log.warning("no ground truth to anchor the first pose; starting at the origin")
+        yaw = 0.0
+        m = self.measurements.compass
+        if m is not None and m.valid[0]:
+            yaw = float(m.value[0])
+        return np.array([0.0, 0.0, yaw])
+
+    def _add_timings(self) -> None:
+        tm = self.timings
+        self.metrics["timings_s"] = {
+            "read": round(tm.read_s, 4),
+            "frontend": round(tm.frontend_s, 4),
+            "validation": round(tm.validation_s, 4),
+            "graph_build": round(tm.graph_build_s, 4),
+            "optimise": round(tm.optimise_s, 4),
+            "write": round(tm.write_s, 4),
+        }
+        total = self.metrics.get("runtime_s") or 0.0
+        if total:
+            self.metrics["realtime_factor"] = round(self.recording.duration / total, 2)
+
+    def _write_into(self, d: Path) -> None:
+        from slam.io.tum import write_tum
+
+        rec, est, out = self.recording, self.backend.trajectory, self.config.output
+        write_tum(d / "trajectory.tum", est, rec.t0)
+        if rec.groundtruth is not None:
+            write_tum(d / "groundtruth.tum", rec.groundtruth, rec.t0)
+        (d / "config.yaml").write_text(dump_config(self.config))
+        for name, text in self.extra_outputs.items():
+            (d / name).write_text(text)
+        points = self.map_points()
+        if points is not None:
+            from slam.io.pointcloud import write_ply
+
+            write_ply(d / "map.ply", points)
+        if out.plots:
+            from slam.plots import plot_map, plot_trajectories
+
+            ref = rec.groundtruth
+            shaded = [(f"true {c} fault", iv) for c, iv in rec.faults.items() if iv]
+            plot_trajectories(d / "trajectory.png", {"estimate": est}, ref, title=rec.name, shaded=shaded)
+            if points is not None:
+                plot_map(d / "map.png", points, est, title=f"{rec.name}: laser map")
+
+    def map_points(self) -> np.ndarray | None:
+        """Laser points of every keyframe in its optimised pose, voxel-thinned."""
+        from slam.io.pointcloud import voxel_downsample
+
+        rec, meas = self.recording, self.measurements
+        if rec.scans is None or meas.scan_index is None:
+            return None
+        est, fe = self.backend.trajectory, self.config.frontend
+        chunks = []
+        for k, i in enumerate(meas.scan_index):
+            p = scan_points(rec.scans.ranges[i], rec.scans.angles, fe.min_range_m, min(fe.max_range_m, rec.scans.range_max))
+            c, s = np.cos(est.yaw[k]), np.sin(est.yaw[k])
+            chunks.append(np.column_stack([est.x[k] + c * p[:, 0] - s * p[:, 1], est.y[k] + s * p[:, 0] + c * p[:, 1]]))
+        points = np.concatenate(chunks) if chunks else np.zeros((0, 2))
+        return voxel_downsample(points, self.config.output.map_voxel_m)
+
+
+def _replace_dir(new: Path, target: Path) -> None:
+    """Put folder ``new`` at ``target``; an old ``target`` is replaced whole."""
+    if target.exists():
+        old = target.with_name(f".{target.name}.old-{os.getpid()}")
+        os.replace(target, old)
+        os.replace(new, target)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(new, target)
+
+
+def run_map(
+    input_path: str | Path,
+    config: PipelineConfig,
+    out_dir: str | Path,
+    progress: bool = False,
+    weights_hook=None,
+) -> MapResult:
+    """Map one run (the library form of ``gslam map``)."""
+    return MappingPipeline(input_path, config, out_dir, progress=progress, weights_hook=weights_hook).run()
