@@ -1,0 +1,169 @@
+"""The logical system model SD of the consistency-based diagnosis, read from YAML.
+
+A model names the diagnosable *components* (sensors such as ``ODO``,
+``IMU_GYRO``, ``IMU_YAW``, ``SM``, ``GPS``), the *relations* whose observers
+compare the streams of two components, unary *plausibility checks* of one
+component, and optional rules. Its meaning, in Reiter's terms:
+
+* ``¬AB(S) -> ok(S)`` for every component S;
+* ``relation(Si, Sj) ∧ ok(Si) ∧ ok(Sj) -> match(Si, Sj)``; an observation
+  ``no_match`` is ``¬match``, so ``match ∧ no_match -> ⊥``;
+* ``ok(S) -> plausible(S)`` for a unary check; ``implausible ∧ plausible -> ⊥``;
+* fault propagation ``ok(S1) <-> ok(S2)``: both are faulty or neither is;
+* failure masking on a relation, ``match(S1, S2) ∧ CORR(match(S1, S2)) ->
+  ok(S1) ∧ ok(S2)``: a match is taken as evidence that both are healthy. With
+  ``corr: false`` the assumption CORR cannot be retracted, so a match always
+  implies both ok (which can leave no diagnosis at all); with ``corr: true``
+  a diagnosis may retract it, i.e. declare the match coincidental.
+
+Example (``configs/validation/telemax_model.yaml`` is the shipped one)::
+
+    components: [IMU_GYRO, IMU_YAW, SM]
+    relations:
+      yaw_gyro_sm: [IMU_GYRO, SM]
+    unary_checks:
+      mag_plausible: IMU_YAW
+    fault_propagation: [[IMU_GYRO, IMU_YAW]]
+    failure_masking:
+      - {relation: yaw_gyro_sm, corr: true, masking_prob: 0.05}
+    priors: {SM: 0.05}
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+from typing import Any, TypeVar
+
+import pydantic
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from slam.config import load_yaml
+from slam.errors import GslamError
+from validation.errors import ValidationError
+
+DEFAULT_PRIOR = 0.01
+"""Fault probability of a component the model gives no prior for."""
+
+
+class Observation(Enum):
+    """The outcome of an observer comparing the streams of a relation."""
+
+    MATCH = "match"
+    NO_MATCH = "no_match"
+
+
+class Plausibility(Enum):
+    """The outcome of a unary plausibility check of one component."""
+
+    PLAUSIBLE = "plausible"
+    IMPLAUSIBLE = "implausible"
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class MaskingRule(_Strict):
+    """No failure masking on ``relation``: its match implies both components ok.
+
+    ``corr``: the implication holds under the retractable assumption
+    CORR(match); ``masking_prob`` is the prior probability that a match of
+    this relation is coincidental (used only to rank diagnoses).
+    """
+
+    relation: str
+    corr: bool = True
+    masking_prob: float = Field(DEFAULT_PRIOR, gt=0.0, lt=1.0)
+
+
+class SystemModel(_Strict):
+    """The system description SD; see the module docstring for its logic."""
+
+    components: tuple[str, ...] = Field(min_length=1)
+    relations: dict[str, tuple[str, str]] = Field(default_factory=dict)
+    unary_checks: dict[str, str] = Field(default_factory=dict)
+    fault_propagation: tuple[tuple[str, str], ...] = ()
+    failure_masking: tuple[MaskingRule, ...] = ()
+    priors: dict[str, float] = Field(default_factory=dict)
+
+    @field_validator("components")
+    @classmethod
+    def _unique_components(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        dupes = sorted({c for c in value if value.count(c) > 1})
+        if dupes:
+            raise ValueError(f"duplicate component {dupes[0]!r}")
+        return value
+
+    @field_validator("priors")
+    @classmethod
+    def _probabilities(cls, value: dict[str, float]) -> dict[str, float]:
+        for name, p in value.items():
+            if not 0.0 < p < 1.0:
+                raise ValueError(f"prior of {name!r} must be in (0, 1), got {p}")
+        return value
+
+    @model_validator(mode="after")
+    def _references(self) -> "SystemModel":
+        known = set(self.components)
+
+        def check(where: str, names: tuple[str, ...]) -> None:
+            for n in names:
+                if n not in known:
+                    raise ValueError(f"{where}: unknown component {n!r}")
+
+        for name, pair in self.relations.items():
+            check(f"relations.{name}", pair)
+            if pair[0] == pair[1]:
+                raise ValueError(f"relations.{name}: a relation needs two different components")
+        for name, comp in self.unary_checks.items():
+            check(f"unary_checks.{name}", (comp,))
+            if name in self.relations:
+                raise ValueError(f"unary_checks.{name}: name already used by a relation")
+        for i, pair in enumerate(self.fault_propagation):
+            check(f"fault_propagation.{i}", pair)
+        seen: set[str] = set()
+        for i, rule in enumerate(self.failure_masking):
+            if rule.relation not in self.relations:
+                raise ValueError(f"failure_masking.{i}: unknown relation {rule.relation!r}")
+            if rule.relation in seen:
+                raise ValueError(f"failure_masking.{i}: relation {rule.relation!r} listed twice")
+            seen.add(rule.relation)
+        check("priors", tuple(self.priors))
+        return self
+
+    def prior(self, component: str) -> float:
+        """Prior fault probability of ``component`` (``DEFAULT_PRIOR`` if unset)."""
+        return self.priors.get(component, DEFAULT_PRIOR)
+
+    @property
+    def observables(self) -> tuple[str, ...]:
+        """Names an observation may refer to: relations, then unary checks."""
+        return tuple(self.relations) + tuple(self.unary_checks)
+
+
+_M = TypeVar("_M", bound=BaseModel)
+
+
+def validate_mapping(model_type: type[_M], data: Any, source: str) -> _M:
+    """Validate ``data`` as ``model_type``; bad input raises a one-line
+    :class:`ValidationError` naming ``source`` and the offending key."""
+    try:
+        return model_type.model_validate(data)
+    except pydantic.ValidationError as e:
+        first = e.errors()[0]
+        loc = ".".join(str(p) for p in first["loc"])
+        if first["type"] == "extra_forbidden":
+            raise ValidationError(f"{source}: unknown key '{loc}'") from None
+        msg = first["msg"].removeprefix("Value error, ")
+        where = f"{loc}: " if loc else ""
+        raise ValidationError(f"{source}: {where}{msg}") from None
+
+
+def load_model(path: str | Path) -> SystemModel:
+    """Read a :class:`SystemModel` from a YAML file."""
+    try:
+        data = load_yaml(path)
+    except GslamError as e:
+        raise ValidationError(str(e)) from None
+    return validate_mapping(SystemModel, data, str(path))
