@@ -55,7 +55,11 @@ class GpsInputConfig(Strict):
 
 
 class InputConfig(Strict):
-    format: Literal["auto", "rosbag"] = "auto"
+    """``format``: ``auto`` guesses the reader from the path (ROS 1 ``.bag``,
+    ROS 2 bag folder, simulated run folder, CARMEN ``.log``/``.log.gz``,
+    BROAD ``.mat``, libRSF ``*_Input.txt``)."""
+
+    format: Literal["auto", "rosbag", "carmen", "broad", "librsf"] = "auto"
     topics: TopicsConfig = TopicsConfig()
     compass: CompassInputConfig = CompassInputConfig()
     gps: GpsInputConfig = GpsInputConfig()

@@ -1,0 +1,166 @@
+"""Readers of recorded runs: one small interface, a registry keyed by format,
+and the simulator's run folders.
+
+A *run folder* (written by the simulator) is a directory holding ``bag/``
+and a ``truth.json`` sidecar::
+
+    {"scenario": str, "seed": int, "t0": <absolute s>, "duration_s": float,
+     "faults": {"ODO": [[start, end], ...], "IMU_GYRO": ..., ...},
+     "magnetic_reference": {"strength_T", "dip_rad", "declination_rad"},
+     "gps_datum": {"lat_deg", "lon_deg"}}
+
+Fault intervals are seconds relative to the sidecar's ``t0``; they are
+shifted into the recording's time base (relative to ``Recording.t0``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from types import MappingProxyType
+from typing import Mapping, Protocol
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from slam.config import GpsInputConfig, InputConfig
+from slam.errors import GslamError
+from slam.io.rosbag import RosbagReader, is_rosbag
+from slam.recording import COMPONENTS, MagneticReference, Recording
+
+log = logging.getLogger(__name__)
+
+SIDECAR = "truth.json"
+RUN_BAG = "bag"
+
+
+class Reader(Protocol):
+    """Reads one recorded run into a :class:`Recording`."""
+
+    def read(self, path: Path, config: InputConfig) -> Recording: ...
+
+
+READERS: Mapping[str, Reader] = MappingProxyType({"rosbag": RosbagReader()})
+
+
+def is_run_folder(path: Path) -> bool:
+    """A simulator run folder: a directory with ``truth.json`` and ``bag/``."""
+    return path.is_dir() and (path / SIDECAR).is_file() and (path / RUN_BAG).exists()
+
+
+def guess_format(path: str | Path) -> str:
+    """The registry key of the reader for ``path`` (a run folder's bag)."""
+    path = Path(path)
+    if not path.exists():
+        raise GslamError(f"{path}: no such file or directory")
+    if is_run_folder(path):
+        path = path / RUN_BAG
+        if path.is_dir() and not is_rosbag(path):
+            return "rosbag"  # a folder holding one bag file; the reader resolves it
+    if is_rosbag(path):
+        return "rosbag"
+    raise GslamError(
+        f"{path}: unknown recording format; expected a .bag file, a rosbag2 directory "
+        "(metadata.yaml), a .db3/.mcap file or a run folder (truth.json + bag/)"
+    )
+
+
+# --- sidecar -------------------------------------------------------------
+
+
+class _Strict(BaseModel):
+    # Keys added by newer simulators are ignored: this is data, not a config.
+    model_config = ConfigDict(extra="ignore")
+
+
+class _MagneticReference(_Strict):
+    strength_T: float
+    dip_rad: float
+    declination_rad: float = 0.0
+
+
+class _Datum(_Strict):
+    lat_deg: float
+    lon_deg: float
+
+
+class Sidecar(_Strict):
+    """Contents of ``truth.json``; times in seconds, ``t0`` absolute."""
+
+    scenario: str = ""
+    seed: int | None = None
+    t0: float
+    duration_s: float | None = None
+    faults: dict[str, list[tuple[float, float]]] = Field(default_factory=dict)
+    magnetic_reference: _MagneticReference | None = None
+    gps_datum: _Datum | None = None
+
+
+def load_sidecar(path: str | Path) -> Sidecar:
+    """Read and check a ``truth.json``; one-line :class:`GslamError` if bad."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except OSError as e:
+        raise GslamError(f"{path}: cannot read ({e.strerror})") from None
+    except json.JSONDecodeError as e:
+        raise GslamError(f"{path}: line {e.lineno}: invalid JSON ({e.msg})") from None
+    try:
+        sidecar = Sidecar.model_validate(data)
+    except ValidationError as e:
+        first = e.errors()[0]
+        loc = ".".join(str(p) for p in first["loc"]) or "top level"
+        raise GslamError(f"{path}: {loc}: {first['msg']}") from None
+    unknown = sorted(set(sidecar.faults) - set(COMPONENTS))
+    if unknown:
+        raise GslamError(
+            f"{path}: faults: unknown component {unknown[0]!r}, expected one of {', '.join(COMPONENTS)}"
+        )
+    for name, intervals in sidecar.faults.items():
+        for start, end in intervals:
+            if not start <= end:
+                raise GslamError(
+                    f"{path}: faults.{name}: interval [{start}, {end}] ends before it starts"
+                )
+    return sidecar
+
+
+def attach_sidecar(rec: Recording, sidecar: Sidecar) -> None:
+    """Fill ``rec.faults`` (shifted into the recording's time base) and
+    ``rec.magnetic_reference`` from the sidecar."""
+    shift = sidecar.t0 - rec.t0
+    rec.faults = {
+        name: [(start + shift, end + shift) for start, end in intervals]
+        for name, intervals in sidecar.faults.items()
+    }
+    mag = sidecar.magnetic_reference
+    if mag is not None:
+        rec.magnetic_reference = MagneticReference(mag.strength_T, mag.dip_rad, mag.declination_rad)
+
+
+# --- entry point ---------------------------------------------------------
+
+
+def read_recording(path: str | Path, config: InputConfig) -> Recording:
+    """Read a recorded run with the reader for ``config.format`` (``auto``
+    guesses it from the path). A run folder reads its ``bag/``, is named
+    after the folder and gets the sidecar's faults and magnetic reference;
+    the sidecar's GPS datum is used when the config sets none."""
+    path = Path(path)
+    fmt = guess_format(path) if config.format == "auto" else config.format
+    if fmt not in READERS:
+        raise GslamError(f"unknown input format '{fmt}'; known: {', '.join(READERS)}")
+    if not is_run_folder(path):
+        return READERS[fmt].read(path, config)
+
+    sidecar = load_sidecar(path / SIDECAR)
+    unset = config.gps.datum_lat_deg is None and config.gps.datum_lon_deg is None
+    if unset and sidecar.gps_datum is not None:
+        lat, lon = sidecar.gps_datum.lat_deg, sidecar.gps_datum.lon_deg
+        datum = GpsInputConfig(datum_lat_deg=lat, datum_lon_deg=lon)
+        config = config.model_copy(update={"gps": datum})
+    rec = READERS[fmt].read(path / RUN_BAG, config)
+    rec.name = path.name
+    attach_sidecar(rec, sidecar)
+    log.info("%s: run '%s' with faults in %s", path, sidecar.scenario, ", ".join(rec.faults) or "none")
+    return rec

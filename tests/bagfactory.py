@@ -1,0 +1,278 @@
+"""Build small ROS 1 / ROS 2 bags with known contents for tests.
+
+Usage::
+
+    bag = BagBuilder(ros=1)
+    bag.imu("/imu/data", t=100.0, rate_z=0.1, yaw=0.3)
+    bag.scan("/scan", t=100.05, ranges=[1.0, 2.0, 3.0])
+    path = bag.write(tmp_path / "run.bag")          # ROS 1 (.bag)
+    path = BagBuilder(ros=2)...write(tmp_path / "run")  # rosbag2 directory
+
+Times are absolute seconds; each message's header stamp is ``t`` and its
+bag (log) time is ``log_t`` (default ``t``). Messages are written sorted by
+log time, so header stamps can be made out of order on purpose.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rosbags.typesys import Stores, get_typestore
+
+from slam.geometry import quaternion_from_yaw
+
+LASER_SCAN = "sensor_msgs/msg/LaserScan"
+IMU = "sensor_msgs/msg/Imu"
+MAGNETIC_FIELD = "sensor_msgs/msg/MagneticField"
+ODOMETRY = "nav_msgs/msg/Odometry"
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+NAV_SAT_FIX = "sensor_msgs/msg/NavSatFix"
+
+
+def _ns(t: float) -> int:
+    return int(round(t * 1e9))
+
+
+class BagBuilder:
+    """Collects messages per topic and writes them as one bag."""
+
+    def __init__(self, ros: int = 2) -> None:
+        if ros not in (1, 2):
+            raise ValueError("ros must be 1 or 2")
+        self.ros = ros
+        self.typestore = get_typestore(Stores.ROS1_NOETIC if ros == 1 else Stores.ROS2_HUMBLE)
+        self.types = self.typestore.types
+        # (log_ns, insertion order, topic, msgtype, message)
+        self._messages: list[tuple[int, int, str, str, Any]] = []
+        self._topics: dict[str, str] = {}
+
+    # -- generic --------------------------------------------------------
+
+    def add(self, topic: str, msgtype: str, msg: Any, log_t: float) -> None:
+        """Add any message of ``msgtype`` logged at ``log_t`` (s)."""
+        known = self._topics.setdefault(topic, msgtype)
+        if known != msgtype:
+            raise ValueError(f"{topic} already carries {known}")
+        self._messages.append((_ns(log_t), len(self._messages), topic, msgtype, msg))
+
+    def topic(self, topic: str, msgtype: str) -> None:
+        """Declare a topic without messages (an empty stream)."""
+        self._topics.setdefault(topic, msgtype)
+
+    def header(self, t: float, frame_id: str = "base_link") -> Any:
+        ns = _ns(t)
+        stamp = self.types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+        if self.ros == 1:
+            return self.types["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame_id)
+        return self.types["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id)
+
+    def _vec(self, x: float, y: float, z: float) -> Any:
+        return self.types["geometry_msgs/msg/Vector3"](x=float(x), y=float(y), z=float(z))
+
+    def _quat(self, yaw: float) -> Any:
+        qx, qy, qz, qw = quaternion_from_yaw(yaw)
+        return self.types["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw)
+
+    def _pose(self, x: float, y: float, yaw: float) -> Any:
+        point = self.types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0)
+        return self.types["geometry_msgs/msg/Pose"](position=point, orientation=self._quat(yaw))
+
+    # -- typed messages -------------------------------------------------
+
+    def scan(
+        self,
+        topic: str,
+        t: float,
+        ranges: Sequence[float],
+        angle_min: float = -np.pi / 2,
+        angle_increment: float = np.pi / 180,
+        range_min: float = 0.1,
+        range_max: float = 30.0,
+        log_t: float | None = None,
+    ) -> None:
+        """sensor_msgs/LaserScan."""
+        r = np.asarray(ranges, dtype=np.float32)
+        msg = self.types[LASER_SCAN](
+            header=self.header(t, "laser"),
+            angle_min=float(angle_min),
+            angle_max=float(angle_min + (len(r) - 1) * angle_increment),
+            angle_increment=float(angle_increment),
+            time_increment=0.0,
+            scan_time=0.1,
+            range_min=float(range_min),
+            range_max=float(range_max),
+            ranges=r,
+            intensities=np.zeros(0, dtype=np.float32),
+        )
+        self.add(topic, LASER_SCAN, msg, t if log_t is None else log_t)
+
+    def imu(
+        self,
+        topic: str,
+        t: float,
+        rate_z: float = 0.0,
+        yaw: float = 0.0,
+        has_orientation: bool = True,
+        log_t: float | None = None,
+    ) -> None:
+        """sensor_msgs/Imu with yaw rate ``rate_z`` (rad/s) and orientation
+        yaw ``yaw`` (rad); ``has_orientation=False`` marks the orientation
+        as absent (covariance[0] = -1, REP-145)."""
+        cov = np.zeros(9)
+        ocov = cov.copy()
+        if not has_orientation:
+            ocov[0] = -1.0
+        msg = self.types[IMU](
+            header=self.header(t, "imu"),
+            orientation=self._quat(yaw),
+            orientation_covariance=ocov,
+            angular_velocity=self._vec(0.0, 0.0, rate_z),
+            angular_velocity_covariance=cov.copy(),
+            linear_acceleration=self._vec(0.0, 0.0, 9.81),
+            linear_acceleration_covariance=cov.copy(),
+        )
+        self.add(topic, IMU, msg, t if log_t is None else log_t)
+
+    def mag(self, topic: str, t: float, field: Sequence[float], log_t: float | None = None) -> None:
+        """sensor_msgs/MagneticField, ``field`` (3,) tesla in the sensor frame."""
+        msg = self.types[MAGNETIC_FIELD](
+            header=self.header(t, "mag"),
+            magnetic_field=self._vec(*field),
+            magnetic_field_covariance=np.zeros(9),
+        )
+        self.add(topic, MAGNETIC_FIELD, msg, t if log_t is None else log_t)
+
+    def odom(
+        self, topic: str, t: float, x: float, y: float, yaw: float, log_t: float | None = None
+    ) -> None:
+        """nav_msgs/Odometry with a planar pose."""
+        pwc = self.types["geometry_msgs/msg/PoseWithCovariance"](
+            pose=self._pose(x, y, yaw), covariance=np.zeros(36)
+        )
+        twist = self.types["geometry_msgs/msg/Twist"](
+            linear=self._vec(0, 0, 0), angular=self._vec(0, 0, 0)
+        )
+        twc = self.types["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36))
+        msg = self.types[ODOMETRY](
+            header=self.header(t, "odom"), child_frame_id="base_link", pose=pwc, twist=twc
+        )
+        self.add(topic, ODOMETRY, msg, t if log_t is None else log_t)
+
+    def pose(
+        self, topic: str, t: float, x: float, y: float, yaw: float, log_t: float | None = None
+    ) -> None:
+        """geometry_msgs/PoseStamped with a planar pose."""
+        msg = self.types[POSE_STAMPED](header=self.header(t, "map"), pose=self._pose(x, y, yaw))
+        self.add(topic, POSE_STAMPED, msg, t if log_t is None else log_t)
+
+    def fix(
+        self,
+        topic: str,
+        t: float,
+        lat: float,
+        lon: float,
+        status: int = 0,
+        variance_m2: tuple[float, float] = (1.0, 1.0),
+        covariance_type: int = 2,
+        log_t: float | None = None,
+    ) -> None:
+        """sensor_msgs/NavSatFix; ``variance_m2`` is the (east, north)
+        diagonal of the position covariance."""
+        cov = np.zeros(9)
+        cov[0], cov[4], cov[8] = variance_m2[0], variance_m2[1], 4.0
+        msg = self.types[NAV_SAT_FIX](
+            header=self.header(t, "gps"),
+            status=self.types["sensor_msgs/msg/NavSatStatus"](status=int(status), service=1),
+            latitude=float(lat),
+            longitude=float(lon),
+            altitude=100.0,
+            position_covariance=cov,
+            position_covariance_type=int(covariance_type),
+        )
+        self.add(topic, NAV_SAT_FIX, msg, t if log_t is None else log_t)
+
+    # -- output ---------------------------------------------------------
+
+    def write_in(self, folder: str | Path, name: str = "run", storage: str = "sqlite3") -> Path:
+        """Write to ``folder/name.bag`` (ROS 1) or ``folder/name/`` (ROS 2)."""
+        folder = Path(folder)
+        return self.write(folder / (f"{name}.bag" if self.ros == 1 else name), storage)
+
+    def write(self, path: str | Path, storage: str = "sqlite3") -> Path:
+        """Write the bag and return its path.
+
+        ROS 1 writes one ``.bag`` file (``path`` must end in ``.bag``);
+        ROS 2 writes a rosbag2 directory ``path`` with ``storage``
+        ``sqlite3`` or ``mcap``.
+        """
+        path = Path(path)
+        ordered = sorted(self._messages, key=lambda m: (m[0], m[1]))
+        if self.ros == 1:
+            from rosbags.rosbag1 import Writer as Writer1
+
+            if path.suffix != ".bag":
+                raise ValueError("a ROS 1 bag path must end in .bag")
+            with Writer1(path) as writer:
+                conns = {
+                    topic: writer.add_connection(topic, msgtype, typestore=self.typestore)
+                    for topic, msgtype in self._topics.items()
+                }
+                for log_ns, _, topic, msgtype, msg in ordered:
+                    writer.write(conns[topic], log_ns, self.typestore.serialize_ros1(msg, msgtype))
+            return path
+
+        from rosbags.rosbag2 import StoragePlugin
+        from rosbags.rosbag2 import Writer as Writer2
+
+        plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
+        with Writer2(path, version=9, storage_plugin=plugin) as writer:
+            conns = {
+                topic: writer.add_connection(topic, msgtype, typestore=self.typestore)
+                for topic, msgtype in self._topics.items()
+            }
+            for log_ns, _, topic, msgtype, msg in ordered:
+                writer.write(conns[topic], log_ns, self.typestore.serialize_cdr(msg, msgtype))
+        return path
+
+
+def driving_bag(
+    ros: int = 2,
+    t0: float = 1_700_000_000.0,
+    duration_s: float = 2.0,
+    speed_m_s: float = 1.0,
+    yaw: float = 0.5,
+    datum: tuple[float, float] = (48.0, 11.0),
+) -> BagBuilder:
+    """A robot driving straight at ``speed_m_s`` along world yaw ``yaw`` on
+    the default topics of :class:`slam.config.TopicsConfig`: scans 10 Hz
+    (5 beams at 2 m), Imu 100 Hz (rate 0, orientation ``yaw``), magnetometer
+    20 Hz (level, no declination), odometry 20 Hz, GPS 5 Hz about ``datum``,
+    ground truth 100 Hz."""
+    from slam.geometry import geodetic_from_enu
+
+    bag = BagBuilder(ros)
+    c, s = np.cos(yaw), np.sin(yaw)
+    # Level field of 20 uT north, 40 uT down, seen from a body at ``yaw``.
+    field = (20e-6 * np.cos(np.pi / 2 - yaw), 20e-6 * np.sin(np.pi / 2 - yaw), -40e-6)
+
+    def ticks(rate_hz: float) -> np.ndarray:
+        return t0 + np.arange(int(round(duration_s * rate_hz))) / rate_hz
+
+    for t in ticks(10):
+        bag.scan("/scan", t, [2.0] * 5)
+    for t in ticks(100):
+        bag.imu("/imu/data", t, rate_z=0.0, yaw=yaw)
+        d = speed_m_s * (t - t0)
+        bag.odom("/ground_truth", t, d * c, d * s, yaw)
+    for t in ticks(20):
+        bag.mag("/imu/mag", t, field)
+        d = speed_m_s * (t - t0)
+        bag.odom("/odom", t, d, 0.0, 0.0)
+    for t in ticks(5):
+        d = speed_m_s * (t - t0)
+        lat, lon = geodetic_from_enu(d * c, d * s, *datum)
+        bag.fix("/gps/fix", t, float(lat), float(lon))
+    return bag
