@@ -28,7 +28,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from slam.sim import simulate
 
     res = simulate(args.scenario, args.out, seed=args.seed, progress=not args.quiet)
-    print(f"wrote {res.out_dir} ({res.duration_s:.1f} s simulated)")
+    print(f"wrote {res.run_dir} ({res.duration_s:.1f} s simulated)")
     for comp, intervals in res.faults.items():
         if intervals:
             spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals)
@@ -59,7 +59,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     run_dir = out / "run"
     if not (run_dir / "truth.json").exists():
         sim = simulate(scenario, run_dir, seed=args.seed, progress=not args.quiet)
-        print(f"simulated {sim.out_dir} ({sim.duration_s:.1f} s)")
+        print(f"simulated {sim.run_dir} ({sim.duration_s:.1f} s)")
     res = run_map(run_dir, load_config(config_path), out / "map", progress=not args.quiet)
     _print_metrics(res.out_dir, res.metrics)
     return 0
