@@ -1,0 +1,289 @@
+"""Observers (Algorithm 3), unary checks, and the validation streams."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slam.recording import Compass, Gps, Gyro, MagneticReference, Recording, Trajectory
+from tests.synthetic import field_body, yaw_scenario
+from validation.errors import ValidationError
+from validation.model import Observation, Plausibility
+from validation.observers import (
+    DEFAULT_RELATIONS,
+    GpsQualityCheck,
+    MagnetometerCheck,
+    MismatchCounter,
+    ObserverBank,
+    ObserversConfig,
+    compare_trends,
+    load_observers_config,
+    observe,
+    observe_steps,
+    unary_checks,
+)
+from validation.streams import Stream, fixed_rate_steps, resample, resample_streams, validation_streams
+
+YAW_RELATION = DEFAULT_RELATIONS[0]  # compass_yaw ~ gyro_yaw
+
+
+# --- Algorithm 3 ----------------------------------------------------------------
+
+
+def test_counter_by_hand():
+    a = [0, 0, 1, 1, 1, 0, 0, 0, -1, -1]
+    b = [0, 1, 1, 0, 0, 0, 1, 0, -1, 1]
+    # mismatch:  .  x  .  x  x  .  x  .  .  x
+    counter, no_match = compare_trends(np.array(a), np.array(b), threshold=1)
+    assert counter.tolist() == [0, 1, 0, 1, 2, 1, 2, 1, 0, 1]
+    assert no_match.tolist() == [False] * 4 + [True, False, True] + [False] * 3
+    online = MismatchCounter(1)
+    obs = [online.update(x, y) for x, y in zip(a, b)]
+    assert [o is Observation.NO_MATCH for o in obs] == no_match.tolist()
+
+
+def test_invalid_steps_hold_the_counter():
+    a = np.array([1, 1, 1, 0, 0, 0])
+    b = np.array([0, 0, 0, 0, 0, 0])
+    valid = np.array([True, True, False, False, True, True])
+    counter, no_match = compare_trends(a, b, 0, valid)
+    assert counter.tolist() == [1, 2, 2, 2, 1, 0]
+    assert no_match.tolist() == [True, True, False, False, True, False]  # no observation when invalid
+    online = MismatchCounter(0)
+    assert [online.update(x, y, v) for x, y, v in zip(a, b, valid)][2] is None
+
+
+def test_threshold_is_strict():
+    c = MismatchCounter(3)
+    obs = [c.update(1, 0) for _ in range(4)]
+    assert [c_ is Observation.NO_MATCH for c_ in obs] == [False, False, False, True]  # 3 is not > 3
+    counter, no_match = compare_trends(np.ones(4, int), np.zeros(4, int), 3)
+    assert counter.tolist() == [1, 2, 3, 4] and no_match.tolist() == [False, False, False, True]
+
+
+def test_counter_cap():
+    a = np.array([1] * 10 + [0] * 5)
+    counter, no_match = compare_trends(a, np.zeros(15, int), 2, max_counter=4)
+    assert counter.tolist() == [1, 2, 3, 4, 4, 4, 4, 4, 4, 4, 3, 2, 1, 0, 0]
+    assert not no_match[12]
+
+
+# --- configuration ------------------------------------------------------------------
+
+
+def test_relations_from_yaml(tmp_path):
+    path = tmp_path / "observers.yaml"
+    path.write_text(
+        "relations:\n"
+        "  - {name: yaw_gyro_sm, stream_a: gyro_yaw, stream_b: sm_yaw,\n"
+        "     boundary: 0.04, window_s: 1.5, threshold: 3}\n"
+        "  - {name: dist, stream_a: odo_distance, stream_b: sm_distance, boundary: 0.1,\n"
+        "     boundary_b: 0.2, window_s: 2, threshold: 4}\n"
+        "magnetometer: {enabled: false}\n"
+    )
+    cfg = load_observers_config(path)
+    assert [r.name for r in cfg.relations] == ["yaw_gyro_sm", "dist"]
+    assert cfg.relations[0].components == ("IMU_GYRO", "SM")
+    assert cfg.relations[1].boundaries == (0.1, 0.2)
+    assert [c.name for c in unary_checks(cfg)] == ["gps_plausible"]
+
+    rel = "{name: r, stream_a: gyro_yaw, stream_b: sm_yaw, boundary: 0.1, windw_s: 1, threshold: 1}"
+    path.write_text(f"relations:\n  - {rel}\n")
+    with pytest.raises(ValidationError, match="unknown key 'relations.0.windw_s'"):
+        load_observers_config(path)
+    rel = "{name: r, stream_a: gyro, stream_b: sm_yaw, boundary: 0.1, window_s: 1, threshold: 1}"
+    path.write_text(f"relations:\n  - {rel}\n")
+    with pytest.raises(ValidationError, match="relations.0.stream_a"):
+        load_observers_config(path)
+
+
+def test_default_relations_cover_the_paper():
+    pairs = {frozenset(r.components) for r in ObserversConfig().relations}
+    assert {frozenset(p) for p in [("IMU_YAW", "IMU_GYRO"), ("IMU_YAW", "SM"), ("IMU_GYRO", "SM")]} <= pairs
+
+
+# --- streams ---------------------------------------------------------------------------
+
+
+def small_recording():
+    t = np.arange(0.0, 10.001, 0.1)
+    odo = Trajectory(t, 0.5 * t, np.zeros_like(t), np.full_like(t, 0.2))
+    gyro = Gyro(t, np.full_like(t, 0.1))
+    tg = np.arange(0.0, 10.001, 1.0)
+    gps = Gps(tg, 2.0 * tg, np.zeros_like(tg), np.full_like(tg, 1.0), np.zeros(len(tg), int))
+    return Recording("small", gyro=gyro, odometry=odo, gps=gps)
+
+
+def test_validation_streams_from_recording():
+    rec = small_recording()
+    sm = Trajectory(rec.odometry.t[::2], rec.odometry.x[::2] * 2, rec.odometry.y[::2], rec.odometry.yaw[::2])
+    s = validation_streams(rec, sm)
+    assert set(s) == {
+        "gyro_yaw", "odo_yaw", "odo_distance", "odo_speed", "sm_yaw", "sm_distance", "gps_speed", "gps_sigma"
+    }
+    np.testing.assert_allclose(s["gyro_yaw"].values, 0.1 * rec.gyro.t, atol=1e-12)
+    np.testing.assert_allclose(s["odo_distance"].values, 0.5 * rec.odometry.t, atol=1e-12)
+    np.testing.assert_allclose(s["odo_speed"].values, 0.5, atol=1e-9)
+    np.testing.assert_allclose(s["sm_distance"].values[-1], 10.0, atol=1e-9)
+    np.testing.assert_allclose(s["gps_speed"].values, 2.0)
+    np.testing.assert_allclose(s["gps_speed"].t, np.arange(0.5, 10.0, 1.0))
+    assert s["odo_yaw"].angular and not s["odo_distance"].angular
+
+
+def test_resample_validity_and_angles():
+    t = np.array([0.0, 1.0, 2.0, 5.0, 6.0])
+    yaw = np.array([3.0, 3.1, -3.1, -3.0, -2.9])  # crosses +pi between 1 and 2 s
+    step = np.array([-0.5, 0.0, 1.5, 3.0, 5.5, 6.0, 6.5])
+    v, ok = resample(Stream(t, yaw, angular=True), step, max_gap_s=1.0)
+    assert ok.tolist() == [False, True, True, False, True, True, False]
+    assert v[2] == pytest.approx(0.5 * (3.1 + (2 * np.pi - 3.1)))  # through pi, not through 0
+    assert v[4] == pytest.approx(-2.95 + 2 * np.pi)
+    assert np.isnan(v[3])
+
+
+# --- relation observers on streams ----------------------------------------------------------
+
+
+def test_absent_stream_makes_no_observation():
+    sc = yaw_scenario(duration_s=30.0, compass_drift=None)
+    gps_rel = DEFAULT_RELATIONS[-1]
+    log = observe(sc.streams, [YAW_RELATION, gps_rel], sc.step_t)
+    assert not log.relations[gps_rel.name].valid.any()
+    warm = sc.step_t >= YAW_RELATION.warmup
+    assert np.array_equal(log.relations[YAW_RELATION.name].valid, warm)
+    assert gps_rel.name not in log.observations(100)
+    assert log.observations(100)[YAW_RELATION.name] is Observation.MATCH
+
+
+def test_gap_in_a_stream_invalidates_its_steps():
+    sc = yaw_scenario(duration_s=40.0, compass_drift=None)
+    c = sc.streams["compass_yaw"]
+    keep = (c.t < 10.0) | (c.t > 15.0)
+    streams = dict(sc.streams, compass_yaw=Stream(c.t[keep], c.values[keep], True))
+    log = observe(streams, [YAW_RELATION], sc.step_t)
+    trace = log.relations[YAW_RELATION.name]
+    in_gap = (sc.step_t > 10.1) & (sc.step_t < 14.9)
+    assert not trace.valid[in_gap].any()
+    assert not trace.valid[(sc.step_t > 15.1) & (sc.step_t < 15.0 + YAW_RELATION.warmup)].any()
+    assert trace.valid[(sc.step_t > 15.1 + YAW_RELATION.warmup) & (sc.step_t < 39.0)].all()
+    assert trace.counter[in_gap].tolist() == [trace.counter[np.flatnonzero(in_gap)[0] - 1]] * int(in_gap.sum())
+
+
+def onset_and_clear(t, flag, after):
+    on = t[flag & (t >= after)]
+    first = on[0]
+    off = t[(~flag) & (t > first)]
+    return first, off[0]
+
+
+def test_compass_drift_raises_no_match_and_clears():
+    sc = yaw_scenario(duration_s=260.0)
+    step = 1.0 / 10.0
+    log = observe(sc.streams, [YAW_RELATION, DEFAULT_RELATIONS[2]], sc.step_t)
+    trace = log.relations[YAW_RELATION.name]
+    # No false alarm before the fault, through the turns at 20-50 s.
+    assert not trace.no_match[sc.step_t < 70.0].any()
+    first, cleared = onset_and_clear(sc.step_t, trace.no_match, 70.0)
+    # Onset: the compass slope must cross b within the window, then th + 1 mismatches.
+    assert 70.0 < first <= 70.0 + YAW_RELATION.window_s + (YAW_RELATION.threshold + 1) * step + 0.5
+    # The paper's counter is unbounded: ~800 mismatching steps take ~800 steps to count down.
+    assert 150.0 + 70.0 < cleared < 150.0 + 90.0
+    # gyro ~ sm never disagrees.
+    assert not log.relations["yaw_gyro_sm"].no_match.any()
+
+    capped = YAW_RELATION.model_copy(update={"max_counter": 20})
+    trace = observe(sc.streams, [capped], sc.step_t).relations[capped.name]
+    first, cleared = onset_and_clear(sc.step_t, trace.no_match, 70.0)
+    assert 150.0 < cleared < 150.0 + YAW_RELATION.window_s + 20 * step + 1.0
+    assert not trace.no_match[sc.step_t > cleared].any()
+
+
+# --- unary checks --------------------------------------------------------------------------
+
+
+def mag_recording(disturb: tuple[float, float], extra_T: float, extra_dip: float = 0.0):
+    ref = MagneticReference(strength_T=48e-6, dip_rad=np.radians(65.0))
+    t = np.arange(0.0, 100.0, 0.05)
+    yaw = 0.02 * t
+    bad = (t >= disturb[0]) & (t < disturb[1])
+    strength = np.where(bad, ref.strength_T + extra_T, ref.strength_T)
+    dip = np.where(bad, ref.dip_rad + extra_dip, ref.dip_rad)
+    return Recording("mag", compass=Compass(t, yaw, field_body(yaw, strength, dip)), magnetic_reference=ref)
+
+
+def test_magnetometer_check_flags_a_disturbed_field_only():
+    cfg = ObserversConfig(relations=())
+    step_t = np.arange(0.0, 99.0, 0.1)
+    rec = mag_recording((40.0, 60.0), extra_T=20e-6)
+    checks = unary_checks(cfg, rec.magnetic_reference)
+    log = observe(validation_streams(rec), [], step_t, checks)
+    u = log.unary["mag_plausible"]
+    assert u.component == "IMU_YAW" and u.valid.all()
+    hold = cfg.magnetometer.hold_s
+    expect = (step_t >= 40.0 + hold - 1e-6) & (step_t < 60.0 - 0.05)
+    away = np.abs(step_t - 40.0 - hold) > 0.06  # the onset step may round either way
+    assert np.array_equal(u.implausible[away], expect[away])
+    assert log.observations(10)["mag_plausible"] is Plausibility.PLAUSIBLE
+
+    # The reference field itself is plausible; so is the heading's own change.
+    clean = mag_recording((0.0, 0.0), extra_T=0.0)
+    assert not observe(validation_streams(clean), [], step_t, checks).unary["mag_plausible"].implausible.any()
+    # A dip change alone is caught.
+    dip = mag_recording((40.0, 60.0), extra_T=0.0, extra_dip=np.radians(10.0))
+    assert observe(validation_streams(dip), [], step_t, checks).unary["mag_plausible"].implausible.sum() > 150
+
+
+def test_gps_quality_check():
+    check = GpsQualityCheck("gps_plausible", "GPS", max_sigma_m=3.0, hold_s=0.0)
+    tg = np.arange(0.0, 20.0, 1.0)
+    sigma = np.where((tg >= 8) & (tg <= 12), 10.0, 1.0)
+    status = np.where(tg == 15, -1, 0)
+    rec = Recording("g", gps=Gps(tg, tg, tg, sigma, status))
+    cfg = ObserversConfig()
+    step_t = np.arange(0.0, 19.0, 0.5)
+    log = observe(validation_streams(rec), [], step_t, [check], cfg.max_gap_s, cfg.stream_max_gap_s)
+    u = log.unary["gps_plausible"]
+    assert u.implausible[(step_t >= 8) & (step_t <= 12)].all()
+    assert not u.implausible[(step_t <= 7) | (step_t >= 13)].any()
+    assert u.valid.all()  # the dropped fix leaves a 2 s gap, within the 2.5 s allowed
+
+
+# --- batch == online ------------------------------------------------------------------------
+
+
+def test_batch_and_online_agree():
+    sc = yaw_scenario(duration_s=120.0, compass_drift=(40.0, 70.0), seed=3)
+    c = sc.streams["compass_yaw"]
+    keep = (c.t < 80.0) | (c.t > 83.0)  # a gap in the middle
+    streams = dict(sc.streams, compass_yaw=Stream(c.t[keep], c.values[keep], True))
+    ref = MagneticReference(50e-6, np.radians(60.0))
+    field = np.repeat(field_body(np.zeros(1), ref.strength_T, ref.dip_rad), len(c.t), axis=0)
+    field[(c.t > 50) & (c.t < 55), 0] += 30e-6
+    mag = validation_streams(Recording("m", compass=Compass(c.t, c.values, field)))
+    streams.update(mag_strength=mag["mag_strength"], mag_dip=mag["mag_dip"])
+    relations = [
+        *DEFAULT_RELATIONS[:3],
+        DEFAULT_RELATIONS[0].model_copy(update={"name": "capped", "max_counter": 12, "boundary_b": 0.03}),
+    ]
+    checks = [MagnetometerCheck("mag", "IMU_YAW", ref.strength_T, ref.dip_rad, 5e-6, 0.1, 1.0)]
+
+    steps = resample_streams(streams, sc.step_t)
+    log = observe_steps(steps, relations, checks)
+    bank = ObserverBank(relations, checks, steps.angular)
+    for k, t in enumerate(steps.t):
+        out = bank.update(t, {n: v[k] for n, v in steps.values.items()})
+        for r in relations:
+            tr = log.relations[r.name]
+            assert out.counters[r.name] == tr.counter[k], (r.name, t)
+            assert out.symbols[r.name] == (tr.symbol_a[k], tr.symbol_b[k])
+            assert out.observations[r.name] == tr.observation(k)
+        assert out.observations["mag"] == log.unary["mag"].plausibility(k)
+    assert log.relations["capped"].no_match.any() and log.unary["mag"].implausible.any()
+    cols = log.columns()
+    assert cols["capped.counter"] is log.relations["capped"].counter and len(cols["t"]) == len(steps.t)
+
+
+def test_fixed_rate_steps():
+    np.testing.assert_allclose(fixed_rate_steps(1.0, 2.0, 10.0), np.linspace(1.0, 2.0, 11))
+    with pytest.raises(ValidationError):
+        fixed_rate_steps(0.0, 1.0, 0.0)

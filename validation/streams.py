@@ -1,0 +1,200 @@
+"""The named streams the observers compare, derived from one recording.
+
+Relation streams (trend streams), with the component each one speaks for:
+
+============== ========= ===================================================
+name           component values
+============== ========= ===================================================
+compass_yaw    IMU_YAW   compass heading, rad (angular)
+gyro_yaw       IMU_GYRO  gyro yaw rate integrated by trapezoids, rad from 0
+sm_yaw         SM        scan-matching (KISS-ICP) yaw, rad (angular)
+odo_yaw        ODO       odometry yaw, rad (angular)
+odo_distance   ODO       path length of the odometry x/y, m
+sm_distance    SM        path length of the scan-matching x/y, m
+odo_speed      ODO       derivative of odo_distance, m/s
+gps_speed      GPS       distance between successive fixes over their time
+                         difference, m/s, at the mid time
+============== ========= ===================================================
+
+Quality streams for the unary checks: ``mag_strength`` (T) and ``mag_dip``
+(rad, positive downward, assuming a level robot) from the raw compass field,
+and ``gps_sigma`` (m). Fixes with a negative status carry no position and
+are left out.
+
+Streams are then resampled onto the validation step times by linear
+interpolation (angles unwrapped first, so the result is continuous) with a
+validity mask that is false where the stream has no data within a max gap.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Literal, get_args
+
+import numpy as np
+
+from slam.recording import Recording, Trajectory
+from validation.errors import ValidationError
+
+logger = logging.getLogger(__name__)
+
+StreamName = Literal[
+    "compass_yaw", "gyro_yaw", "sm_yaw", "odo_yaw", "odo_distance", "sm_distance", "odo_speed", "gps_speed"
+]
+QualityStreamName = Literal["mag_strength", "mag_dip", "gps_sigma"]
+
+STREAM_COMPONENT: dict[str, str] = {
+    "compass_yaw": "IMU_YAW",
+    "gyro_yaw": "IMU_GYRO",
+    "sm_yaw": "SM",
+    "odo_yaw": "ODO",
+    "odo_distance": "ODO",
+    "sm_distance": "SM",
+    "odo_speed": "ODO",
+    "gps_speed": "GPS",
+    "mag_strength": "IMU_YAW",
+    "mag_dip": "IMU_YAW",
+    "gps_sigma": "GPS",
+}
+STREAM_NAMES: tuple[str, ...] = get_args(StreamName) + get_args(QualityStreamName)
+ANGULAR_STREAMS: frozenset[str] = frozenset({"compass_yaw", "sm_yaw", "odo_yaw"})
+
+
+@dataclass(frozen=True)
+class Stream:
+    """One scalar stream: ``t`` (n,) s strictly increasing, ``values`` (n,)."""
+
+    t: np.ndarray
+    values: np.ndarray
+    angular: bool = False
+
+
+def _clean(name: str, t: np.ndarray, values: np.ndarray, angular: bool = False) -> Stream:
+    """Drop non-finite samples and repeated stamps (keeping the first)."""
+    t = np.asarray(t, dtype=float)
+    values = np.asarray(values, dtype=float)
+    keep = np.isfinite(t) & np.isfinite(values)
+    t, values = t[keep], values[keep]
+    if len(t) > 1 and np.any(np.diff(t) < 0.0):
+        i = int(np.flatnonzero(np.diff(t) < 0.0)[0]) + 1
+        raise ValidationError(f"stream {name}: timestamps go back at sample {i} ({t[i]} s after {t[i - 1]} s)")
+    fresh = np.concatenate(([True], np.diff(t) > 0.0)) if len(t) else np.zeros(0, bool)
+    if not np.all(fresh):
+        logger.debug("stream %s: dropped %d samples with repeated stamps", name, int(np.sum(~fresh)))
+    return Stream(t[fresh], values[fresh], angular)
+
+
+def path_length(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Cumulative planar path length (m) of a polyline, starting at 0."""
+    return np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))))
+
+
+def _gradient(t: np.ndarray, v: np.ndarray) -> np.ndarray:
+    # np.gradient: second-order central differences on irregular stamps.
+    return np.gradient(v, t) if len(t) >= 2 else np.zeros(len(t))
+
+
+def _trajectory_streams(prefix: str, traj: Trajectory, streams: dict[str, Stream]) -> None:
+    streams[f"{prefix}_yaw"] = _clean(f"{prefix}_yaw", traj.t, traj.yaw, angular=True)
+    streams[f"{prefix}_distance"] = _clean(f"{prefix}_distance", traj.t, path_length(traj.x, traj.y))
+
+
+def validation_streams(recording: Recording, sm: Trajectory | None = None) -> dict[str, Stream]:
+    """The named streams available in ``recording`` (plus scan matching).
+
+    ``sm`` is the KISS-ICP trajectory over the scan times (world frame of
+    the front-end); streams whose source is absent are simply not returned.
+    """
+    streams: dict[str, Stream] = {}
+    if recording.compass is not None:
+        c = recording.compass
+        streams["compass_yaw"] = _clean("compass_yaw", c.t, c.yaw, angular=True)
+        if c.field is not None:
+            f = np.asarray(c.field, dtype=float)
+            streams["mag_strength"] = _clean("mag_strength", c.t, np.linalg.norm(f, axis=1))
+            # Body z is up, so a field dipping downward has a negative z.
+            streams["mag_dip"] = _clean("mag_dip", c.t, np.arctan2(-f[:, 2], np.hypot(f[:, 0], f[:, 1])))
+    if recording.gyro is not None:
+        g = _clean("gyro_rate", recording.gyro.t, recording.gyro.rate)
+        yaw = np.concatenate(([0.0], np.cumsum(0.5 * (g.values[1:] + g.values[:-1]) * np.diff(g.t))))
+        # Already continuous: no unwrapping needed.
+        streams["gyro_yaw"] = Stream(g.t, yaw, angular=False)
+    if sm is not None and len(sm):
+        _trajectory_streams("sm", sm, streams)
+    if recording.odometry is not None and len(recording.odometry):
+        _trajectory_streams("odo", recording.odometry, streams)
+        d = streams["odo_distance"]
+        streams["odo_speed"] = Stream(d.t, _gradient(d.t, d.values))
+    if recording.gps is not None:
+        gps = recording.gps
+        fix = np.asarray(gps.status) >= 0
+        x = _clean("gps_x", gps.t[fix], gps.x[fix])
+        y = _clean("gps_y", gps.t[fix], gps.y[fix])
+        if len(x.t) == len(y.t) and len(x.t) >= 2:
+            speed = np.hypot(np.diff(x.values), np.diff(y.values)) / np.diff(x.t)
+            streams["gps_speed"] = Stream(0.5 * (x.t[1:] + x.t[:-1]), speed)
+        streams["gps_sigma"] = _clean("gps_sigma", gps.t[fix], gps.sigma[fix])
+    logger.info("validation streams: %s", ", ".join(sorted(streams)))
+    return streams
+
+
+def resample(stream: Stream, step_t: np.ndarray, max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Linear interpolation of ``stream`` at ``step_t`` (s): ``(values, valid)``.
+
+    A step is valid when it lies within the stream's time span and the two
+    samples around it are at most ``max_gap_s`` apart (a step on a sample is
+    always valid). Angular streams are unwrapped before interpolating, so
+    the values come out continuous (not wrapped). Invalid steps hold NaN.
+    """
+    step_t = np.asarray(step_t, dtype=float)
+    n = len(stream.t)
+    values = np.full(len(step_t), np.nan)
+    if n == 0:
+        return values, np.zeros(len(step_t), dtype=bool)
+    v = np.unwrap(stream.values) if stream.angular else stream.values
+    j = np.searchsorted(stream.t, step_t, side="right") - 1  # last sample <= step
+    jc = np.clip(j, 0, n - 1)
+    on_sample = (j >= 0) & (stream.t[jc] == step_t)
+    nxt = np.minimum(jc + 1, n - 1)
+    bracketed = (j >= 0) & (j < n - 1) & (stream.t[nxt] - stream.t[jc] <= max_gap_s)
+    valid = on_sample | bracketed
+    values[valid] = np.interp(step_t[valid], stream.t, v)
+    return values, valid
+
+
+@dataclass(frozen=True)
+class StepStreams:
+    """Streams resampled onto the validation steps ``t`` (m,) s."""
+
+    t: np.ndarray
+    values: dict[str, np.ndarray]
+    valid: dict[str, np.ndarray]
+    angular: dict[str, bool]
+
+
+def resample_streams(
+    streams: Mapping[str, Stream],
+    step_t: np.ndarray,
+    max_gap_s: float = 0.5,
+    stream_max_gap_s: Mapping[str, float] | None = None,
+) -> StepStreams:
+    """Resample every stream; ``stream_max_gap_s`` overrides the gap per name."""
+    step_t = np.asarray(step_t, dtype=float)
+    if step_t.ndim != 1 or (len(step_t) > 1 and not np.all(np.diff(step_t) > 0.0)):
+        raise ValidationError("step times must be a strictly increasing 1-D array")
+    gaps = stream_max_gap_s or {}
+    values, valid, angular = {}, {}, {}
+    for name, s in streams.items():
+        values[name], valid[name] = resample(s, step_t, gaps.get(name, max_gap_s))
+        angular[name] = s.angular
+    return StepStreams(step_t, values, valid, angular)
+
+
+def fixed_rate_steps(start_s: float, end_s: float, rate_hz: float) -> np.ndarray:
+    """Validation step times from ``start_s`` to ``end_s`` (inclusive) at ``rate_hz``."""
+    if not rate_hz > 0.0 or end_s < start_s:
+        raise ValidationError(f"validation steps: need rate_hz > 0 and end >= start, got {rate_hz}, {start_s}..{end_s}")
+    count = int(np.floor((end_s - start_s) * rate_hz + 1e-9)) + 1
+    return start_s + np.arange(count) / rate_hz
