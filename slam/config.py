@@ -280,9 +280,28 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
         set_dotted(tree, key, value)
     source = str(path) if path is not None else "config"
     try:
-        return PipelineConfig.model_validate(tree)
+        config = PipelineConfig.model_validate(tree)
     except ValidationError as e:
         raise GslamError(_format_pydantic(source, e)) from None
+    # The validation package checks its own sections (imported here, not at
+    # module level: it builds on this module).
+    from validation.config import inline_model, parse_sections
+    from validation.errors import ValidationError as SectionError
+
+    base_dir = Path(path).parent if path is not None else Path.cwd()
+    try:
+        inline_model(config.validation, base_dir)
+        parse_sections(config.validation, config.gating)
+    except SectionError as e:
+        raise GslamError(f"{source}: {e}") from None
+    return config
+
+
+def validation_sections(config: PipelineConfig):
+    """The typed ``validation`` and ``gating`` sections of a loaded config."""
+    from validation.config import parse_sections
+
+    return parse_sections(config.validation, config.gating)
 
 
 def dump_config(config: PipelineConfig) -> str:

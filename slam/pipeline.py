@@ -54,10 +54,8 @@ class _Timings:
 class MappingPipeline:
     """Map one run with the given config; see :meth:`run`.
 
-    ``weights_hook`` is how sensor validation plugs in: it receives the
-    pipeline after the measurements are built and returns per-step factor
-    weights (and may add files and metrics through ``self.extra_outputs``
-    and ``self.extra_metrics``).
+    ``recording`` and ``frontend`` may be given to reuse what another
+    variant of the same run already computed (``gslam compare``).
     """
 
     def __init__(
@@ -66,17 +64,17 @@ class MappingPipeline:
         config: PipelineConfig,
         out_dir: str | Path,
         progress: bool = False,
-        weights_hook=None,
         recording: Recording | None = None,
+        frontend: FrontendResult | None = None,
     ):
         self.input_path = Path(input_path)
         self.config = config
         self.out_dir = Path(out_dir)
         self.progress = progress
-        self.weights_hook = weights_hook
         self.recording = recording
         self.timings = _Timings()
-        self.frontend: FrontendResult | None = None
+        self.frontend: FrontendResult | None = frontend
+        self.validation = None
         self.measurements: Measurements | None = None
         self.weights: FactorWeights | None = None
         self.backend: BackendResult | None = None
@@ -113,6 +111,9 @@ class MappingPipeline:
     def match_scans(self) -> None:
         rec, cfg = self.recording, self.config
         if rec.scans is None or not cfg.frontend.enabled or not cfg.backend.factors.scan_matching.enabled:
+            self.frontend = None
+            return
+        if self.frontend is not None:  # reused from another variant
             return
         self.frontend = run_frontend(rec.scans, cfg.frontend, progress=self.progress)
         self.timings.frontend_s = self.frontend.time_s
@@ -129,13 +130,25 @@ class MappingPipeline:
         self.measurements = build_measurements(rec, t, cfg.backend.factors, scan_idx, sm)
 
     def validate(self) -> None:
+        """Gate the factors per keyframe (``validation.mode`` on or oracle)."""
+        from slam.config import validation_sections
+
+        vcfg, gcfg = validation_sections(self.config)
         n = len(self.measurements)
-        if self.weights_hook is None:
+        if vcfg.mode == "off":
             self.weights = unit_weights(n)
             return
-        t = time.perf_counter()
-        self.weights = self.weights_hook(self)
-        self.timings.validation_s = time.perf_counter() - t
+        from validation.validator import run_validation
+
+        rec = self.recording
+        if vcfg.mode == "oracle" and not any(rec.faults.values()):
+            log.warning("oracle gating without true fault intervals: nothing will be gated")
+        sm = self.frontend.poses if self.frontend is not None else None
+        self.validation = run_validation(rec, sm, self.measurements.t, vcfg, gcfg)
+        self.weights = self.validation.weights
+        self.timings.validation_s = self.validation.time_s
+        self.extra_metrics.update(self.validation.metrics)
+        self.extra_outputs["validation.csv"] = self.validation.csv_text()
 
     def optimise(self) -> None:
         pose0 = self._initial_pose()
@@ -265,12 +278,6 @@ def _replace_dir(new: Path, target: Path) -> None:
         os.replace(new, target)
 
 
-def run_map(
-    input_path: str | Path,
-    config: PipelineConfig,
-    out_dir: str | Path,
-    progress: bool = False,
-    weights_hook=None,
-) -> MapResult:
+def run_map(input_path: str | Path, config: PipelineConfig, out_dir: str | Path, progress: bool = False) -> MapResult:
     """Map one run (the library form of ``gslam map``)."""
-    return MappingPipeline(input_path, config, out_dir, progress=progress, weights_hook=weights_hook).run()
+    return MappingPipeline(input_path, config, out_dir, progress=progress).run()

@@ -135,7 +135,7 @@ def test_unary_implausible_blames_its_component():
 
 def test_unary_implausible_in_shipped_model():
     model = load_model(TELEMAX)
-    obs = {r: M for r in model.relations} | {"mag_plausible": IMPL, "gps_quality": PLAUS}
+    obs = {r: M for r in model.relations} | {"mag_plausible": IMPL, "gps_plausible": PLAUS}
     result = Diagnoser(model).diagnose(obs)
     assert result.diagnoses == sets(("IMU_YAW",))
     # The compass's matches with the gyro and the scan matcher are coincidences.
@@ -154,7 +154,7 @@ def test_priors_rank_diagnoses_and_give_their_probability():
 
 def test_memo_returns_the_same_object_quickly():
     d = Diagnoser(load_model(TELEMAX))
-    obs = {"yaw_compass_sm": N, "yaw_gyro_sm": N, "dist_odo_sm": N, "yaw_compass_gyro": M}
+    obs = {"yaw_compass_sm": N, "yaw_gyro_sm": N, "distance_odo_sm": N, "yaw_compass_gyro": M}
     t0 = time.perf_counter()
     first = d.diagnose(obs)
     cold = time.perf_counter() - t0
@@ -162,15 +162,15 @@ def test_memo_returns_the_same_object_quickly():
     second = d.diagnose(dict(reversed(list(obs.items()))))
     warm = time.perf_counter() - t0
     assert second is first
-    assert d.diagnose(obs | {"gps_quality": None}) is first  # None: not observed
+    assert d.diagnose(obs | {"gps_plausible": None}) is first  # None: not observed
     assert warm < cold and warm < 1e-3
 
 
 def test_shipped_model_blames_scan_matching_outdoors():
     """The paper's scenario: every observer of SM disagrees, the rest agree."""
     model = load_model(TELEMAX)
-    obs = {r: M for r in model.relations} | {"mag_plausible": PLAUS, "gps_quality": PLAUS}
-    for r in ("yaw_compass_sm", "yaw_gyro_sm", "dist_odo_sm"):
+    obs = {r: M for r in model.relations} | {"mag_plausible": PLAUS, "gps_plausible": PLAUS}
+    for r in ("yaw_compass_sm", "yaw_gyro_sm", "distance_odo_sm"):
         obs[r] = N
     result = Diagnoser(model).diagnose(obs)
     assert result.diagnoses[0] == {"SM"}

@@ -80,7 +80,7 @@ def test_with_real_diagnoser_scan_matching_is_gated():
     obs = {r: Observation.MATCH for r in model.relations} | {
         "yaw_compass_sm": Observation.NO_MATCH,
         "yaw_gyro_sm": Observation.NO_MATCH,
-        "dist_odo_sm": Observation.NO_MATCH,
+        "distance_odo_sm": Observation.NO_MATCH,
         "mag_plausible": Plausibility.PLAUSIBLE,
     }
     gate = Gate(GatingConfig(), model)

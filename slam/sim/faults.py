@@ -1,0 +1,138 @@
+"""True fault intervals, derived from the simulated physics.
+
+A component is faulty where its output is physically wrong beyond its
+nominal noise. Nothing here is switched on by a flag; each definition looks
+at the noise-free quantity the sensor model produced:
+
+* ``IMU_YAW`` (compass): the heading computed by
+  :func:`slam.geometry.heading_from_magnetometer` from the noise-free body
+  field (Earth + steel dipoles) differs from the true yaw by more than
+  ``faults.compass_error_deg``. Evaluated at the truth rate.
+* ``SM`` (scan matching): the noise-free scan cannot constrain a 2D pose,
+  either because it has fewer than ``faults.sm_min_returns`` returns, or
+  because its geometry is degenerate. For each return i with hit point p_i
+  (relative to the laser, m) on a wall with unit normal n_i, point-to-line
+  ICP has the Jacobian row J_i = (n_x, n_y, (p_i x n_i) / L), L being the
+  mean range so all three columns are unitless; the scan is degenerate when
+  the smallest eigenvalue of ``sum_i(J_i^T J_i) / B`` (B the number of
+  beams, so a scan with few returns is weak too) is below
+  ``faults.sm_min_eigenvalue``. A single straight wall (or a corridor) has
+  an exact null direction along the wall and gives 0; a furnished room
+  gives 0.1-0.3. At the laser times.
+* ``GPS``: a fix is published and its multipath bias exceeds
+  ``faults.gps_sigmas`` times the nominal sigma. At the GPS times (no fix
+  means no output, which is not a fault).
+* ``ODO``: the track slip (terrain slip + turn-rate part) exceeds
+  ``faults.odo_slip``, i.e. more than the nominal slip of a calibrated
+  odometry. At the truth rate.
+* ``IMU_GYRO``: the true gyro bias exceeds ``faults.gyro_bias_rad_s``
+  (normally never). At the gyro times.
+
+Samples flagged faulty are joined into intervals ``[first, last]`` (s from
+the start); intervals closer than ``faults.merge_gap_s`` are merged and
+those shorter than ``faults.min_duration_s`` dropped.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from slam.geometry import heading_from_magnetometer, wrap_angle
+from slam.recording import Interval
+from slam.sim.magnetics import body_field, reference
+from slam.sim.robot import Motion
+from slam.sim.scenario import Scenario
+from slam.sim.world import World
+
+if TYPE_CHECKING:
+    from slam.sim.sensors import GpsData, GyroData, LaserData
+
+
+def intervals_from_mask(
+    t: np.ndarray, mask: np.ndarray, merge_gap_s: float, min_duration_s: float
+) -> list[Interval]:
+    """Runs of True in ``mask`` over times ``t`` (s) as merged intervals."""
+    if not np.any(mask):
+        return []
+    m = np.concatenate([[False], mask.astype(bool), [False]])
+    starts = np.flatnonzero(~m[:-1] & m[1:])
+    ends = np.flatnonzero(m[:-1] & ~m[1:]) - 1
+    merged: list[list[float]] = []
+    for a, b in zip(t[starts], t[ends]):
+        if merged and a - merged[-1][1] <= merge_gap_s:
+            merged[-1][1] = float(b)
+        else:
+            merged.append([float(a), float(b)])
+    return [(round(a, 6), round(b, 6)) for a, b in merged if b - a >= min_duration_s]
+
+
+def compass_heading_error(
+    true_body_field: np.ndarray, yaw: np.ndarray, declination_rad: float
+) -> np.ndarray:
+    """Heading error (n,) rad of a compass reading a noise-free field."""
+    return np.asarray(wrap_angle(heading_from_magnetometer(true_body_field, declination_rad) - yaw))
+
+
+def scan_constraint(
+    ranges: np.ndarray, hit: np.ndarray, beam_yaw: np.ndarray, normals: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Number of returns (n,) and smallest eigenvalue (n,) of the normalised
+    point-to-line information matrix of each scan (module docstring).
+
+    ``ranges`` (n, B) noise-free m (inf without a return); ``hit`` (n, B)
+    indices of the segments hit; ``beam_yaw`` (n, B) world angle of each
+    beam, rad; ``normals`` (S, 2) unit wall normals, world frame. The
+    eigenvalues do not depend on the frame, so everything stays in the world.
+    """
+    ok = np.isfinite(ranges) & (hit >= 0)
+    count = ok.sum(axis=1)
+    r = np.where(ok, ranges, 0.0)
+    px, py = r * np.cos(beam_yaw), r * np.sin(beam_yaw)
+    n = normals[np.where(ok, hit, 0)]
+    scale = np.where(count > 0, r.sum(axis=1) / np.maximum(count, 1), 1.0)
+    rot = (px * n[..., 1] - py * n[..., 0]) / scale[:, None]
+    rows = np.stack([n[..., 0], n[..., 1], rot], axis=-1) * ok[..., None]
+    info = np.einsum("nbi,nbj->nij", rows, rows) / ranges.shape[1]
+    return count, np.linalg.eigvalsh(info)[:, 0]
+
+
+def sm_mask(
+    count: np.ndarray, min_eig: np.ndarray, min_returns: int, min_eigenvalue: float
+) -> np.ndarray:
+    """Scans that cannot constrain a 2D pose."""
+    return (count < min_returns) | (min_eig < min_eigenvalue)
+
+
+def true_faults(
+    scenario: Scenario,
+    world: World,
+    motion: Motion,
+    laser: LaserData,
+    gyro: GyroData,
+    gps: GpsData,
+) -> dict[str, list[Interval]]:
+    """The fault intervals (s from the start) of every component."""
+    cfg = scenario.faults
+    ref = reference(scenario.environment)
+    xy = motion.xy()
+
+    def intervals(t: np.ndarray, mask: np.ndarray) -> list[Interval]:
+        return intervals_from_mask(t, mask, cfg.merge_gap_s, cfg.min_duration_s)
+
+    # 1. Compass: heading from the noise-free disturbed field vs the truth.
+    height = scenario.sensors.magnetometer.mounting_height_m
+    field = body_field(xy, motion.yaw, height, ref, scenario.world.disturbers)
+    yaw_err = compass_heading_error(field, motion.yaw, ref.declination_rad)
+    # 2. Track slip beyond nominal, 3. gyro bias, 4. multipath, 5. scan geometry.
+    slip = world.track_slip(xy, motion.w, scenario.sensors.odometry.turn_slip_per_rad_s)
+    sm_bad = sm_mask(laser.returns, laser.min_eigenvalue, cfg.sm_min_returns, cfg.sm_min_eigenvalue)
+    gps_bad = (gps.status == 0) & (gps.multipath > cfg.gps_sigmas * gps.sigma)
+    return {
+        "ODO": intervals(motion.t, slip > cfg.odo_slip),
+        "IMU_GYRO": intervals(gyro.t, np.abs(gyro.bias) > cfg.gyro_bias_rad_s),
+        "IMU_YAW": intervals(motion.t, np.abs(yaw_err) > np.radians(cfg.compass_error_deg)),
+        "SM": intervals(laser.t, sm_bad),
+        "GPS": intervals(gps.t, gps_bad),
+    }

@@ -1,0 +1,229 @@
+"""Typed scenario description of a simulated run, loaded from YAML.
+
+A scenario has five parts: the ``world`` (walls, doors, obstacles, labelled
+regions, magnetic disturbers), the ``robot`` (waypoints and motion limits),
+the ``sensors`` (rate and noise of each), the ``environment`` (Earth field,
+GPS datum, start time) and the ``faults`` thresholds that turn the physics
+into true fault intervals. Every model forbids unknown keys, so a typo is an
+error naming the file and the key. Coordinates are metres in the ENU world
+frame (x east, y north); angles in the YAML are degrees (keys say ``_deg``).
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from slam.config import load_yaml
+from slam.errors import GslamError
+
+Point = tuple[float, float]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+# --- world ---------------------------------------------------------------
+
+
+class RegionKind(str, Enum):
+    """Whether a region is under a roof (no GPS) or in the open."""
+
+    INDOOR = "indoor"
+    OUTDOOR = "outdoor"
+
+
+class Door(Strict):
+    """An opening cut into every wall segment that passes through ``center``."""
+
+    center: Point
+    width_m: float = Field(gt=0.0)
+
+
+class Region(Strict):
+    """A labelled area; ``slip`` is the terrain's track slip fraction."""
+
+    name: str
+    kind: RegionKind
+    polygon: list[Point] = Field(min_length=3)
+    slip: float = Field(0.02, ge=0.0, lt=1.0)
+
+
+class Disturber(Strict):
+    """A magnetic dipole (a steel structure). ``position`` is (x, y, z) m with
+    z the height of the dipole's centre; ``direction`` is the moment's axis
+    in the world frame (normalised on load)."""
+
+    name: str
+    position: tuple[float, float, float]
+    moment_A_m2: float = Field(gt=0.0)
+    direction: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+    @field_validator("direction")
+    @classmethod
+    def _nonzero(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        if sum(c * c for c in v) == 0.0:
+            raise ValueError("direction must not be the zero vector")
+        return v
+
+
+class WorldConfig(Strict):
+    """Walls are open polylines (each consecutive pair of points a segment);
+    obstacles are closed polygons. Anything outside every region is
+    ``default_region``."""
+
+    walls: list[list[Point]] = Field(default_factory=list)
+    doors: list[Door] = Field(default_factory=list)
+    obstacles: list[list[Point]] = Field(default_factory=list)
+    regions: list[Region] = Field(default_factory=list)
+    default_region: Region = Region(
+        name="open", kind=RegionKind.OUTDOOR, polygon=[(0, 0), (1, 0), (0, 1)], slip=0.03
+    )
+    disturbers: list[Disturber] = Field(default_factory=list)
+
+
+# --- robot ---------------------------------------------------------------
+
+
+class RobotConfig(Strict):
+    """A tracked vehicle driving through ``waypoints`` ([x, y] or
+    [x, y, pause_s]). Corners sharper than ``spot_turn_above_deg`` are turned
+    on the spot, the others on arcs of ``corner_radius_m``."""
+
+    start_yaw_deg: float = 0.0
+    waypoints: list[tuple[float, float] | tuple[float, float, float]] = Field(min_length=2)
+    max_speed_m_s: float = Field(0.5, gt=0.0)
+    max_accel_m_s2: float = Field(0.3, gt=0.0)
+    max_turn_rate_deg_s: float = Field(30.0, gt=0.0)
+    max_turn_accel_deg_s2: float = Field(60.0, gt=0.0)
+    corner_radius_m: float = Field(1.0, ge=0.0)
+    spot_turn_above_deg: float = Field(100.0, ge=0.0, le=180.0)
+    start_pause_s: float = Field(1.0, ge=0.0)
+    end_pause_s: float = Field(1.0, ge=0.0)
+    truth_rate_hz: float = Field(100.0, ge=100.0)
+
+    @field_validator("waypoints")
+    @classmethod
+    def _pauses_nonnegative(cls, v: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
+        if any(len(w) == 3 and w[2] < 0.0 for w in v):
+            raise ValueError("a waypoint's pause (third value, s) must be >= 0")
+        return v
+
+
+# --- sensors -------------------------------------------------------------
+
+
+class LaserConfig(Strict):
+    rate_hz: float = Field(10.0, gt=0.0)
+    beams: int = Field(541, ge=2)
+    fov_deg: float = Field(270.0, gt=0.0, le=360.0)
+    min_range_m: float = Field(0.1, ge=0.0)
+    max_range_m: float = Field(10.0, gt=0.0)
+    range_noise_m: float = Field(0.01, ge=0.0)
+
+
+class GyroConfig(Strict):
+    """z-rate with white noise (per sample) and a bias random walk."""
+
+    rate_hz: float = Field(100.0, gt=0.0)
+    noise_rad_s: float = Field(0.002, ge=0.0)
+    bias_initial_rad_s: float = 0.0
+    bias_walk_rad_s_sqrt_s: float = Field(2e-5, ge=0.0)
+
+
+class MagnetometerConfig(Strict):
+    rate_hz: float = Field(20.0, gt=0.0)
+    noise_T: float = Field(2e-7, ge=0.0)
+    mounting_height_m: float = Field(0.3, ge=0.0)
+
+
+class OdometryConfig(Strict):
+    """Track odometry. The reported distance is scaled by
+    ``1 + distance_scale_error + slip``, the reported rotation by
+    ``1 + rotation_overreport + slip``, where ``slip`` is the terrain's slip
+    plus ``turn_slip_per_rad_s`` times the true turn rate."""
+
+    rate_hz: float = Field(20.0, gt=0.0)
+    distance_scale_error: float = 0.005
+    rotation_overreport: float = 0.0
+    turn_slip_per_rad_s: float = Field(0.05, ge=0.0)
+    distance_noise_m_sqrt_m: float = Field(0.005, ge=0.0)
+    yaw_noise_rad_sqrt_rad: float = Field(0.005, ge=0.0)
+
+
+class GpsConfig(Strict):
+    """Fixes only in the open and farther than ``outage_distance_m`` from an
+    indoor region. Multipath adds a bias away from the nearest wall of
+    ``multipath_max_m * exp(-d / multipath_scale_m)`` at wall distance d."""
+
+    rate_hz: float = Field(5.0, gt=0.0)
+    sigma_m: float = Field(1.0, gt=0.0)
+    outage_distance_m: float = Field(2.0, ge=0.0)
+    multipath_max_m: float = Field(6.0, ge=0.0)
+    multipath_scale_m: float = Field(4.0, gt=0.0)
+    altitude_m: float = 115.0
+
+
+class SensorsConfig(Strict):
+    laser: LaserConfig = LaserConfig()
+    gyro: GyroConfig = GyroConfig()
+    magnetometer: MagnetometerConfig = MagnetometerConfig()
+    odometry: OdometryConfig = OdometryConfig()
+    gps: GpsConfig = GpsConfig()
+
+
+# --- environment and faults ------------------------------------------------
+
+
+class EnvironmentConfig(Strict):
+    """Undisturbed Earth field, GPS datum and absolute start time."""
+
+    field_strength_T: float = Field(48e-6, gt=0.0)
+    dip_deg: float = Field(64.0, ge=-90.0, le=90.0)
+    declination_deg: float = 3.0
+    datum_lat_deg: float = Field(49.0, ge=-90.0, le=90.0)
+    datum_lon_deg: float = Field(8.4, ge=-180.0, le=180.0)
+    t0_s: float = 1_700_000_000.0
+
+
+class FaultsConfig(Strict):
+    """Thresholds that define the true fault intervals (see
+    :mod:`slam.sim.faults`)."""
+
+    compass_error_deg: float = Field(5.0, gt=0.0)
+    sm_min_returns: int = Field(20, ge=3)
+    sm_min_eigenvalue: float = Field(0.03, ge=0.0)
+    odo_slip: float = Field(0.12, gt=0.0)
+    gyro_bias_rad_s: float = Field(0.01, gt=0.0)
+    gps_sigmas: float = Field(3.0, gt=0.0)
+    min_duration_s: float = Field(0.5, ge=0.0)
+    merge_gap_s: float = Field(0.5, ge=0.0)
+
+
+class Scenario(Strict):
+    """Root of a scenario YAML (e.g. ``configs/scenarios/telemax_lab.yaml``)."""
+
+    name: str
+    seed: int = Field(0, ge=0)
+    world: WorldConfig = WorldConfig()
+    robot: RobotConfig
+    sensors: SensorsConfig = SensorsConfig()
+    environment: EnvironmentConfig = EnvironmentConfig()
+    faults: FaultsConfig = FaultsConfig()
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML; bad input raises :class:`GslamError`
+    with one line naming the file and the offending key."""
+    tree = load_yaml(path)
+    try:
+        return Scenario.model_validate(tree)
+    except ValidationError as e:
+        first = e.errors()[0]
+        loc = ".".join(str(p) for p in first["loc"])
+        if first["type"] == "extra_forbidden":
+            raise GslamError(f"{path}: unknown scenario key '{loc}'") from None
+        raise GslamError(f"{path}: {loc}: {first['msg']}") from None
