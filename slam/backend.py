@@ -59,12 +59,22 @@ class BackendResult:
     iterations: int = 0
 
 
-def _robust_kernel(config: BackendConfig):
-    kernel, c = config.robust_kernel, config.robust_param
+def _robust_kernel(kernel: str, c: float):
     if kernel == "none":
         return None
     est = gtsam.noiseModel.mEstimator
     return {"huber": est.Huber, "cauchy": est.Cauchy, "dcs": est.DCS}[kernel].Create(c)
+
+
+def _kernels(config: BackendConfig) -> dict[str, object]:
+    """The M-estimator of each factor type: its own, else the back-end's."""
+    out = {}
+    for factor in FACTOR_TYPES:
+        fc = getattr(config.factors, factor)
+        kernel = fc.robust_kernel if fc.robust_kernel is not None else config.robust_kernel
+        param = fc.robust_param if fc.robust_param is not None else config.robust_param
+        out[factor] = _robust_kernel(kernel, param)
+    return out
 
 
 class GraphBuilder:
@@ -76,7 +86,7 @@ class GraphBuilder:
         self.meas = meas
         self.weights = weights
         self.config = config
-        self.robust = _robust_kernel(config)
+        self.robust = _kernels(config)
         self.counts = {f: 0 for f in FACTOR_TYPES}
         self.fallback_steps = 0
 
@@ -105,17 +115,17 @@ class GraphBuilder:
             for factor, w in self._between_weights(k).items():
                 if np.isfinite(w):
                     meas = m.get(factor)
-                    out.append(between_factor(k, meas.delta[k], gaussian(meas.sigma[k] * w, self.robust)))
+                    out.append(between_factor(k, meas.delta[k], gaussian(meas.sigma[k] * w, self.robust[factor])))
                     self.counts[factor] += 1
             if self._available("gyro", k) and np.isfinite(w := self._weight("gyro", k)):
-                out.append(yaw_increment_factor(k, m.gyro.value[k], gaussian([m.gyro.sigma[k] * w], self.robust)))
+                out.append(yaw_increment_factor(k, m.gyro.value[k], gaussian([m.gyro.sigma[k] * w], self.robust["gyro"])))
                 self.counts["gyro"] += 1
         if self._available("compass", k) and np.isfinite(w := self._weight("compass", k)):
-            out.append(yaw_prior_factor(k, m.compass.value[k], gaussian([m.compass.sigma[k] * w], self.robust)))
+            out.append(yaw_prior_factor(k, m.compass.value[k], gaussian([m.compass.sigma[k] * w], self.robust["compass"])))
             self.counts["compass"] += 1
         if self._available("gps", k) and np.isfinite(w := self._weight("gps", k)):
             s = m.gps.sigma[k] * w
-            out.append(position_prior_factor(k, m.gps.xy[k], gaussian([s, s], self.robust)))
+            out.append(position_prior_factor(k, m.gps.xy[k], gaussian([s, s], self.robust["gps"])))
             self.counts["gps"] += 1
         return out
 

@@ -98,45 +98,52 @@ class KeyframeConfig(Strict):
         return self
 
 
-class OdometryFactorConfig(Strict):
-    """Between factor from track odometry; sigma grows with the step length."""
+Kernel = Literal["none", "huber", "cauchy", "dcs"]
+
+
+class FactorConfig(Strict):
+    """Common to every factor type: ``robust_kernel`` (null: the back-end's
+    ``robust_kernel``) and its parameter in sigmas (null: the back-end's)."""
 
     enabled: bool = True
+    robust_kernel: Kernel | None = None
+    robust_param: float | None = Field(None, gt=0.0)
+
+
+class OdometryFactorConfig(FactorConfig):
+    """Between factor from track odometry; sigma grows with the step length."""
+
     sigma_xy_m: float = Field(0.01, gt=0.0)
     sigma_xy_per_m: float = Field(0.05, ge=0.0)
     sigma_yaw_deg: float = Field(0.5, gt=0.0)
     sigma_yaw_per_rad: float = Field(0.1, ge=0.0)
 
 
-class GyroFactorConfig(Strict):
+class GyroFactorConfig(FactorConfig):
     """Relative-yaw factor from the integrated gyro rate."""
 
-    enabled: bool = True
     sigma_yaw_deg: float = Field(0.2, gt=0.0)
     sigma_yaw_per_s_deg: float = Field(0.05, ge=0.0)
 
 
-class CompassFactorConfig(Strict):
+class CompassFactorConfig(FactorConfig):
     """Absolute-yaw prior from the compass heading at the keyframe."""
 
-    enabled: bool = True
     sigma_yaw_deg: float = Field(3.0, gt=0.0)
 
 
-class ScanMatchingFactorConfig(Strict):
+class ScanMatchingFactorConfig(FactorConfig):
     """Between factor from KISS-ICP's relative pose."""
 
-    enabled: bool = True
     sigma_xy_m: float = Field(0.02, gt=0.0)
     sigma_xy_per_m: float = Field(0.02, ge=0.0)
     sigma_yaw_deg: float = Field(0.3, gt=0.0)
 
 
-class GpsFactorConfig(Strict):
+class GpsFactorConfig(FactorConfig):
     """Position prior from a GPS fix near the keyframe; sigma from the
     receiver's covariance, floored, times ``sigma_scale``."""
 
-    enabled: bool = True
     sigma_floor_m: float = Field(0.5, gt=0.0)
     sigma_scale: float = Field(1.0, gt=0.0)
     max_time_offset_s: float = Field(0.25, gt=0.0)
@@ -172,7 +179,7 @@ class BackendConfig(Strict):
     initial_sigma_yaw_deg: float = Field(0.5, gt=0.0)
     max_iterations: int = Field(100, ge=1)
     relative_error_tol: float = Field(1e-6, gt=0.0)
-    robust_kernel: Literal["none", "huber", "cauchy", "dcs"] = "none"
+    robust_kernel: Kernel = "none"
     robust_param: float = Field(1.345, gt=0.0)
     gnc_inlier_probability: float | None = Field(None, gt=0.0, lt=1.0)
     fallback_inflation: float = Field(10.0, ge=1.0)

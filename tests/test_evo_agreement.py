@@ -11,6 +11,7 @@ import json
 import os
 import shutil
 import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -21,8 +22,17 @@ from slam.evaluation import ate, evaluate, rpe
 from slam.io.tum import read_tum, write_tum
 from slam.recording import Trajectory
 
+def _evo_tool(name: str) -> str | None:
+    """evo's console script: beside this interpreter (a virtualenv that is
+    not activated), else on PATH."""
+    here = Path(sys.executable).parent / name
+    return str(here) if here.exists() else shutil.which(name)
+
+
+EVO_APE, EVO_RPE = _evo_tool("evo_ape"), _evo_tool("evo_rpe")
+
 pytestmark = pytest.mark.skipif(
-    shutil.which("evo_ape") is None or shutil.which("evo_rpe") is None,
+    EVO_APE is None or EVO_RPE is None,
     reason="evo is not installed (test-only dependency: pip install evo)",
 )
 
@@ -92,9 +102,9 @@ def test_ate_and_rpe_agree_with_evo(tmp_path):
     est, _ = read_tum(est_path, t0=T0)
     files = ["tum", str(ref_path), str(est_path)]
     rpe_args = ["--delta_unit", "m", "--all_pairs", "--pairs_from_reference"]
-    jobs = {"ape": ["evo_ape", *files], "ape_aligned": ["evo_ape", *files, "-a"]}
+    jobs = {"ape": [EVO_APE, *files], "ape_aligned": [EVO_APE, *files, "-a"]}
     for delta in (5, 20):
-        rpe_cmd = ["evo_rpe", *files, "--delta", str(delta), *rpe_args]
+        rpe_cmd = [EVO_RPE, *files, "--delta", str(delta), *rpe_args]
         jobs[f"rpe_trans_{delta}"] = [*rpe_cmd, "-r", "trans_part"]
         jobs[f"rpe_rot_{delta}"] = [*rpe_cmd, "-r", "angle_deg"]
     evo = _run_evo(jobs, tmp_path)

@@ -80,6 +80,13 @@ class GatingConfig(BaseModel):
     failed scan matcher also admits the unlikely triple fault of all its
     partners as a second minimal diagnosis, and inflating every sensor would
     throw away the dead reckoning that should take over.
+
+    ``lookback_s``: when a factor is gated, its factors of the preceding
+    ``lookback_s`` are gated too. The observers need a window and a counter
+    to see a fault, so the factors of those seconds were measured while the
+    sensor was already failing; on the robot, iSAM2 removes them when the
+    decision is made (``removeFactorIndices``). 0 is the paper's behaviour:
+    decisions act from their step on.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
@@ -89,6 +96,7 @@ class GatingConfig(BaseModel):
     no_diagnosis: NoDiagnosisPolicy = NoDiagnosisPolicy.KEEP_PREVIOUS
     inflation: float = Field(10.0, ge=1.0)
     holdoff_s: float = Field(2.0, ge=0.0)
+    lookback_s: float = Field(0.0, ge=0.0)
     factors: dict[str, list[str]] = Field(default_factory=_default_factors)
 
     @model_validator(mode="after")

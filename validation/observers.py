@@ -175,6 +175,7 @@ class ObserversConfig(_Strict):
     gps: GpsCheckConfig = GpsCheckConfig()
     max_gap_s: float = Field(0.5, gt=0.0)
     stream_max_gap_s: dict[str, float] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
+    gps_speed_window_s: float = Field(5.0, gt=0.0)
 
     @model_validator(mode="after")
     def _names(self) -> "ObserversConfig":

@@ -11,9 +11,11 @@ sm_yaw         SM        scan-matching (KISS-ICP) yaw, rad (angular)
 odo_yaw        ODO       odometry yaw, rad (angular)
 odo_distance   ODO       path length of the odometry x/y, m
 sm_distance    SM        path length of the scan-matching x/y, m
+odo_lateral    ODO       sideways travel: sum of the body-frame lateral steps, m
+sm_lateral     SM        the same from scan matching, m
 odo_speed      ODO       derivative of odo_distance, m/s
-gps_speed      GPS       distance between successive fixes over their time
-                         difference, m/s, at the mid time
+gps_speed      GPS       speed from the slope of the fixes' x and y over a
+                         window, m/s
 ============== ========= ===================================================
 
 Quality streams for the unary checks: ``mag_strength`` (T) and ``mag_dip``
@@ -35,13 +37,15 @@ from typing import Literal, get_args
 
 import numpy as np
 
+from validation.trends import derivative
 from slam.recording import Recording, Trajectory
 from validation.errors import ValidationError
 
 logger = logging.getLogger(__name__)
 
 StreamName = Literal[
-    "compass_yaw", "gyro_yaw", "sm_yaw", "odo_yaw", "odo_distance", "sm_distance", "odo_speed", "gps_speed"
+    "compass_yaw", "gyro_yaw", "sm_yaw", "odo_yaw", "odo_distance", "sm_distance",
+    "odo_lateral", "sm_lateral", "odo_speed", "gps_speed",
 ]
 QualityStreamName = Literal["mag_strength", "mag_dip", "gps_sigma"]
 
@@ -52,6 +56,8 @@ STREAM_COMPONENT: dict[str, str] = {
     "odo_yaw": "ODO",
     "odo_distance": "ODO",
     "sm_distance": "SM",
+    "odo_lateral": "ODO",
+    "sm_lateral": "SM",
     "odo_speed": "ODO",
     "gps_speed": "GPS",
     "mag_strength": "IMU_YAW",
@@ -96,16 +102,32 @@ def _gradient(t: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.gradient(v, t) if len(t) >= 2 else np.zeros(len(t))
 
 
+def lateral_travel(x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """Cumulative sideways travel (m): each step's displacement projected on
+    the body's left axis at its start. A tracked or wheeled robot cannot
+    move sideways, so a healthy source keeps this flat; a scan matcher that
+    slides along a lone wall does not."""
+    dx, dy = np.diff(x), np.diff(y)
+    step = -np.sin(yaw[:-1]) * dx + np.cos(yaw[:-1]) * dy
+    return np.concatenate(([0.0], np.cumsum(step)))
+
+
 def _trajectory_streams(prefix: str, traj: Trajectory, streams: dict[str, Stream]) -> None:
     streams[f"{prefix}_yaw"] = _clean(f"{prefix}_yaw", traj.t, traj.yaw, angular=True)
     streams[f"{prefix}_distance"] = _clean(f"{prefix}_distance", traj.t, path_length(traj.x, traj.y))
+    streams[f"{prefix}_lateral"] = _clean(f"{prefix}_lateral", traj.t, lateral_travel(traj.x, traj.y, traj.yaw))
 
 
-def validation_streams(recording: Recording, sm: Trajectory | None = None) -> dict[str, Stream]:
+def validation_streams(
+    recording: Recording, sm: Trajectory | None = None, gps_speed_window_s: float = 5.0
+) -> dict[str, Stream]:
     """The named streams available in ``recording`` (plus scan matching).
 
     ``sm`` is the KISS-ICP trajectory over the scan times (world frame of
     the front-end); streams whose source is absent are simply not returned.
+    GPS speed is the norm of the regression slopes of x and y over a
+    trailing ``gps_speed_window_s``: differences of single fixes carry the
+    fixes' metre-level noise divided by 0.2 s, far above a robot's speed.
     """
     streams: dict[str, Stream] = {}
     if recording.compass is not None:
@@ -133,8 +155,9 @@ def validation_streams(recording: Recording, sm: Trajectory | None = None) -> di
         x = _clean("gps_x", gps.t[fix], gps.x[fix])
         y = _clean("gps_y", gps.t[fix], gps.y[fix])
         if len(x.t) == len(y.t) and len(x.t) >= 2:
-            speed = np.hypot(np.diff(x.values), np.diff(y.values)) / np.diff(x.t)
-            streams["gps_speed"] = Stream(0.5 * (x.t[1:] + x.t[:-1]), speed)
+            vx = derivative(x.t, x.values, gps_speed_window_s)
+            vy = derivative(y.t, y.values, gps_speed_window_s)
+            streams["gps_speed"] = Stream(x.t, np.hypot(vx, vy))
         streams["gps_sigma"] = _clean("gps_sigma", gps.t[fix], gps.sigma[fix])
     logger.info("validation streams: %s", ", ".join(sorted(streams)))
     return streams

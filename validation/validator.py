@@ -72,15 +72,31 @@ def _step_times(keyframe_t: np.ndarray, rate_hz: float) -> np.ndarray:
     return fixed_rate_steps(float(keyframe_t[0]), float(keyframe_t[-1]), rate_hz)
 
 
-def keyframe_weights(step_t: np.ndarray, decisions: list[dict[str, FactorGate]], keyframe_t: np.ndarray) -> dict[str, np.ndarray]:
+def step_scales(step_t: np.ndarray, decisions: list[dict[str, FactorGate]], lookback_s: float) -> dict[str, np.ndarray]:
+    """Sigma scale per factor type and validation step, with every gating
+    decision also applied to the ``lookback_s`` before it."""
+    factors = sorted(decisions[0]) if decisions else []
+    scales = {}
+    for f in factors:
+        scale = np.array([d[f].sigma_scale for d in decisions])
+        if lookback_s > 0:
+            back = scale.copy()
+            first = np.searchsorted(step_t, step_t - lookback_s, side="left")
+            for k in np.flatnonzero(scale > 1.0):
+                seg = back[first[k] : k]
+                np.maximum(seg, scale[k], out=seg)
+            scale = back
+        scales[f] = scale
+    return scales
+
+
+def keyframe_weights(step_t: np.ndarray, scales: dict[str, np.ndarray], keyframe_t: np.ndarray) -> dict[str, np.ndarray]:
     """Per keyframe, the largest sigma scale of the steps in (t_{k-1}, t_k];
     keyframe 0 takes the last step at or before it."""
-    factors = sorted(decisions[0]) if decisions else []
     end = np.searchsorted(step_t, keyframe_t, side="right")
     start = np.concatenate([[max(end[0] - 1, 0)], end[:-1]])
     weights = {}
-    for f in factors:
-        scale = np.array([d[f].sigma_scale for d in decisions])
+    for f, scale in scales.items():
         w = np.ones(len(keyframe_t))
         for k, (a, b) in enumerate(zip(start, end)):
             if b > a:
@@ -106,7 +122,7 @@ def run_validation(
         decisions = oracle_decisions(gating, step_t, recording.faults)
     else:
         obs_cfg = config.observers
-        streams = validation_streams(recording, sm_poses)
+        streams = validation_streams(recording, sm_poses, obs_cfg.gps_speed_window_s)
         checks = unary_checks(obs_cfg, recording.magnetic_reference)
         observer_log = observe(
             streams, obs_cfg.relations, step_t, checks, obs_cfg.max_gap_s, obs_cfg.stream_max_gap_s
@@ -118,7 +134,9 @@ def run_validation(
             result = diagnoser.diagnose(observer_log.observations(k))
             results.append(result)
             decisions.append(gate.step(float(t), result))
-    weights = keyframe_weights(step_t, decisions, keyframe_t)
+    # The oracle knows each onset exactly: no look-back.
+    lookback = 0.0 if config.mode == "oracle" else gating.lookback_s
+    weights = keyframe_weights(step_t, step_scales(step_t, decisions, lookback), keyframe_t)
     elapsed = time.perf_counter() - start
     metrics = validation_metrics(step_t, results, decisions, gating, recording.faults)
     metrics["validation_time_s"] = round(elapsed, 4)

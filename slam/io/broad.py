@@ -80,7 +80,8 @@ def _load(path: Path) -> dict[str, np.ndarray]:
     try:
         data = loadmat(str(path))
     except (ValueError, TypeError, OSError, NotImplementedError) as e:
-        raise GslamError(f"{path}: cannot read as a MATLAB v5 file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+        reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise GslamError(f"{path}: cannot read as a MATLAB v5 file ({reason})") from None
     for key in REQUIRED:
         if key not in data:
             raise GslamError(f"{path}: expected a BROAD trial with '{key}' ({', '.join(REQUIRED)})")

@@ -159,7 +159,10 @@ def _parse_flaser(d: _Log, parts: list[str], where: str) -> None:
     if len(parts) < n + 11:
         raise GslamError(f"{where}: expected {_FLASER} ({n + 11} fields, got {len(parts)})")
     values = _floats(parts[2 : n + 9], where, _FLASER)
-    fov = float(d.params.get("laser_front_laser_fov", DEFAULT_FOV_DEG))
+    try:
+        fov = float(d.params.get("laser_front_laser_fov", DEFAULT_FOV_DEG))
+    except ValueError:
+        raise GslamError(f"{where}: expected a number in PARAM laser_front_laser_fov") from None
     pose = (values[n], values[n + 1], values[n + 2])
     _add_scan(d, where, values[:n], _flaser_angles(n, fov), pose, values[n + 6], None)
 

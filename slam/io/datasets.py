@@ -4,18 +4,18 @@ The data are not part of the repository. They live in one folder, the *data
 root*: ``$GSLAM_DATA`` if set, else ``../shared/data`` beside the project
 root. Each set keeps the layout of its public source:
 
-=============  ==========================================================  ==============  ==============================
-folder         original public source                                      licence         reader (``input.format``)
-=============  ==========================================================  ==============  ==============================
-``carmen/``    Radish / Freiburg "corrected" CARMEN logs, as collected     none stated;    ``carmen`` (:mod:`slam.io.carmen`)
+=============  ==========================================================  =================  ==============================
+folder         original public source                                      licence            reader (``input.format``)
+=============  ==========================================================  =================  ==============================
+``carmen/``    Radish / Freiburg "corrected" CARMEN logs, as collected     none stated;       ``carmen`` (:mod:`slam.io.carmen`)
                in https://github.com/acschaefer/ple (``data/carmen/``)      research use
-``broad/``     BROAD benchmark, https://github.com/dlaidig/broad            CC BY 4.0       ``broad`` (:mod:`slam.io.broad`)
+``broad/``     BROAD benchmark, https://github.com/dlaidig/broad            CC BY 4.0          ``broad`` (:mod:`slam.io.broad`)
                (``data_mat/*.mat``, ``trials.json``)
-``librsf/``    libRSF data sets, https://github.com/TUC-ProAut/libRSF       CC BY-NC-SA 4.0 ``librsf`` (:mod:`slam.io.librsf`)
-               (``datasets/``: ``Corridor_*``, ``Indoor_UWB/``)              / CC BY-SA 4.0
-``rosbag/``    ``test1_husky_2015.bag`` from the test data of               BSD / Apache    ``rosbag`` (:mod:`slam.io.rosbag`)
+``librsf/``    libRSF data sets, https://github.com/TUC-ProAut/libRSF       CC BY-NC-SA 4.0    ``librsf`` (:mod:`slam.io.librsf`)
+               (``datasets/SLAM/Corridor_*``, ``datasets/Indoor_UWB/``)    / CC BY-SA 4.0
+``rosbag/``    ``test/test1.bag`` (here ``test1_husky_2015.bag``) of         BSD / Apache       ``rosbag`` (:mod:`slam.io.rosbag`)
                https://github.com/cra-ros-pkg/robot_localization
-=============  ==========================================================  ==============  ==============================
+=============  ==========================================================  =================  ==============================
 
 :data:`CHECKSUMS` holds the SHA-256 of every file as the project uses it, so
 a local copy can be checked with ``python scripts/datasets.py verify``.
@@ -65,7 +65,7 @@ DATASETS: tuple[Dataset, ...] = (
     ),
     Dataset(
         "broad",
-        "https://github.com/dlaidig/broad (Laidig et al., BROAD, 2021)",
+        "https://github.com/dlaidig/broad (data_mat/; Laidig et al., BROAD, 2021)",
         "CC BY 4.0",
         "broad",
         "hand-held IMU (gyro, accelerometer, magnetometer) with optical motion-capture truth; "
@@ -73,14 +73,15 @@ DATASETS: tuple[Dataset, ...] = (
     ),
     Dataset(
         "librsf",
-        "https://github.com/TUC-ProAut/libRSF (datasets/)",
+        "https://github.com/TUC-ProAut/libRSF (datasets/SLAM/Corridor_*, datasets/Indoor_UWB/); "
+        "TUC SLAM data set, Neubert, Schubert & Protzel, RA-L 2019",
         "CC BY-NC-SA 4.0 (SLAM sets), CC BY-SA 4.0 (Indoor_UWB)",
         "librsf",
         "wheel speed + yaw rate at 10 Hz with ground-truth positions and headings",
     ),
     Dataset(
         "rosbag",
-        "https://github.com/cra-ros-pkg/robot_localization (test data)",
+        "https://github.com/cra-ros-pkg/robot_localization (test/test1.bag)",
         "BSD / Apache (the project's licence)",
         "rosbag",
         "Clearpath Husky outdoors: IMU, wheel odometry, GPS; no laser, no ground truth",
