@@ -69,9 +69,17 @@ class InputConfig(Strict):
 
 
 class FrontendConfig(Strict):
-    """KISS-ICP on 2D scans (points at z = 0)."""
+    """KISS-ICP on 2D scans (points at z = 0).
+
+    ``initial_guess``: ``constant_velocity`` is KISS-ICP's own prediction;
+    ``odometry`` starts each registration from the odometry step instead,
+    which sparse, fast-turning logs (CARMEN) need. With odometry as the
+    guess, a scan matcher that sees nothing returns the odometry step, so
+    its failure no longer shows as a disagreement with odometry.
+    """
 
     enabled: bool = True
+    initial_guess: Literal["constant_velocity", "odometry"] = "constant_velocity"
     min_range_m: float = Field(0.1, ge=0.0)
     max_range_m: float = Field(30.0, gt=0.0)
     voxel_size_m: float = Field(0.1, gt=0.0)

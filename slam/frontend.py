@@ -73,17 +73,43 @@ class ScanMatcher:
         kiss.registration.max_num_threads = 1
         self._icp = KissICP(kiss)
 
-    def register(self, points: np.ndarray) -> tuple[float, float, float]:
-        """Register one scan; returns the planar pose (x, y, yaw) of the laser."""
+    def register(self, points: np.ndarray, guess: np.ndarray | None = None) -> tuple[float, float, float]:
+        """Register one scan; returns the planar pose (x, y, yaw) of the laser.
+
+        ``guess``: the motion (dx, dy, dyaw) since the previous scan, in its
+        frame, to start from instead of KISS-ICP's constant velocity.
+        """
+        if guess is not None:
+            delta = np.eye(4)
+            c, s = np.cos(guess[2]), np.sin(guess[2])
+            delta[:2, :2] = [[c, -s], [s, c]]
+            delta[:2, 3] = guess[:2]
+            self._icp.last_delta = delta
         self._icp.register_frame(points, np.zeros(len(points)))
         pose = self._icp.last_pose
         return float(pose[0, 3]), float(pose[1, 3]), float(np.arctan2(pose[1, 0], pose[0, 0]))
 
 
-def run_frontend(scans: Scans, config: FrontendConfig, progress: bool = False) -> FrontendResult:
-    """Register every scan with KISS-ICP; see :class:`FrontendResult`."""
+def run_frontend(
+    scans: Scans, config: FrontendConfig, progress: bool = False, odometry: Trajectory | None = None
+) -> FrontendResult:
+    """Register every scan with KISS-ICP; see :class:`FrontendResult`.
+
+    ``odometry`` seeds each registration when ``config.initial_guess`` is
+    ``odometry`` (steps where it has no data fall back to KISS-ICP's guess).
+    """
     matcher = ScanMatcher(config, scans.range_max)
     n = len(scans)
+    guesses = None
+    if config.initial_guess == "odometry" and odometry is not None and len(odometry) > 1:
+        from slam.measurements import covered, interpolate_poses, relative_poses
+
+        poses = interpolate_poses(odometry, scans.t)
+        guesses = np.zeros_like(poses)
+        guesses[1:] = relative_poses(poses[:-1], poses[1:])
+        ok = covered(odometry.t, scans.t, max_gap_s=1.0)
+        usable = np.zeros(n, dtype=bool)
+        usable[1:] = ok[1:] & ok[:-1]
     xyyaw = np.zeros((n, 3))
     n_points = np.zeros(n, dtype=np.int64)
     start = time.perf_counter()
@@ -95,7 +121,8 @@ def run_frontend(scans: Scans, config: FrontendConfig, progress: bool = False) -
     for i in iterator:
         pts = scan_points(scans.ranges[i], scans.angles, config.min_range_m, matcher.max_range)
         n_points[i] = len(pts)
-        xyyaw[i] = matcher.register(pts)
+        guess = guesses[i] if guesses is not None and usable[i] else None
+        xyyaw[i] = matcher.register(pts, guess)
     elapsed = time.perf_counter() - start
     log.info("KISS-ICP registered %d scans in %.2f s", n, elapsed)
     poses = Trajectory(t=scans.t.copy(), x=xyyaw[:, 0], y=xyyaw[:, 1], yaw=xyyaw[:, 2])

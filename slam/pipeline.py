@@ -115,7 +115,7 @@ class MappingPipeline:
             return
         if self.frontend is not None:  # reused from another variant
             return
-        self.frontend = run_frontend(rec.scans, cfg.frontend, progress=self.progress)
+        self.frontend = run_frontend(rec.scans, cfg.frontend, progress=self.progress, odometry=rec.odometry)
         self.timings.frontend_s = self.frontend.time_s
 
     def build_measurements(self) -> None:

@@ -138,8 +138,8 @@ def test_unary_implausible_in_shipped_model():
     obs = {r: M for r in model.relations} | {"mag_plausible": IMPL, "gps_plausible": PLAUS}
     result = Diagnoser(model).diagnose(obs)
     assert result.diagnoses == sets(("IMU_YAW",))
-    # The compass's matches with the gyro and the scan matcher are coincidences.
-    assert result.explanations[0].masked == {"yaw_compass_gyro", "yaw_compass_sm"}
+    # The shipped model has no failure masking: nothing is retracted but AB.
+    assert result.explanations[0].masked == frozenset()
 
 
 def test_priors_rank_diagnoses_and_give_their_probability():
@@ -170,13 +170,26 @@ def test_shipped_model_blames_scan_matching_outdoors():
     """The paper's scenario: every observer of SM disagrees, the rest agree."""
     model = load_model(TELEMAX)
     obs = {r: M for r in model.relations} | {"mag_plausible": PLAUS, "gps_plausible": PLAUS}
-    for r in ("yaw_compass_sm", "yaw_gyro_sm", "distance_odo_sm"):
+    for r in ("yaw_compass_sm", "yaw_gyro_sm", "distance_odo_sm", "lateral_odo_sm"):
         obs[r] = N
     result = Diagnoser(model).diagnose(obs)
     assert result.diagnoses[0] == {"SM"}
-    # The only other minimal diagnosis is the (far less probable) triple fault.
+    # The only other minimal diagnosis is the (far less probable) triple fault:
+    # 0.05*0.98*0.99*0.95^2 against 0.02*0.01*0.05*0.95^2.
     assert result.diagnoses[1:] == sets(("ODO", "IMU_GYRO", "IMU_YAW"))
-    assert result.probabilities[0] > 1e6 * result.probabilities[1]
+    assert result.probabilities[0] / result.probabilities[1] == pytest.approx(
+        (0.05 * 0.98 * 0.99) / (0.02 * 0.01 * 0.05)
+    )
+
+
+def test_shipped_model_prefers_scan_matching_for_a_lateral_mismatch():
+    """Only the sideways-travel observer disagrees: odometry or scan matching,
+    and the priors make the scan matcher (prone to sliding along a lone wall)
+    the likelier one."""
+    model = load_model(TELEMAX)
+    obs = {r: M for r in model.relations} | {"lateral_odo_sm": N}
+    result = Diagnoser(model).diagnose(obs)
+    assert result.diagnoses == sets(("SM",), ("ODO",))
 
 
 # --- large models ---------------------------------------------------------

@@ -119,14 +119,18 @@ def test_validation_streams_from_recording():
     sm = Trajectory(rec.odometry.t[::2], rec.odometry.x[::2] * 2, rec.odometry.y[::2], rec.odometry.yaw[::2])
     s = validation_streams(rec, sm)
     assert set(s) == {
-        "gyro_yaw", "odo_yaw", "odo_distance", "odo_speed", "sm_yaw", "sm_distance", "gps_speed", "gps_sigma"
+        "gyro_yaw", "odo_yaw", "odo_distance", "odo_lateral", "odo_speed",
+        "sm_yaw", "sm_distance", "sm_lateral", "gps_speed", "gps_sigma",
     }
     np.testing.assert_allclose(s["gyro_yaw"].values, 0.1 * rec.gyro.t, atol=1e-12)
     np.testing.assert_allclose(s["odo_distance"].values, 0.5 * rec.odometry.t, atol=1e-12)
     np.testing.assert_allclose(s["odo_speed"].values, 0.5, atol=1e-9)
     np.testing.assert_allclose(s["sm_distance"].values[-1], 10.0, atol=1e-9)
-    np.testing.assert_allclose(s["gps_speed"].values, 2.0)
-    np.testing.assert_allclose(s["gps_speed"].t, np.arange(0.5, 10.0, 1.0))
+    # Regression slope over the trailing window; the first fix has no slope.
+    np.testing.assert_allclose(s["gps_speed"].values[1:], 2.0, atol=1e-9)
+    np.testing.assert_allclose(s["gps_speed"].t, np.arange(0.0, 10.001, 1.0))
+    # Heading 0.2 rad while moving along +x: each step is partly sideways.
+    np.testing.assert_allclose(s["odo_lateral"].values[-1], -np.sin(0.2) * 5.0, atol=1e-9)
     assert s["odo_yaw"].angular and not s["odo_distance"].angular
 
 

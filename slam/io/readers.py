@@ -17,14 +17,16 @@ from __future__ import annotations
 
 import json
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
-from typing import Mapping, Protocol
+from typing import Callable, Mapping, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from slam.config import GpsInputConfig, InputConfig
 from slam.errors import GslamError
+from slam.io import broad, carmen, librsf
 from slam.io.rosbag import RosbagReader, is_rosbag
 from slam.recording import COMPONENTS, MagneticReference, Recording
 
@@ -40,7 +42,31 @@ class Reader(Protocol):
     def read(self, path: Path, config: InputConfig) -> Recording: ...
 
 
-READERS: Mapping[str, Reader] = MappingProxyType({"rosbag": RosbagReader()})
+@dataclass(frozen=True)
+class FunctionReader:
+    """A :class:`Reader` made of a plain ``read(path, config)`` function."""
+
+    fn: Callable[[Path, InputConfig], Recording]
+
+    def read(self, path: Path, config: InputConfig) -> Recording:
+        return self.fn(path, config)
+
+
+READERS: Mapping[str, Reader] = MappingProxyType(
+    {
+        "rosbag": RosbagReader(),
+        "carmen": FunctionReader(carmen.read_carmen),
+        "broad": FunctionReader(broad.read_broad),
+        "librsf": FunctionReader(librsf.read_librsf),
+    }
+)
+
+# Formats recognised from the path alone, tried in this order.
+_GUESSERS: tuple[tuple[str, Callable[[Path], bool]], ...] = (
+    ("carmen", carmen.looks_like_carmen),
+    ("broad", broad.looks_like_broad),
+    ("librsf", librsf.looks_like_librsf),
+)
 
 
 def is_run_folder(path: Path) -> bool:
@@ -59,9 +85,13 @@ def guess_format(path: str | Path) -> str:
             return "rosbag"  # a folder holding one bag file; the reader resolves it
     if is_rosbag(path):
         return "rosbag"
+    for fmt, looks_like in _GUESSERS:
+        if looks_like(path):
+            return fmt
     raise GslamError(
         f"{path}: unknown recording format; expected a .bag file, a rosbag2 directory "
-        "(metadata.yaml), a .db3/.mcap file or a run folder (truth.json + bag/)"
+        "(metadata.yaml), a .db3/.mcap file, a run folder (truth.json + bag/), a CARMEN "
+        ".log[.gz], a BROAD .mat or a libRSF *_Input.txt"
     )
 
 
