@@ -26,6 +26,7 @@ from slam.factors import (
     pose_key,
     position_prior_factor,
     yaw_increment_factor,
+    yaw_only_noise,
     yaw_prior_factor,
 )
 from slam.measurements import FACTOR_TYPES, Measurements
@@ -118,7 +119,8 @@ class GraphBuilder:
                     out.append(between_factor(k, meas.delta[k], gaussian(meas.sigma[k] * w, self.robust[factor])))
                     self.counts[factor] += 1
             if self._available("gyro", k) and np.isfinite(w := self._weight("gyro", k)):
-                out.append(yaw_increment_factor(k, m.gyro.value[k], gaussian([m.gyro.sigma[k] * w], self.robust["gyro"])))
+                noise = yaw_only_noise(m.gyro.sigma[k] * w, self.robust["gyro"])
+                out.append(yaw_increment_factor(k, m.gyro.value[k], noise))
                 self.counts["gyro"] += 1
         if self._available("compass", k) and np.isfinite(w := self._weight("compass", k)):
             out.append(yaw_prior_factor(k, m.compass.value[k], gaussian([m.compass.sigma[k] * w], self.robust["compass"])))
@@ -156,7 +158,6 @@ def _optimise_batch(graph, initial, config: BackendConfig, anchor_index: int):
         params = gtsam.GncLMParams()
         params.setLossType(gtsam.GncLossType.TLS if config.optimizer == "gnc_tls" else gtsam.GncLossType.GM)
         params.setKnownInliers([anchor_index])
-        params.setMaxIterations(config.max_iterations)
         optimizer = gtsam.GncLMOptimizer(graph, initial, params)
         if config.gnc_inlier_probability is not None:
             optimizer.setInlierCostThresholdsAtProbability(config.gnc_inlier_probability)

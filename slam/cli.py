@@ -21,6 +21,7 @@ examples:
   gslam map runs/lab --config configs/telemax.yaml --out runs/lab_gated --gating on
   gslam map runs/lab --config configs/telemax.yaml --out runs/lab_isam2 --set backend.optimizer=isam2
   gslam map recording.bag --config my_robot.yaml --out runs/real --set input.topics.scan=/base_scan
+  gslam compare runs/lab --config configs/telemax.yaml --out runs/lab_compare
   gslam demo --out runs/demo
 """
 
@@ -47,6 +48,16 @@ def _cmd_map(args: argparse.Namespace) -> int:
     config = load_config(args.config, overrides)
     res = run_map(args.input, config, args.out, progress=not args.quiet)
     _print_metrics(res.out_dir, res.metrics)
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from slam.compare import run_compare
+
+    only = args.only.split(",") if args.only else None
+    res = run_compare(args.input, args.config, args.out, args.variants, only, args.set or [], progress=not args.quiet)
+    print((Path(args.out) / "comparison.md").read_text())
+    print(f"wrote {res.out_dir}")
     return 0
 
 
@@ -111,6 +122,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="off: every factor in; on: causal sensor validation gates factors; "
                         "oracle: gate with the true fault intervals (default: the config's validation.mode)")
     m.set_defaults(func=_cmd_map)
+
+    c = sub.add_parser("compare", help="run ungated, gated, oracle and robust-kernel variants on the same run",
+                       epilog="examples:\n  gslam compare runs/lab --config configs/telemax.yaml --out runs/lab_compare\n"
+                              "  gslam compare runs/lab --config configs/telemax.yaml --out runs/x --only ungated,gated",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    c.add_argument("input", help="run folder, ROS 2 bag folder or ROS 1 .bag file")
+    c.add_argument("--config", required=True, help="pipeline config YAML")
+    c.add_argument("--out", required=True, help="comparison folder: one result folder per variant, tables, figures")
+    c.add_argument("--variants", default="configs/variants.yaml", help="variants YAML (default configs/variants.yaml)")
+    c.add_argument("--only", default=None, help="comma-separated subset of the variants")
+    c.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key for every variant")
+    c.set_defaults(func=_cmd_compare)
 
     d = sub.add_parser("demo", help="simulate the Telemax lab mission and map it")
     d.add_argument("--out", default="runs/demo", help="demo folder (default runs/demo)")

@@ -2,8 +2,11 @@
 
 Odometry and scan matching are ``BetweenFactorPose2``; the compass is a
 ``PoseRotationPrior2D`` (absolute yaw); GPS a ``PoseTranslationPrior2D``.
-GTSAM has no relative-yaw factor on Pose2, so the gyro's integrated yaw
-increment is a small :class:`gtsam.CustomFactor` with analytic Jacobians.
+GTSAM has no relative-yaw factor on Pose2; the gyro's integrated yaw
+increment is a ``BetweenFactorPose2`` whose noise has zero precision on x
+and y, which is exact: the yaw residual of a Pose2 between factor is
+wrap(yaw_j - yaw_i - measured), whatever the translation. Unlike a Python
+``CustomFactor`` it runs in C++ and can be cloned (GTSAM's GNC needs that).
 """
 
 from __future__ import annotations
@@ -45,20 +48,13 @@ def yaw_increment_error(measured: float, yaw_i: float, yaw_j: float) -> float:
     return float(wrap_angle(yaw_j - yaw_i - measured))
 
 
+def yaw_only_noise(sigma_yaw: float, robust: gtsam.noiseModel.mEstimator.Base | None = None) -> gtsam.noiseModel.Base:
+    """Pose2 noise that weighs only the yaw: precisions (0, 0, 1/sigma^2)."""
+    noise = gtsam.noiseModel.Diagonal.Precisions(np.array([0.0, 0.0, 1.0 / sigma_yaw**2]))
+    return gtsam.noiseModel.Robust.Create(robust, noise) if robust is not None else noise
+
+
 def yaw_increment_factor(k: int, measured: float, noise: gtsam.noiseModel.Base) -> gtsam.NonlinearFactor:
-    """Relative yaw from keyframe k-1 to k (integrated gyro), noise of dim 1.
-
-    Pose2's retraction adds the tangent's third component to the heading, so
-    the Jacobians of the residual are exactly [0, 0, -1] and [0, 0, 1].
-    """
-    keys = [pose_key(k - 1), pose_key(k)]
-
-    def error(this: gtsam.CustomFactor, values: gtsam.Values, jacobians) -> np.ndarray:
-        yaw_i = values.atPose2(this.keys()[0]).theta()
-        yaw_j = values.atPose2(this.keys()[1]).theta()
-        if jacobians is not None:
-            jacobians[0] = np.array([[0.0, 0.0, -1.0]])
-            jacobians[1] = np.array([[0.0, 0.0, 1.0]])
-        return np.array([yaw_increment_error(measured, yaw_i, yaw_j)])
-
-    return gtsam.CustomFactor(noise, keys, error)
+    """Relative yaw from keyframe k-1 to k (integrated gyro); ``noise`` from
+    :func:`yaw_only_noise`."""
+    return gtsam.BetweenFactorPose2(pose_key(k - 1), pose_key(k), gtsam.Pose2(0.0, 0.0, measured), noise)

@@ -38,6 +38,7 @@ class MapResult:
     metrics: dict[str, Any]
     trajectory: Trajectory
     recording: Recording | None = None
+    validation: Any = None
 
 
 @dataclass
@@ -94,7 +95,7 @@ class MappingPipeline:
         self.evaluate()
         self.metrics["runtime_s"] = round(time.perf_counter() - start, 4)
         self.write()
-        return MapResult(self.out_dir, self.metrics, self.backend.trajectory, self.recording)
+        return MapResult(self.out_dir, self.metrics, self.backend.trajectory, self.recording, self.validation)
 
     # -- steps ----------------------------------------------------------------
 

@@ -76,9 +76,13 @@ def plot_trajectories(
     reference: Trajectory | None = None,
     title: str = "",
     shaded: Sequence[tuple[str, Sequence[Interval]]] = (),
+    zoom_margin: float | None = None,
 ) -> None:
     """Top-down plot of labelled trajectories (m, world frame) over an
     optional reference, written as a PNG to ``path``.
+
+    ``zoom_margin``: limit the view to the reference's extent plus this
+    fraction of it, so one estimate that flew off does not hide the rest.
 
     ``shaded`` highlights time segments, e.g. the outdoor part or a fault:
     each ``(label, intervals)`` marks the poses of the reference (else of
@@ -100,6 +104,11 @@ def plot_trajectories(
         color = line.get_color()
         ax.plot(traj.x[0], traj.y[0], "o", color=color, markersize=6, zorder=3)
         ax.plot(traj.x[-1], traj.y[-1], "x", color=color, markersize=8, mew=2, zorder=3)
+    if zoom_margin is not None and reference is not None and len(reference):
+        lo, hi = reference.xy().min(axis=0), reference.xy().max(axis=0)
+        pad = zoom_margin * max(hi - lo) + 1.0
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.legend(loc="best", fontsize="small")
     save_figure(fig, path)
 

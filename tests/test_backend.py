@@ -6,7 +6,7 @@ import pytest
 
 from slam.backend import optimise, unit_weights
 from slam.config import BackendConfig
-from slam.factors import pose_key, yaw_increment_factor
+from slam.factors import pose_key, yaw_increment_error, yaw_increment_factor, yaw_only_noise
 from slam.measurements import BetweenMeasurement, Measurements, PositionMeasurement, ScalarMeasurement, relative_poses
 
 
@@ -107,14 +107,20 @@ def test_every_optimizer_solves_a_consistent_graph(optimizer):
     np.testing.assert_allclose(np.column_stack([traj.x, traj.y]), truth[:, :2], atol=1e-5)
 
 
-def test_yaw_increment_factor_jacobians_match_numerical_derivatives():
-    factor = yaw_increment_factor(1, 0.3, gtsam.noiseModel.Isotropic.Sigma(1, 1.0))
+def test_yaw_increment_factor_weighs_only_the_yaw_with_exact_jacobians():
+    factor = yaw_increment_factor(1, 0.3, yaw_only_noise(0.1))
     values = gtsam.Values()
     values.insert(pose_key(0), gtsam.Pose2(0.2, -0.1, 0.4))
     values.insert(pose_key(1), gtsam.Pose2(1.0, 0.5, 0.9))
-    jac = factor.linearize(values).jacobian()[0]  # [H0 | H1], whitened (sigma 1)
+    # The whitened residual: zero weight on x and y, yaw error / sigma.
+    assert factor.whitenedError(values)[2] == pytest.approx(yaw_increment_error(0.3, 0.4, 0.9) / 0.1)
+    np.testing.assert_allclose(factor.whitenedError(values)[:2], 0.0)
+    # Linearised: the only non-zero row is [0, 0, -1 | 0, 0, 1] / sigma,
+    # checked against central differences of the yaw residual.
+    a, _ = factor.linearize(values).jacobian()
+    rows = a[np.abs(a).sum(axis=1) > 0]
     eps = 1e-6
-    numeric = np.zeros((1, 6))
+    numeric = np.zeros(6)
     for j, key in enumerate([pose_key(0), pose_key(1)]):
         for d in range(3):
             for sign in (+1, -1):
@@ -122,6 +128,7 @@ def test_yaw_increment_factor_jacobians_match_numerical_derivatives():
                 xi = np.zeros(3)
                 xi[d] = sign * eps
                 v.update(key, values.atPose2(key).retract(xi))
-                numeric[0, 3 * j + d] += sign * factor.unwhitenedError(v)[0] / (2 * eps)
-    np.testing.assert_allclose(jac, numeric, atol=1e-6)
-    assert factor.unwhitenedError(values)[0] == pytest.approx(0.9 - 0.4 - 0.3)
+                numeric[3 * j + d] += sign * factor.whitenedError(v)[2] / (2 * eps)
+    assert rows.shape == (1, 6)
+    np.testing.assert_allclose(np.abs(rows[0]), np.abs(numeric), atol=1e-6)
+    np.testing.assert_allclose(numeric, [0, 0, -10, 0, 0, 10], atol=1e-6)

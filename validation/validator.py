@@ -41,6 +41,7 @@ class ValidationOutcome:
     weights: dict[str, np.ndarray]
     metrics: dict
     time_s: float
+    sm_poses: Trajectory | None = None
 
     def csv_text(self) -> str:
         """The per-step log: trends, counters, observations, diagnoses, decisions."""
@@ -145,7 +146,7 @@ def run_validation(
     metrics["keyframes_excluded"] = excluded
     metrics["keyframes_inflated"] = inflated
     log.info("validation (%s): %d steps in %.3f s; excluded keyframes %s", config.mode, len(step_t), elapsed, excluded)
-    return ValidationOutcome(step_t, observer_log, results, decisions, weights, metrics, elapsed)
+    return ValidationOutcome(step_t, observer_log, results, decisions, weights, metrics, elapsed, sm_poses)
 
 
 def suspected_components(decisions: list[dict[str, FactorGate]], gating: GatingConfig) -> list[set[str]]:

@@ -1,0 +1,123 @@
+"""Figures of a validated run, after the paper's:
+
+* :func:`plot_yaw_trends` (its Fig. 2): the yaw streams over time with the
+  qualitative trend symbol of each under it.
+* :func:`plot_observer_alarms` (its Fig. 3): every observer's no_match /
+  implausible over time, the sensors the diagnosis blamed, and the true
+  fault intervals shaded.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from slam.plots import save_figure
+from slam.recording import Recording
+
+_FAULT_COLOR = "gold"
+
+
+def _shade_faults(ax, recording: Recording, components=None) -> None:
+    labelled = False
+    for comp, intervals in recording.faults.items():
+        if components is not None and comp not in components:
+            continue
+        for a, b in intervals:
+            ax.axvspan(a, b, color=_FAULT_COLOR, alpha=0.35, label=None if labelled else "true fault", lw=0)
+            labelled = True
+
+
+def plot_yaw_trends(path: str | Path, recording: Recording, validation) -> None:
+    """Yaw streams (deg, unwrapped, each from 0) and their trend symbols.
+
+    The symbols are those the observers used (first relation that carries
+    each stream), on the validation steps.
+    """
+    log = validation.observer_log
+    symbols: dict[str, np.ndarray] = {}
+    for trace in log.relations.values():
+        for stream, sym in zip(trace.relation.streams, (trace.symbol_a, trace.symbol_b)):
+            if stream.endswith("_yaw") and stream not in symbols:
+                symbols[stream] = np.where(trace.valid, sym, np.nan)
+    streams = _yaw_streams(recording, validation)
+    names = [n for n in ("compass_yaw", "gyro_yaw", "sm_yaw", "odo_yaw") if n in symbols]
+    fig = Figure(figsize=(10, 2.2 + 1.2 * len(names)))
+    axes = fig.subplots(1 + len(names), 1, sharex=True, gridspec_kw={"height_ratios": [3] + [1] * len(names)})
+    top = axes[0]
+    sane = []  # the view follows compass and gyro: a failed scan matcher may spin off
+    for name in names:
+        if name in streams:
+            t, yaw = streams[name]
+            deg = np.degrees(yaw - yaw[0])
+            top.plot(t, deg, label=name, linewidth=1.0)
+            if name in ("compass_yaw", "gyro_yaw"):
+                sane.append(deg)
+    if sane:
+        lo, hi = min(d.min() for d in sane), max(d.max() for d in sane)
+        pad = 0.2 * (hi - lo) + 10.0
+        top.set_ylim(lo - pad, hi + pad)
+    _shade_faults(top, recording, {"IMU_YAW", "SM", "IMU_GYRO", "ODO"})
+    top.set_ylabel("yaw change [deg]")
+    top.set_title(f"{recording.name}: yaw streams and their qualitative trends")
+    top.legend(loc="best", fontsize="small")
+    top.grid(True, linewidth=0.5, alpha=0.5)
+    for ax, name in zip(axes[1:], names):
+        ax.step(log.t, symbols[name], where="post", linewidth=1.0)
+        ax.set_yticks([-1, 0, 1], ["−", "0", "+"])
+        ax.set_ylim(-1.4, 1.4)
+        ax.set_ylabel(name, rotation=0, ha="right", fontsize="small")
+        ax.grid(True, linewidth=0.5, alpha=0.5)
+        _shade_faults(ax, recording, {"IMU_YAW", "SM", "IMU_GYRO", "ODO"})
+    axes[-1].set_xlabel("time [s]")
+    save_figure(fig, path)
+
+
+def _yaw_streams(recording: Recording, validation) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    from validation.streams import validation_streams
+
+    out = {}
+    sm = getattr(validation, "sm_poses", None)
+    for name, s in validation_streams(recording, sm).items():
+        if name.endswith("_yaw"):
+            out[name] = (s.t, np.unwrap(s.values) if s.angular else s.values)
+    return out
+
+
+def plot_observer_alarms(path: str | Path, recording: Recording, validation) -> None:
+    """One row per observer (no_match or implausible as bars), one row per
+    component blamed by the most probable diagnosis, true faults shaded."""
+    log = validation.observer_log
+    rows: list[tuple[str, np.ndarray]] = []
+    for name, trace in log.relations.items():
+        rows.append((name, trace.no_match & trace.valid))
+    for name, trace in log.unary.items():
+        rows.append((name, trace.implausible & trace.valid))
+    blamed_rows = []
+    if validation.results is not None:
+        comps = sorted({c for r in validation.results if r.consistent for c in r.diagnoses[0]})
+        for c in comps:
+            blamed = np.array([r.consistent and c in r.diagnoses[0] for r in validation.results])
+            blamed_rows.append((f"blamed: {c}", blamed))
+    all_rows = rows + blamed_rows
+    fig = Figure(figsize=(10, 1.0 + 0.45 * len(all_rows)))
+    ax = fig.add_subplot()
+    t = log.t
+    dt = np.median(np.diff(t)) if len(t) > 1 else 0.1
+    for i, (name, on) in enumerate(all_rows):
+        y = len(all_rows) - 1 - i
+        color = "tab:red" if name.startswith("blamed") else "tab:blue"
+        starts = np.flatnonzero(on & ~np.r_[False, on[:-1]])
+        ends = np.flatnonzero(on & ~np.r_[on[1:], False])
+        ax.broken_barh([(t[a], t[b] - t[a] + dt) for a, b in zip(starts, ends)], (y - 0.35, 0.7), color=color)
+    ax.set_yticks(range(len(all_rows)), [n for n, _ in reversed(all_rows)], fontsize="small")
+    _shade_faults(ax, recording)
+    ax.set_xlabel("time [s]")
+    ax.set_xlim(t[0], t[-1] + dt)
+    ax.set_title(f"{recording.name}: observer alarms (blue), blamed sensors (red), true faults (shaded)")
+    ax.grid(True, axis="x", linewidth=0.5, alpha=0.5)
+    if recording.faults and any(recording.faults.values()):
+        ax.legend(loc="upper right", fontsize="small")
+    save_figure(fig, path)
