@@ -1,0 +1,298 @@
+"""Validation of one run: look-back, per-keyframe weights, and
+``run_validation`` on a synthetic recording whose compass drifts away."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from slam.config import load_config, validation_sections
+from slam.geometry import wrap_angle
+from slam.recording import Compass, Gyro, MagneticReference, Recording, Trajectory
+from tests.synthetic import DEFAULT_TURNS, field_body, ramp_error, sample_times, true_yaw, yaw_rate
+from validation.gating import FactorGate, GatingAction
+from validation.streams import fixed_rate_steps
+from validation.validator import keyframe_weights, run_validation, step_scales
+
+INF = math.inf
+INC = FactorGate(GatingAction.INCLUDE, 1.0)
+INFL = FactorGate(GatingAction.INFLATE, 10.0)
+EXC = FactorGate(GatingAction.EXCLUDE, INF)
+TELEMAX = Path(__file__).resolve().parents[1] / "configs" / "telemax.yaml"
+FACTORS = ("compass", "gps", "gyro", "odometry", "scan_matching")
+
+
+def decisions_from(columns: dict[str, list[FactorGate]]) -> list[dict[str, FactorGate]]:
+    """Per-step decision dicts from per-factor columns."""
+    n = len(next(iter(columns.values())))
+    return [{f: col[k] for f, col in columns.items()} for k in range(n)]
+
+
+# --- step_scales ------------------------------------------------------------
+
+
+# Steps every 0.25 s (exact in binary floating point), so the look-back window
+# [t_k - 0.5, t_k) holds exactly the two steps before step k.
+STEPS = 0.25 * np.arange(10)
+COLUMNS = {
+    "compass": [INC] * 6 + [EXC] + [INC] * 3,  # step 6 excluded
+    # Excluded at step 4, inflated at step 5: the inflation's look-back
+    # (steps 3, 4) must not lower the exclusion's (steps 2, 3) - a maximum.
+    "gps": [INC] * 4 + [EXC, INFL] + [INC] * 4,
+    "gyro": [INC] * 10,
+}
+
+
+def test_step_scales_without_lookback_are_the_decisions():
+    scales = step_scales(STEPS, decisions_from(COLUMNS), 0.0)
+    assert sorted(scales) == ["compass", "gps", "gyro"]
+    assert scales["compass"].tolist() == [1, 1, 1, 1, 1, 1, INF, 1, 1, 1]
+    assert scales["gps"].tolist() == [1, 1, 1, 1, INF, 10, 1, 1, 1, 1]
+    assert scales["gyro"].tolist() == [1] * 10
+
+
+def test_step_scales_lookback_covers_the_preceding_window():
+    scales = step_scales(STEPS, decisions_from(COLUMNS), 0.5)
+    # compass: step 6 (1.5 s) also gates 1.0 s and 1.25 s, not 0.75 s.
+    assert scales["compass"].tolist() == [1, 1, 1, 1, INF, INF, INF, 1, 1, 1]
+    # gps: exclusion at 1.0 s reaches back to 0.5 s; the inflation at
+    # 1.25 s reaches 0.75 s and 1.0 s, which stay excluded (the max).
+    assert scales["gps"].tolist() == [1, 1, INF, INF, INF, 10, 1, 1, 1, 1]
+    assert scales["gyro"].tolist() == [1] * 10
+
+
+def test_step_scales_lookback_is_clipped_at_the_first_step():
+    cols = {"compass": [INC, EXC, INC, INC]}
+    scales = step_scales(0.25 * np.arange(4), decisions_from(cols), 100.0)
+    assert scales["compass"].tolist() == [INF, INF, 1, 1]
+
+
+def test_step_scales_no_decisions():
+    assert step_scales(np.zeros(0), [], 1.0) == {}
+
+
+def test_step_scales_lookback_boundary_on_a_10hz_grid():
+    # On the validator's own 10 Hz steps a 0.2 s look-back is exactly two
+    # steps, [t_k - 0.2, t_k), for every k; the left end is inclusive.
+    step_t = fixed_rate_steps(0.0, 10.0, 10.0)
+    n = len(step_t)
+    wrong = []
+    for k in range(2, n):
+        col = [INC] * n
+        col[k] = EXC
+        scale = step_scales(step_t, decisions_from({"compass": col}), 0.2)["compass"]
+        if np.flatnonzero(~np.isfinite(scale)).tolist() != [k - 2, k - 1, k]:
+            wrong.append(k)
+    assert wrong == [], f"look-back did not cover exactly 2 steps for steps {wrong[:10]}"
+
+
+# --- keyframe_weights ------------------------------------------------------
+
+
+STEP_T = 0.5 * np.arange(7)  # 0, 0.5, ..., 3.0 s
+
+
+def test_keyframe_weights_max_over_steps_since_previous_keyframe():
+    scales = {"f": np.array([1, 10, 1, INF, 1, 1, 10], dtype=float)}
+    kf = np.array([0.25, 1.0, 1.5, 2.2, 3.0])
+    # kf 0 (0.25 s): last step at or before it, step 0 -> 1
+    # kf 1 (1.0 s): steps in (0.25, 1.0] = 0.5, 1.0 -> max(10, 1) = 10
+    # kf 2 (1.5 s): (1.0, 1.5] = 1.5 -> inf
+    # kf 3 (2.2 s): (1.5, 2.2] = 2.0 -> 1
+    # kf 4 (3.0 s): (2.2, 3.0] = 2.5, 3.0 -> 10
+    w = keyframe_weights(STEP_T, scales, kf)
+    assert w["f"].tolist() == [1, 10, INF, 1, 10]
+
+
+def test_keyframe_weights_step_on_a_keyframe_belongs_to_that_keyframe():
+    scales = {"f": np.array([1, 1, INF, 1, 1, 1, 1], dtype=float)}  # 1.0 s excluded
+    w = keyframe_weights(STEP_T, scales, np.array([0.0, 1.0, 1.5]))
+    assert w["f"].tolist() == [1, INF, 1]
+
+
+def test_keyframe_zero_takes_the_last_step_at_or_before_it():
+    scales = {"f": np.array([1, 10, 1, 1, 1, 1, 1], dtype=float)}  # 0.5 s inflated
+    assert keyframe_weights(STEP_T, scales, np.array([0.5, 1.0]))["f"].tolist() == [10, 1]
+    assert keyframe_weights(STEP_T, scales, np.array([0.7, 1.0]))["f"].tolist() == [10, 1]
+    # Before the first step there is no decision: included.
+    assert keyframe_weights(STEP_T, scales, np.array([-1.0, 0.5]))["f"].tolist() == [1, 10]
+
+
+def test_keyframe_without_a_step_since_the_previous_keeps_the_last_step():
+    scales = {"f": np.array([1, INF, 1, 1, 1, 1, 1], dtype=float)}  # 0.5 s excluded
+    # 0.6 -> 0.7 s holds no step: the decision in force is step 0.5 s.
+    w = keyframe_weights(STEP_T, scales, np.array([0.0, 0.6, 0.7, 1.0]))
+    assert w["f"].tolist() == [1, INF, INF, 1]
+
+
+# --- run_validation on a drifting compass ----------------------------------
+
+
+DRIFT = (55.0, 80.0)  # s; the compass heading runs away at 0.1 rad/s
+DURATION = 100.0
+KEYFRAMES = np.arange(0.0, 99.0 + 1e-9, 0.5)
+
+
+def drift_recording(seed: int = 0) -> tuple[Recording, Trajectory]:
+    """A robot driving at 0.5 m/s through the default turns (20-30 s,
+    40-50 s) with compass, gyro, odometry and scan matching; the compass
+    heading drifts away during ``DRIFT`` (its field stays plausible).
+    Returns the recording and the scan-matching trajectory."""
+    rng = np.random.default_rng(seed)
+    tf = np.arange(0.0, DURATION + 1e-9, 0.01)
+    yaw = true_yaw(tf, DEFAULT_TURNS, 0.5)
+    x = np.concatenate(([0.0], np.cumsum(0.25 * (np.cos(yaw[1:]) + np.cos(yaw[:-1])) * 0.01)))
+    y = np.concatenate(([0.0], np.cumsum(0.25 * (np.sin(yaw[1:]) + np.sin(yaw[:-1])) * 0.01)))
+
+    def trajectory(rate_hz: float) -> Trajectory:
+        t = sample_times(DURATION, rate_hz, rng)
+        noisy = np.interp(t, tf, yaw) + rng.normal(0.0, 0.002, len(t))
+        return Trajectory(t, np.interp(t, tf, x), np.interp(t, tf, y), wrap_angle(noisy))
+
+    ref = MagneticReference(48.5e-6, np.radians(64.5))
+    tc = sample_times(DURATION, 20.0, rng)
+    true_c = np.interp(tc, tf, yaw)
+    heading = true_c + rng.normal(0.0, 0.01, len(tc)) + ramp_error(tc, DRIFT, 0.1)
+    compass = Compass(tc, wrap_angle(heading), field_body(true_c, ref.strength_T, ref.dip_rad))
+    tg = sample_times(DURATION, 100.0, rng)
+    gyro = Gyro(tg, yaw_rate(tg, DEFAULT_TURNS) + rng.normal(0.0, 0.002, len(tg)))
+    rec = Recording(
+        "drift", compass=compass, gyro=gyro, odometry=trajectory(20.0),
+        faults={"IMU_YAW": [DRIFT]}, magnetic_reference=ref,
+    )
+    return rec, trajectory(10.0)
+
+
+@pytest.fixture(scope="module")
+def drift():
+    return drift_recording()
+
+
+def sections(mode: str, *overrides: str):
+    return validation_sections(load_config(TELEMAX, [f"validation.mode={mode}", *overrides]))
+
+
+def rows(outcome) -> list[dict[str, str]]:
+    return list(csv.DictReader(io.StringIO(outcome.csv_text())))
+
+
+def test_drifting_compass_is_excluded_and_nothing_else(drift):
+    rec, sm = drift
+    vcfg, gcfg = sections("on", "gating.lookback_s=0")
+    out = run_validation(rec, sm, KEYFRAMES, vcfg, gcfg)
+    assert out.results is not None and out.observer_log is not None
+    assert sorted(out.weights) == list(FACTORS)
+    for f in FACTORS:
+        assert out.weights[f].shape == KEYFRAMES.shape
+        if f != "compass":
+            assert np.all(out.weights[f] == 1.0), f
+    excluded = ~np.isfinite(out.weights["compass"])
+    assert np.all((out.weights["compass"] == 1.0) | excluded)  # policy single: exclude
+    # Detection needs the 2 s trend window plus the 1 s counter threshold;
+    # from then to the end of the drift every keyframe is excluded.
+    assert excluded[(KEYFRAMES >= DRIFT[0] + 3.5) & (KEYFRAMES <= DRIFT[1])].all()
+    # No false alarm before (through the turns at 20-50 s); after the drift
+    # the counter falls from its cap (30) to the threshold (10) in 2 s and
+    # the hold-off is 2 s: back in by 80 + 4 s (+1 s margin).
+    assert not excluded[KEYFRAMES < DRIFT[0]].any()
+    assert not excluded[KEYFRAMES > DRIFT[1] + 5.0].any()
+
+    m = out.metrics
+    assert m["validation_steps"] == len(out.step_t) == len(fixed_rate_steps(0.0, 99.0, 10.0))
+    assert m["blamed_steps"].keys() == {"IMU_YAW"}
+    assert 0.0 < m["detection_delay_s"]["IMU_YAW"] <= 3.5
+    assert m["faults_missed"] == 0 and m["no_diagnosis_steps"] == 0
+    assert m["isolation_precision"] > 0.8 and m["isolation_recall"] > 0.85
+    assert m["keyframes_excluded"] == {f: int(excluded.sum()) if f == "compass" else 0 for f in FACTORS}
+    assert m["keyframes_inflated"] == {f: 0 for f in FACTORS}
+
+
+def test_lookback_extends_the_exclusion_back(drift):
+    rec, sm = drift
+    vcfg, gcfg = sections("on")  # the shipped config: lookback_s 6
+    assert gcfg.lookback_s == 6.0
+    out = run_validation(rec, sm, KEYFRAMES, vcfg, gcfg)
+    excluded = ~np.isfinite(out.weights["compass"])
+    # Detected within 3.5 s, so the 6 s look-back covers the onset.
+    assert excluded[(KEYFRAMES >= DRIFT[0]) & (KEYFRAMES <= DRIFT[1])].all()
+    assert not excluded[KEYFRAMES < DRIFT[0] - 6.0].any()
+    # The weights are the per-step decisions with look-back, per keyframe.
+    expected = keyframe_weights(out.step_t, step_scales(out.step_t, out.decisions, 6.0), KEYFRAMES)
+    for f in FACTORS:
+        np.testing.assert_array_equal(out.weights[f], expected[f])
+
+
+def test_validation_csv_columns_and_rows(drift):
+    rec, sm = drift
+    vcfg, gcfg = sections("on")
+    out = run_validation(rec, sm, KEYFRAMES, vcfg, gcfg)
+    text = out.csv_text()
+    header = text.splitlines()[0].split(",")
+    expected = ["t"]
+    for rel in vcfg.observers.relations:
+        expected += [f"{rel.name}.{c}" for c in ("trend_a", "trend_b", "valid", "counter", "no_match")]
+    for check in ("mag_plausible", "gps_plausible"):
+        expected += [f"{check}.valid", f"{check}.implausible"]
+    expected += ["consistent", "diagnoses"] + [f"gate.{f}" for f in FACTORS]
+    assert header == expected
+
+    table = rows(out)
+    assert len(table) == len(out.step_t) == len(text.splitlines()) - 1
+    np.testing.assert_allclose([float(r["t"]) for r in table], out.step_t, atol=1e-4)
+    for r in table:
+        for rel in vcfg.observers.relations:
+            assert r[f"{rel.name}.trend_a"] in {"-1", "0", "1"}
+            assert r[f"{rel.name}.valid"] in {"0", "1"} and r[f"{rel.name}.no_match"] in {"0", "1"}
+            assert 0 <= int(r[f"{rel.name}.counter"]) <= rel.max_counter
+        assert r["gps_plausible.valid"] == "0"  # no GPS in this recording
+        assert r["consistent"] == "1"
+        assert r["gate.compass"] in {"include", "exclude"}
+        assert all(r[f"gate.{f}"] == "include" for f in FACTORS if f != "compass")
+    by_t = {round(float(r["t"]), 1): r for r in table}
+    # Healthy before the drift, both compass relations in conflict during it.
+    assert by_t[30.0]["diagnoses"] == "{}" and by_t[30.0]["gate.compass"] == "include"
+    during = by_t[70.0]
+    assert during["yaw_compass_gyro.no_match"] == "1" and during["yaw_compass_sm.no_match"] == "1"
+    assert during["yaw_gyro_sm.no_match"] == "0"
+    assert during["diagnoses"].split(" | ")[0] == "{IMU_YAW}"
+    assert during["gate.compass"] == "exclude"
+    assert [r["gate.compass"] for r in table] == [d["compass"].action.value for d in out.decisions]
+
+
+def test_oracle_uses_the_true_faults_without_lookback(drift):
+    rec, sm = drift
+    vcfg, gcfg = sections("oracle")
+    assert gcfg.lookback_s == 6.0  # ignored by the oracle
+    out = run_validation(rec, sm, KEYFRAMES, vcfg, gcfg)
+    assert out.results is None and out.observer_log is None
+    # Keyframe k takes the steps in (t_{k-1}, t_k]: exactly the keyframes
+    # at 55.0 .. 80.0 s hold a step inside the closed fault interval.
+    in_fault = (KEYFRAMES >= DRIFT[0]) & (KEYFRAMES <= DRIFT[1])
+    np.testing.assert_array_equal(~np.isfinite(out.weights["compass"]), in_fault)
+    for f in FACTORS:
+        if f != "compass":
+            assert np.all(out.weights[f] == 1.0)
+    m = out.metrics
+    assert m["isolation_precision"] == 1.0 and m["isolation_recall"] == 1.0
+    assert m["detection_delay_s"] == {"IMU_YAW": 0.0}
+    steps_in = int(np.sum((out.step_t >= DRIFT[0]) & (out.step_t <= DRIFT[1])))
+    assert steps_in == 251
+    assert m["alarm_fraction"] == round(steps_in / len(out.step_t), 5)
+    header = out.csv_text().splitlines()[0]
+    assert header == "t," + ",".join(f"gate.{f}" for f in FACTORS)
+    assert len(rows(out)) == len(out.step_t)
+
+
+def test_oracle_without_faults_gates_nothing(drift):
+    rec, sm = drift
+    clean = Recording("clean", compass=rec.compass, gyro=rec.gyro, odometry=rec.odometry)
+    vcfg, gcfg = sections("oracle")
+    out = run_validation(clean, sm, KEYFRAMES, vcfg, gcfg)
+    assert all(np.all(w == 1.0) for w in out.weights.values())
+    assert out.metrics["alarm_fraction"] == 0.0
+    assert out.metrics["isolation_precision"] is None and out.metrics["isolation_recall"] is None
