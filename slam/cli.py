@@ -62,21 +62,22 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from slam.config import load_config
-    from slam.pipeline import run_map
+    from slam.compare import run_compare
     from slam.sim import simulate
 
-    scenario, config_path = Path(args.scenario), Path(args.config)
-    for p in (scenario, config_path):
+    paths = (Path(args.scenario), Path(args.config), Path(args.variants))
+    for p in paths:
         if not p.exists():
-            raise GslamError(f"{p}: not found; run the demo from the repository root or pass --scenario/--config")
+            raise GslamError(f"{p}: not found; run the demo from the repository root or pass --scenario/--config/--variants")
     out = Path(args.out)
     run_dir = out / "run"
     if not (run_dir / "truth.json").exists():
-        sim = simulate(scenario, run_dir, seed=args.seed, progress=not args.quiet)
-        print(f"simulated {sim.run_dir} ({sim.duration_s:.1f} s)")
-    res = run_map(run_dir, load_config(config_path), out / "map", progress=not args.quiet)
-    _print_metrics(res.out_dir, res.metrics)
+        sim = simulate(args.scenario, run_dir, seed=args.seed, progress=not args.quiet)
+        print(f"simulated {sim.run_dir} ({sim.duration_s:.1f} s of the Telemax lab mission)")
+    only = args.only.split(",") if args.only else None
+    res = run_compare(run_dir, args.config, out / "compare", args.variants, only, progress=not args.quiet)
+    print((res.out_dir / "comparison.md").read_text())
+    print(f"result folders, tables and figures in {res.out_dir}")
     return 0
 
 
@@ -135,10 +136,15 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key for every variant")
     c.set_defaults(func=_cmd_compare)
 
-    d = sub.add_parser("demo", help="simulate the Telemax lab mission and map it")
+    d = sub.add_parser("demo", help="simulate the Telemax lab mission, map it ungated, gated and with the oracle",
+                       epilog="examples:\n  gslam demo\n  gslam demo --out runs/demo_all --only "
+                              "ungated,gated,oracle,huber,cauchy,dcs,gnc_tls,gnc_gm --seed 2",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     d.add_argument("--out", default="runs/demo", help="demo folder (default runs/demo)")
     d.add_argument("--scenario", default="configs/scenarios/telemax_lab.yaml")
     d.add_argument("--config", default="configs/telemax.yaml")
+    d.add_argument("--variants", default="configs/variants.yaml")
+    d.add_argument("--only", default="ungated,gated,oracle", help="variants to run (default ungated,gated,oracle)")
     d.add_argument("--seed", type=int, default=None)
     d.set_defaults(func=_cmd_demo)
     return p

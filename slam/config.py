@@ -198,10 +198,21 @@ class BackendConfig(Strict):
 
 
 class EvaluationConfig(Strict):
-    """RPE over path-length deltas (m), as in KITTI / evo ``--delta_unit m``."""
+    """RPE over path-length deltas (m), as in KITTI / evo ``--delta_unit m``.
+
+    ``sm_output_faults``: with ground truth, scan matching also counts as
+    truly faulty where its motion over ``sm_fault_window_s`` is off the true
+    motion by more than ``sm_fault_trans_m`` or ``sm_fault_yaw_deg``
+    (slam.truth); these times join the simulator's geometric fault intervals
+    for the oracle and the validation metrics.
+    """
 
     rpe_deltas_m: list[float] = Field(default_factory=lambda: [5.0])
     max_time_offset_s: float = Field(0.05, gt=0.0)
+    sm_output_faults: bool = True
+    sm_fault_window_s: float = Field(1.0, gt=0.0)
+    sm_fault_trans_m: float = Field(0.15, gt=0.0)
+    sm_fault_yaw_deg: float = Field(3.0, gt=0.0)
 
 
 class OutputConfig(Strict):

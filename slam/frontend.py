@@ -26,6 +26,17 @@ from slam.recording import Scans, Trajectory
 log = logging.getLogger(__name__)
 
 
+def planar(transform: np.ndarray) -> np.ndarray:
+    """The exact planar rigid transform (x, y, yaw; z = roll = pitch = 0)
+    closest in yaw to a 4x4 ``transform``."""
+    yaw = np.arctan2(transform[1, 0], transform[0, 0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = np.eye(4)
+    out[:2, :2] = [[c, -s], [s, c]]
+    out[:2, 3] = transform[:2, 3]
+    return out
+
+
 def scan_points(ranges: np.ndarray, angles: np.ndarray, min_range: float, max_range: float) -> np.ndarray:
     """Points (m, 3) of one scan in the laser frame, z = 0.
 
@@ -86,6 +97,12 @@ class ScanMatcher:
             delta[:2, 3] = guess[:2]
             self._icp.last_delta = delta
         self._icp.register_frame(points, np.zeros(len(points)))
+        # KISS-ICP compounds its pose and velocity as 4x4 float products; over
+        # a long blind stretch (no points: prediction only) round-off makes the
+        # rotation non-orthogonal and Sophus aborts the process. A 2D scanner
+        # has no z, roll or pitch: keep both exactly planar.
+        self._icp.last_pose = planar(self._icp.last_pose)
+        self._icp.last_delta = planar(self._icp.last_delta)
         pose = self._icp.last_pose
         return float(pose[0, 3]), float(pose[1, 3]), float(np.arctan2(pose[1, 0], pose[0, 0]))
 

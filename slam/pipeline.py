@@ -118,6 +118,20 @@ class MappingPipeline:
             return
         self.frontend = run_frontend(rec.scans, cfg.frontend, progress=self.progress, odometry=rec.odometry)
         self.timings.frontend_s = self.frontend.time_s
+        self.label_scan_matching_faults()
+
+    def label_scan_matching_faults(self) -> None:
+        """Add the times where the front-end's output is wrong (against
+        ground truth) to the true SM fault intervals; see slam.truth."""
+        rec, ev = self.recording, self.config.evaluation
+        if rec.groundtruth is None or self.frontend is None or not ev.sm_output_faults:
+            return
+        from slam.truth import scan_matching_output_faults, union_intervals
+
+        wrong = scan_matching_output_faults(
+            self.frontend.poses, rec.groundtruth, ev.sm_fault_window_s, ev.sm_fault_trans_m, ev.sm_fault_yaw_deg
+        )
+        rec.faults["SM"] = union_intervals(rec.faults.get("SM", []), wrong)
 
     def build_measurements(self) -> None:
         rec, cfg = self.recording, self.config

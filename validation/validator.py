@@ -82,7 +82,8 @@ def step_scales(step_t: np.ndarray, decisions: list[dict[str, FactorGate]], look
         scale = np.array([d[f].sigma_scale for d in decisions])
         if lookback_s > 0:
             back = scale.copy()
-            first = np.searchsorted(step_t, step_t - lookback_s, side="left")
+            # Closed at the left: steps are sums of floats, so allow for round-off.
+            first = np.searchsorted(step_t, step_t - lookback_s - 1e-9, side="left")
             for k in np.flatnonzero(scale > 1.0):
                 seg = back[first[k] : k]
                 np.maximum(seg, scale[k], out=seg)

@@ -43,29 +43,12 @@ from slam.geometry import heading_from_magnetometer, wrap_angle
 from slam.recording import Interval
 from slam.sim.magnetics import body_field, reference
 from slam.sim.robot import Motion
+from slam.truth import intervals_from_mask
 from slam.sim.scenario import Scenario
 from slam.sim.world import World
 
 if TYPE_CHECKING:
     from slam.sim.sensors import GpsData, GyroData, LaserData
-
-
-def intervals_from_mask(
-    t: np.ndarray, mask: np.ndarray, merge_gap_s: float, min_duration_s: float
-) -> list[Interval]:
-    """Runs of True in ``mask`` over times ``t`` (s) as merged intervals."""
-    if not np.any(mask):
-        return []
-    m = np.concatenate([[False], mask.astype(bool), [False]])
-    starts = np.flatnonzero(~m[:-1] & m[1:])
-    ends = np.flatnonzero(m[:-1] & ~m[1:]) - 1
-    merged: list[list[float]] = []
-    for a, b in zip(t[starts], t[ends]):
-        if merged and a - merged[-1][1] <= merge_gap_s:
-            merged[-1][1] = float(b)
-        else:
-            merged.append([float(a), float(b)])
-    return [(round(a, 6), round(b, 6)) for a, b in merged if b - a >= min_duration_s]
 
 
 def compass_heading_error(

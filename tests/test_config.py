@@ -1,0 +1,278 @@
+"""Pipeline config loading: overrides, unknown keys, YAML booleans, the
+inlined validation model, the dump round trip and one-line YAML errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from slam.config import PipelineConfig, dump_config, load_config, load_yaml, parse_override, validation_sections
+from slam.errors import GslamError
+from validation.model import load_model
+
+REPO = Path(__file__).resolve().parents[1]
+TELEMAX = REPO / "configs" / "telemax.yaml"
+MODEL = REPO / "configs" / "validation" / "telemax_model.yaml"
+
+
+def one_line(err: pytest.ExceptionInfo) -> str:
+    msg = str(err.value)
+    assert "\n" not in msg
+    return msg
+
+
+# --- overrides --------------------------------------------------------------
+
+
+def test_overrides_set_dotted_keys_with_yaml_values():
+    cfg = load_config(
+        TELEMAX,
+        [
+            "backend.optimizer=isam2",
+            "backend.factors.gps.enabled=false",
+            "keyframes.period_s=0.25",
+            "evaluation.rpe_deltas_m=[1.0, 10.0]",
+            "input.topics.gps=null",
+            "backend.factors.compass.sigma_yaw_deg=2",
+        ],
+    )
+    assert cfg.backend.optimizer == "isam2"
+    assert cfg.backend.factors.gps.enabled is False
+    assert cfg.keyframes.period_s == 0.25
+    assert cfg.evaluation.rpe_deltas_m == [1.0, 10.0]
+    assert cfg.input.topics.gps is None
+    assert cfg.backend.factors.compass.sigma_yaw_deg == 2.0
+    # Untouched keys keep the file's values (not the model defaults).
+    assert cfg.backend.factors.gps.robust_kernel == "cauchy"
+    assert cfg.input.compass.declination_deg == 3.0
+
+
+def test_later_override_wins_and_value_may_contain_equals():
+    cfg = load_config(TELEMAX, ["backend.optimizer=isam2", "backend.optimizer=batch", "input.topics.scan=/a=b"])
+    assert cfg.backend.optimizer == "batch"
+    assert cfg.input.topics.scan == "/a=b"
+
+
+def test_overrides_without_a_file_apply_to_the_defaults():
+    cfg = load_config(None, ["backend.optimizer=isam2"])
+    assert cfg.backend.optimizer == "isam2"
+    assert cfg.keyframes == PipelineConfig().keyframes
+
+
+def test_parse_override():
+    assert parse_override("a.b=3") == ("a.b", 3)
+    assert parse_override(" a.b =on") == ("a.b", True)
+    assert parse_override("a.b=") == ("a.b", None)
+    with pytest.raises(GslamError, match="expected dotted.key=value"):
+        parse_override("a.b")
+    with pytest.raises(GslamError, match="empty key"):
+        parse_override("=3")
+
+
+def test_override_through_a_scalar_is_an_error():
+    with pytest.raises(GslamError) as e:
+        load_config(TELEMAX, ["backend.optimizer.x=1"])
+    assert "'optimizer' is not a section" in one_line(e)
+
+
+# --- unknown keys and bad values -------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "override, named",
+    [
+        ("backend.optimiser=isam2", "backend.optimiser"),
+        ("backend.factors.gps.sigma=1", "backend.factors.gps.sigma"),
+        ("frontend.voxel=0.2", "frontend.voxel"),
+        ("colour=red", "colour"),
+        ("validation.rate=10", "rate"),
+        ("validation.observers.magnetometer.tolerance=1", "magnetometer.tolerance"),
+        ("validation.observers.typo=1", "typo"),
+        ("gating.holdof_s=1", "holdof_s"),
+    ],
+)
+def test_unknown_key_names_the_key(override, named):
+    with pytest.raises(GslamError) as e:
+        load_config(TELEMAX, [override])
+    msg = one_line(e)
+    assert str(TELEMAX) in msg
+    assert "unknown" in msg and named in msg
+
+
+def test_unknown_key_in_a_file_names_the_key(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("backend:\n  factors:\n    odometry: {sigma_xy: 0.1}\n")
+    with pytest.raises(GslamError, match=r"unknown config key 'backend\.factors\.odometry\.sigma_xy'"):
+        load_config(path)
+
+
+def test_unknown_key_inside_a_relation_observer(tmp_path):
+    tree = yaml.safe_load(TELEMAX.read_text())
+    tree["validation"]["model"] = str(MODEL)
+    tree["validation"]["observers"]["relations"][0]["treshold"] = 3
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(tree))
+    with pytest.raises(GslamError) as e:
+        load_config(path)
+    assert "treshold" in one_line(e)
+
+
+@pytest.mark.parametrize(
+    "override, expected",
+    [
+        ("backend.optimizer=lbfgs", "backend.optimizer"),
+        ("keyframes.period_s=-1", "keyframes.period_s"),
+        ("validation.mode=maybe", "mode"),
+        ("validation.rate_hz=0", "rate_hz"),
+        ("gating.single=drop", "single"),
+    ],
+)
+def test_bad_value_names_the_key(override, expected):
+    with pytest.raises(GslamError) as e:
+        load_config(TELEMAX, [override])
+    assert expected in one_line(e)
+
+
+def test_validation_model_needed_when_gating(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("validation: {mode: on}\n")
+    with pytest.raises(GslamError) as e:
+        load_config(path)
+    assert "validation.model" in one_line(e)
+
+
+def test_observer_must_be_a_relation_of_the_model():
+    rel = "{name: yaw_x, stream_a: compass_yaw, stream_b: gyro_yaw, boundary: 0.05, window_s: 2.0, threshold: 10}"
+    with pytest.raises(GslamError) as e:
+        load_config(TELEMAX, [f"validation.observers.relations=[{rel}]"])
+    assert "yaw_x" in one_line(e)
+
+
+def test_gated_component_must_be_in_the_model():
+    with pytest.raises(GslamError) as e:
+        load_config(TELEMAX, ["gating.factors={compass: [MAG]}"])
+    assert "gating.factors.compass" in one_line(e) and "MAG" in str(e.value)
+
+
+# --- YAML booleans for validation.mode ---------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "value, mode",
+    [("on", "on"), ("off", "off"), ("yes", "on"), ("false", "off"), ("oracle", "oracle"), ("'on'", "on")],
+)
+def test_validation_mode_yaml_booleans(value, mode):
+    cfg = load_config(TELEMAX, [f"validation.mode={value}"])
+    assert validation_sections(cfg)[0].mode == mode
+
+
+def test_shipped_config_mode_off_is_a_yaml_boolean():
+    # configs/telemax.yaml says `mode: off`, which YAML 1.1 reads as false.
+    assert load_yaml(TELEMAX)["validation"]["mode"] is False
+    assert validation_sections(load_config(TELEMAX))[0].mode == "off"
+
+
+def test_mode_on_in_a_file(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text(f"validation:\n  mode: on\n  model: {MODEL}\n")
+    vcfg, _ = validation_sections(load_config(path))
+    assert vcfg.mode == "on"
+
+
+# --- validation.model inlined relative to the config file ---------------------
+
+
+def test_model_path_is_relative_to_the_config_file(tmp_path, monkeypatch):
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "m.yaml").write_text(MODEL.read_text())
+    (tmp_path / "cfgs").mkdir()
+    path = tmp_path / "cfgs" / "c.yaml"
+    path.write_text("validation:\n  mode: oracle\n  model: ../models/m.yaml\n")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    cfg = load_config(path)
+    assert isinstance(cfg.validation["model"], dict)
+    assert cfg.validation["model"] == load_yaml(MODEL)
+    vcfg, _ = validation_sections(cfg)
+    assert vcfg.model == load_model(MODEL)
+
+
+def test_shipped_config_inlines_its_model():
+    cfg = load_config(TELEMAX)
+    assert cfg.validation["model"] == load_yaml(MODEL)
+    assert "model: validation/" not in dump_config(cfg)
+
+
+def test_missing_model_file_is_named(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("validation:\n  model: nope.yaml\n")
+    with pytest.raises(GslamError) as e:
+        load_config(path)
+    assert str(tmp_path / "nope.yaml") in one_line(e)
+
+
+# --- dump round trip ---------------------------------------------------------
+
+
+@pytest.mark.parametrize("overrides", [[], ["validation.mode=on", "backend.optimizer=isam2", "input.topics.gps=null"]])
+def test_dump_config_round_trip(tmp_path, overrides):
+    cfg = load_config(TELEMAX, overrides)
+    # Written elsewhere: the dump must not depend on the original location.
+    path = tmp_path / "deep" / "config.yaml"
+    path.parent.mkdir()
+    path.write_text(dump_config(cfg))
+    again = load_config(path)
+    assert again == cfg
+    assert validation_sections(again) == validation_sections(cfg)
+    # Every default is spelled out.
+    tree = yaml.safe_load(path.read_text())
+    assert tree["frontend"]["max_iterations"] == PipelineConfig().frontend.max_iterations
+    assert tree["backend"]["fallback_inflation"] == PipelineConfig().backend.fallback_inflation
+
+
+def test_defaults_round_trip(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text(dump_config(PipelineConfig()))
+    assert load_config(path) == PipelineConfig()
+
+
+# --- YAML errors ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "text, line",
+    [
+        ("backend:\n  optimizer: batch\n  factors: [1, 2\nkeyframes: {}\n", 4),
+        ("backend:\n  optimizer: batch\n optimizer: isam2\n", 3),
+        ("a: 1\nb: 'unclosed\n", 3),
+    ],
+)
+def test_invalid_yaml_names_the_line(tmp_path, text, line):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(GslamError) as e:
+        load_config(path)
+    msg = one_line(e)
+    assert msg.startswith(str(path)) and f"line {line}" in msg and "invalid YAML" in msg
+
+
+def test_top_level_must_be_a_mapping(tmp_path):
+    path = tmp_path / "list.yaml"
+    path.write_text("- 1\n- 2\n")
+    with pytest.raises(GslamError, match="expected a mapping"):
+        load_config(path)
+
+
+def test_empty_file_is_the_defaults(tmp_path):
+    path = tmp_path / "empty.yaml"
+    path.write_text("# nothing\n")
+    assert load_config(path) == PipelineConfig()
+
+
+def test_missing_file_is_named(tmp_path):
+    with pytest.raises(GslamError) as e:
+        load_config(tmp_path / "nope.yaml")
+    assert "nope.yaml" in one_line(e) and "cannot read" in str(e.value)
