@@ -300,23 +300,32 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
 
 def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] = ()) -> PipelineConfig:
     """Load a pipeline config and apply ``dotted.key=value`` overrides."""
+    from validation.config import inline_model
+    from validation.errors import ValidationError as SectionError
+
     tree = load_yaml(path) if path is not None else {}
-    for text in overrides:
-        key, value = parse_override(text)
-        set_dotted(tree, key, value)
     source = str(path) if path is not None else "config"
+    # A model path in the file is relative to the file; one given as an
+    # override is relative to the working directory.
+    try:
+        if isinstance(tree.get("validation"), dict) and path is not None:
+            inline_model(tree["validation"], Path(path).parent)
+        for text in overrides:
+            key, value = parse_override(text)
+            set_dotted(tree, key, value)
+        if isinstance(tree.get("validation"), dict):
+            inline_model(tree["validation"], Path.cwd())
+    except SectionError as e:
+        raise GslamError(f"{source}: {e}") from None
     try:
         config = PipelineConfig.model_validate(tree)
     except ValidationError as e:
         raise GslamError(_format_pydantic(source, e)) from None
     # The validation package checks its own sections (imported here, not at
     # module level: it builds on this module).
-    from validation.config import inline_model, parse_sections
-    from validation.errors import ValidationError as SectionError
+    from validation.config import parse_sections
 
-    base_dir = Path(path).parent if path is not None else Path.cwd()
     try:
-        inline_model(config.validation, base_dir)
         parse_sections(config.validation, config.gating)
     except SectionError as e:
         raise GslamError(f"{source}: {e}") from None

@@ -200,6 +200,16 @@ def test_model_path_is_relative_to_the_config_file(tmp_path, monkeypatch):
     assert vcfg.model == load_model(MODEL)
 
 
+def test_model_path_given_as_override_is_relative_to_the_working_directory(tmp_path, monkeypatch):
+    (tmp_path / "m.yaml").write_text(MODEL.read_text())
+    path = tmp_path / "cfgs" / "c.yaml"
+    path.parent.mkdir()
+    path.write_text("validation:\n  mode: oracle\n")
+    monkeypatch.chdir(tmp_path)
+    cfg = load_config(path, ["validation.model=m.yaml"])
+    assert cfg.validation["model"] == load_yaml(MODEL)
+
+
 def test_shipped_config_inlines_its_model():
     cfg = load_config(TELEMAX)
     assert cfg.validation["model"] == load_yaml(MODEL)
