@@ -76,6 +76,7 @@ class MappingPipeline:
         self.timings = _Timings()
         self.frontend: FrontendResult | None = frontend
         self.validation = None
+        self._start = time.perf_counter()
         self.measurements: Measurements | None = None
         self.weights: FactorWeights | None = None
         self.backend: BackendResult | None = None
@@ -86,14 +87,13 @@ class MappingPipeline:
     # -- the table of contents ------------------------------------------------
 
     def run(self) -> MapResult:
-        start = time.perf_counter()
+        self._start = time.perf_counter()
         self.read()
         self.match_scans()
         self.build_measurements()
         self.validate()
         self.optimise()
         self.evaluate()
-        self.metrics["runtime_s"] = round(time.perf_counter() - start, 4)
         self.write()
         return MapResult(self.out_dir, self.metrics, self.backend.trajectory, self.recording, self.validation)
 
@@ -195,6 +195,8 @@ class MappingPipeline:
         try:
             self._write_into(tmp)
             self.timings.write_s = time.perf_counter() - t
+            # Everything but renaming the folder into place and writing this file.
+            self.metrics["runtime_s"] = round(time.perf_counter() - self._start, 4)
             self._add_timings()
             (tmp / "metrics.json").write_text(json.dumps(self.metrics, indent=2) + "\n")
             _replace_dir(tmp, out)
