@@ -183,7 +183,7 @@ def rows(outcome) -> list[dict[str, str]]:
 
 def test_drifting_compass_is_excluded_and_nothing_else(drift):
     rec, sm = drift
-    vcfg, gcfg = sections("on", "gating.lookback_s=0")
+    vcfg, gcfg = sections("on", "gating.lookback_s=0", "gating.holdoff_s=2")
     out = run_validation(rec, sm, KEYFRAMES, vcfg, gcfg)
     assert out.results is not None and out.observer_log is not None
     assert sorted(out.weights) == list(FACTORS)
