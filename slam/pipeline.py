@@ -157,7 +157,7 @@ class MappingPipeline:
 
         rec = self.recording
         if vcfg.mode == "oracle" and not any(rec.faults.values()):
-            log.warning("oracle gating without true fault intervals: nothing will be gated")
+            log.info("oracle gating without true fault intervals: nothing will be gated")
         sm = self.frontend.poses if self.frontend is not None else None
         self.validation = run_validation(rec, sm, self.measurements.t, vcfg, gcfg)
         self.weights = self.validation.weights

@@ -107,6 +107,7 @@ def plot_trajectories(
     if zoom_margin is not None and reference is not None and len(reference):
         lo, hi = reference.xy().min(axis=0), reference.xy().max(axis=0)
         pad = zoom_margin * max(hi - lo) + 1.0
+        ax.set_aspect("equal", adjustable="box")  # fixed limits: let the box adapt
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.legend(loc="best", fontsize="small")
