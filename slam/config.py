@@ -54,6 +54,18 @@ class GpsInputConfig(Strict):
     datum_lon_deg: float | None = None
 
 
+class GyroInputConfig(Strict):
+    """Which rate of a sensor_msgs/Imu is the yaw rate.
+
+    ``z``: ``angular_velocity.z``, for an IMU mounted level (body z up).
+    ``world_z``: the angular velocity rotated into the world by the message's
+    orientation quaternion, its vertical component: the yaw rate of an IMU
+    mounted tilted or rolled (the orientation must be valid).
+    """
+
+    axis: Literal["z", "world_z"] = "z"
+
+
 class InputConfig(Strict):
     """``format``: ``auto`` guesses the reader from the path (ROS 1 ``.bag``,
     ROS 2 bag folder, simulated run folder, CARMEN ``.log``/``.log.gz``,
@@ -61,6 +73,7 @@ class InputConfig(Strict):
 
     format: Literal["auto", "rosbag", "carmen", "broad", "librsf"] = "auto"
     topics: TopicsConfig = TopicsConfig()
+    gyro: GyroInputConfig = GyroInputConfig()
     compass: CompassInputConfig = CompassInputConfig()
     gps: GpsInputConfig = GpsInputConfig()
 

@@ -454,3 +454,81 @@ def test_real_husky_bag():
     assert 250.0 < step.sum() < 500.0
     assert np.max(np.hypot(rec.gps.x, rec.gps.y)) < 300.0
     assert np.all(np.isfinite(rec.gps.sigma)) and np.all(rec.gps.sigma > 0.0)
+
+
+# --- gyro axis --------------------------------------------------------------
+
+
+def _rolled_imu(bag: BagBuilder, t: float, omega_body, yaw: float, roll: float, has_orientation: bool = True) -> None:
+    """An Imu whose body is rolled by ``roll`` about its x axis, then yawed
+    by ``yaw`` (orientation = Rz(yaw) Rx(roll)), turning at ``omega_body``."""
+    cy, sy, cr, sr = np.cos(yaw / 2), np.sin(yaw / 2), np.cos(roll / 2), np.sin(roll / 2)
+    # q_yaw * q_roll, (x, y, z, w)
+    qx, qy, qz, qw = cy * sr, sy * sr, sy * cr, cy * cr
+    types = bag.types
+    cov = np.zeros(9)
+    ocov = cov.copy()
+    if not has_orientation:
+        ocov[0] = -1.0
+    msg = types[IMU](
+        header=bag.header(t, "imu"),
+        orientation=types["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
+        orientation_covariance=ocov,
+        angular_velocity=bag._vec(*omega_body),
+        angular_velocity_covariance=cov.copy(),
+        linear_acceleration=bag._vec(0.0, 0.0, 9.81),
+        linear_acceleration_covariance=cov.copy(),
+    )
+    bag.add("/imu/data", IMU, msg, t)
+
+
+def test_gyro_axis_world_z_on_a_rolled_imu(tmp_path, ros):
+    # Rolled +90 deg about x, body y points up: a yaw rate shows on body y.
+    bag = BagBuilder(ros)
+    rates = [0.3, -0.2, 0.0, 0.5]
+    for i, r in enumerate(rates):
+        _rolled_imu(bag, T0 + 0.1 * i, (0.0, r, 0.0), yaw=0.7 * i, roll=np.pi / 2)
+    path = bag.write_in(tmp_path)
+    body = read_rosbag(path, config(only(gyro="/imu/data")))
+    np.testing.assert_allclose(body.gyro.rate, 0.0, atol=1e-12)  # body z is horizontal
+    world = read_rosbag(path, config(only(gyro="/imu/data"), gyro={"axis": "world_z"}))
+    np.testing.assert_allclose(world.gyro.rate, rates, atol=1e-9)
+
+
+def test_gyro_axis_world_z_tilted_mix(tmp_path):
+    # Rolled 30 deg: world z = cos(30) * body z + sin(30) * body y.
+    bag = BagBuilder(1)
+    roll = np.radians(30.0)
+    _rolled_imu(bag, T0, (0.4, 0.2, 1.0), yaw=-2.0, roll=roll)
+    _rolled_imu(bag, T0 + 0.1, (0.0, 0.0, 1.0), yaw=1.0, roll=roll)
+    path = bag.write_in(tmp_path)
+    rec = read_rosbag(path, config(only(gyro="/imu/data"), gyro={"axis": "world_z"}))
+    expected = [np.cos(roll) * 1.0 + np.sin(roll) * 0.2, np.cos(roll)]
+    np.testing.assert_allclose(rec.gyro.rate, expected, atol=1e-9)
+
+
+def test_gyro_axis_errors(tmp_path):
+    bag = BagBuilder(1)
+    _rolled_imu(bag, T0, (0.0, 0.1, 0.0), yaw=0.0, roll=0.0)
+    _rolled_imu(bag, T0 + 0.1, (0.0, 0.1, 0.0), yaw=0.0, roll=0.0, has_orientation=False)
+    path = bag.write_in(tmp_path)
+    msg = error_of(read_rosbag, path, config(only(gyro="/imu/data"), gyro={"axis": "world_z"}))
+    assert "gyro topic '/imu/data'" in msg and "message 1 has no orientation" in msg
+    # Without world_z the orientation is not needed.
+    assert len(read_rosbag(path, config(only(gyro="/imu/data"))).gyro.t) == 2
+    with pytest.raises(Exception):
+        config(only(gyro="/imu/data"), gyro={"axis": "y"})
+
+
+def test_real_husky_gyro_world_z_matches_orientation_yaw():
+    path = DATA / "rosbag" / "test1_husky_2015.bag"
+    if not path.is_file():
+        pytest.skip(f"real data not found: {path} (set GSLAM_DATA to the data folder)")
+    topics = only(gyro="/imu/data", compass="/imu/data")
+    cfg = config(topics, gyro={"axis": "world_z"}, compass={"source": "imu_orientation"})
+    rec = read_rosbag(path, cfg)
+    d_yaw = wrap_angle(np.diff(rec.compass.yaw)) / np.diff(rec.compass.t)
+    rate = 0.5 * (rec.gyro.rate[1:] + rec.gyro.rate[:-1])
+    assert np.corrcoef(d_yaw, rate)[0, 1] > 0.95
+    body = read_rosbag(path, config(topics, compass={"source": "imu_orientation"}))
+    assert abs(np.corrcoef(d_yaw, 0.5 * (body.gyro.rate[1:] + body.gyro.rate[:-1]))[0, 1]) < 0.3

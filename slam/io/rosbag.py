@@ -7,7 +7,8 @@ once even when two streams share a topic (gyro and compass from one Imu).
 Message -> stream mapping (all times are header stamps):
 
 * ``scan``: sensor_msgs/LaserScan -> :class:`Scans`, ranges as published.
-* ``gyro``: sensor_msgs/Imu -> :class:`Gyro`, ``angular_velocity.z``.
+* ``gyro``: sensor_msgs/Imu -> :class:`Gyro`, ``angular_velocity.z`` or the
+  world-vertical component of the angular velocity (``input.gyro.axis``).
 * ``compass``: sensor_msgs/MagneticField or the orientation of a
   sensor_msgs/Imu -> :class:`Compass` (sign conventions in
   :class:`_CompassMagStream` and :class:`_CompassImuStream`).
@@ -26,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from slam.config import CompassInputConfig, GpsInputConfig, InputConfig
+from slam.config import CompassInputConfig, GpsInputConfig, GyroInputConfig, InputConfig
 from slam.errors import GslamError
 from slam.geometry import (
     enu_from_geodetic,
@@ -158,25 +159,58 @@ class _ScanStream(_Stream):
 
 
 class _GyroStream(_Stream):
-    """Imu -> yaw rate ``angular_velocity.z`` (rad/s, body z up)."""
+    """Imu -> yaw rate (rad/s).
+
+    ``axis: z`` takes ``angular_velocity.z`` (body z up). ``axis: world_z``
+    rotates the body-frame angular velocity into the world frame with the
+    message's orientation quaternion (body-to-world) and takes its z
+    component, the yaw rate of an IMU mounted tilted or rolled. A message
+    without orientation (``orientation_covariance[0]`` = -1) is then an error.
+    """
 
     msgtypes = (IMU,)
 
-    def __init__(self, name: str, topic: str, bag: Path) -> None:
+    def __init__(self, name: str, topic: str, bag: Path, config: GyroInputConfig) -> None:
         super().__init__(name, topic, bag)
-        self.rates: list[float] = []
+        self.world = config.axis == "world_z"
+        self.rates: list[tuple[float, ...]] = []
 
     def add(self, msg: Any) -> None:
+        w = msg.angular_velocity
+        if self.world:
+            if msg.orientation_covariance[0] == -1.0:
+                raise GslamError(
+                    f"{self.where}: message {len(self.stamps)} has no orientation "
+                    "(orientation_covariance[0] = -1); gyro axis world_z needs one, use axis z"
+                )
+            q = msg.orientation
+            self.rates.append((w.x, w.y, w.z, q.x, q.y, q.z, q.w))
+        else:
+            self.rates.append((w.z,))
         self.stamps.append(_stamp(msg))
-        self.rates.append(msg.angular_velocity.z)
 
     def finish(self) -> None:
         super().finish()
-        self.rate = np.asarray(self.rates, dtype=np.float64)
-        self._finite("angular_velocity.z", self.rate)
+        rows = np.asarray(self.rates, dtype=np.float64).reshape(len(self.rates), -1)
+        if self.world:
+            self._finite("angular_velocity/orientation", rows)
+            self.rate = world_yaw_rate(rows[:, :3], rows[:, 3:])
+        else:
+            self.rate = rows[:, 0] if rows.size else np.zeros(0)
+            self._finite("angular_velocity.z", self.rate)
 
     def build(self, t0_ns: int) -> Gyro:
         return Gyro(t=self.t(t0_ns), rate=self.rate)
+
+
+def world_yaw_rate(omega: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
+    """The world-z component (rad/s) of body-frame angular velocities
+    ``omega`` (n, 3) for body-to-world orientations ``quat_xyzw`` (n, 4,
+    normalised here): the third row of the rotation matrix times omega."""
+    q = quat_xyzw / np.linalg.norm(quat_xyzw, axis=1, keepdims=True)
+    x, y, z, w = q.T
+    row = np.column_stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
+    return np.einsum("ij,ij->i", row, omega)
 
 
 class _CompassMagStream(_Stream):
@@ -382,7 +416,7 @@ def _make_streams(path: Path, config: InputConfig) -> list[_Stream]:
     if topics.scan is not None:
         streams.append(_ScanStream("scan", topics.scan, path))
     if topics.gyro is not None:
-        streams.append(_GyroStream("gyro", topics.gyro, path))
+        streams.append(_GyroStream("gyro", topics.gyro, path, config.gyro))
     if topics.compass is not None:
         cls = _CompassMagStream if compass.source == "magnetic_field" else _CompassImuStream
         streams.append(cls("compass", topics.compass, path, compass))

@@ -1,0 +1,273 @@
+"""Running an ablation's jobs on a local process pool or on Ray, resumably.
+
+Output folder ``OUT``:
+
+* ``OUT/inputs/<scenario>-<hash>-seed<N>/``: each simulated input, once;
+* ``OUT/jobs/<id>/``: each job's result folder, as ``gslam map`` writes it;
+* ``OUT/failed/<id>.json``: the one-line error of a job that failed;
+* ``OUT/spec.yaml``, ``OUT/summary.csv``, ``OUT/summary.md``, ``OUT/plots/``.
+
+Every folder and file is written beside its place and renamed into it, so a
+job is finished exactly when ``jobs/<id>/metrics.json`` exists, whatever
+moment the sweep was killed at. Running the same spec again skips finished
+jobs and retries failed ones. A lock on ``OUT/.lock`` keeps two sweeps out
+of one folder (the kernel drops it when a process dies, even by kill -9).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import logging
+import multiprocessing
+import os
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+import yaml
+from tqdm import tqdm
+
+from slam.ablate.jobs import Job, SimulatedInput, expand_jobs
+from slam.ablate.spec import AblationSpec
+from slam.errors import GslamError
+from slam.io.atomic import write_text
+
+log = logging.getLogger(__name__)
+
+
+class Backend(str, Enum):
+    """Where jobs run: a local process pool, or tasks on a Ray cluster."""
+
+    LOCAL = "local"
+    RAY = "ray"
+
+
+@dataclass(frozen=True)
+class JobOutcome:
+    """What one job did: ``error`` is None on success; ``time_s`` is the
+    wall time in the worker (s), ``simulate_s`` the part spent simulating."""
+
+    id: str
+    error: str | None
+    time_s: float
+    simulate_s: float = 0.0
+
+
+@dataclass
+class AblationResult:
+    """What a sweep did: every job of the spec, which ran now, which were
+    already finished and skipped, which failed (id -> error) and the wall
+    time of the whole command (s)."""
+
+    out_dir: Path
+    jobs: list[Job]
+    ran: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    failed: dict[str, str] = field(default_factory=dict)
+    outcomes: list[JobOutcome] = field(default_factory=list)
+    wall_s: float = 0.0
+    summary: Any = None
+
+
+# --- one job (runs in a worker process) ------------------------------------------
+
+
+def is_finished(out_dir: Path, job: Job) -> bool:
+    return (out_dir / "jobs" / job.id / "metrics.json").exists()
+
+
+def ensure_input(out_dir: Path, sim: SimulatedInput) -> float:
+    """Simulate ``sim`` into ``out_dir/inputs/<key>/`` unless it is there;
+    the wall time spent (s). Built in a private folder and renamed; if
+    another worker got there first, its copy stays and this one is dropped."""
+    from slam.sim import simulate_scenario
+    from slam.sim.scenario import Scenario
+
+    target = out_dir / "inputs" / sim.key
+    if (target / "truth.json").exists():
+        return 0.0
+    t = time.perf_counter()
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{sim.key}.", dir=target.parent))
+    try:
+        simulate_scenario(Scenario.model_validate(sim.scenario), tmp / "run")
+        try:
+            os.rename(tmp / "run", target)
+        except OSError:
+            if not (target / "truth.json").exists():
+                raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return time.perf_counter() - t
+
+
+def run_job(job: Job, out_dir: str | Path) -> JobOutcome:
+    """Run one job into ``out_dir/jobs/<id>/``; never raises for a failing
+    job: its error goes to ``out_dir/failed/<id>.json`` and the outcome."""
+    from slam.config import load_config
+    from slam.pipeline import run_map
+
+    out_dir = Path(out_dir)
+    t = time.perf_counter()
+    failed = out_dir / "failed" / f"{job.id}.json"
+    sim_s = 0.0
+    try:
+        if job.simulated is not None:
+            sim_s = ensure_input(out_dir, job.simulated)
+        config = load_config(job.config_path, list(job.overrides))
+        run_map(job.input_dir(out_dir), config, out_dir / "jobs" / job.id)
+    except Exception as e:  # noqa: BLE001 - a failing job must not stop the sweep
+        error = f"{type(e).__name__}: {e}".splitlines()[0]
+        write_text(failed, json.dumps({"id": job.id, "error": error}, indent=2) + "\n")
+        return JobOutcome(job.id, error, time.perf_counter() - t, sim_s)
+    failed.unlink(missing_ok=True)
+    return JobOutcome(job.id, None, time.perf_counter() - t, sim_s)
+
+
+def _quiet_worker() -> None:
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+
+
+# --- backends --------------------------------------------------------------------
+
+
+def _local(jobs: list[Job], out_dir: Path, workers: int) -> Iterator[JobOutcome]:
+    # spawn: forking a parent that has loaded gtsam/open3d threads is unsafe.
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_quiet_worker) as pool:
+        pending = {pool.submit(run_job, job, str(out_dir)): job for job in jobs}
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                job = pending.pop(fut)
+                try:
+                    yield fut.result()
+                except Exception as e:  # noqa: BLE001 - e.g. a worker killed by a crash
+                    yield JobOutcome(job.id, f"{type(e).__name__}: {e}".splitlines()[0], 0.0)
+
+
+def _ray(jobs: list[Job], out_dir: Path, workers: int, address: str | None) -> Iterator[JobOutcome]:
+    try:
+        import ray
+    except ImportError:
+        raise GslamError('the Ray backend needs ray: pip install ".[ray]"') from None
+    started = not ray.is_initialized()
+    if started:
+        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
+        if address is None:
+            kwargs["num_cpus"] = workers
+        ray.init(address=address, **kwargs)
+    try:
+        task = ray.remote(num_cpus=1)(_ray_job)
+        pending = {task.remote(job, str(out_dir)): job for job in jobs}
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            for ref in done:
+                job = pending.pop(ref)
+                try:
+                    yield ray.get(ref)
+                except Exception as e:  # noqa: BLE001 - a task lost with its node
+                    yield JobOutcome(job.id, f"{type(e).__name__}: {e}".splitlines()[0], 0.0)
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _ray_job(job: Job, out_dir: str) -> JobOutcome:
+    _quiet_worker()
+    return run_job(job, out_dir)
+
+
+# --- the sweep -------------------------------------------------------------------
+
+
+def run_ablation(
+    spec: AblationSpec,
+    out_dir: str | Path,
+    workers: int | None = None,
+    backend: Backend | str = Backend.LOCAL,
+    address: str | None = None,
+    progress: bool = True,
+    source: str = "spec",
+    on_outcome: Callable[[JobOutcome], None] | None = None,
+) -> AblationResult:
+    """Run every unfinished job of ``spec`` into ``out_dir`` and summarise
+    (the library form of ``gslam ablate``). ``workers``: parallel jobs
+    (default: CPU count); ``address``: a Ray cluster (``auto``), or None for
+    a local Ray instance."""
+    from slam.ablate.summary import write_summary
+
+    t0 = time.perf_counter()
+    backend = Backend(backend)
+    jobs = expand_jobs(spec, source)  # validates everything before any job runs
+    out_dir = Path(out_dir).resolve()
+    workers = max(1, workers or os.cpu_count() or 1)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with _lock(out_dir):
+        _clean_leftovers(out_dir)
+        write_text(out_dir / "spec.yaml", yaml.safe_dump(spec.model_dump(mode="json"), sort_keys=False))
+        result = AblationResult(out_dir, jobs)
+        todo = []
+        for job in jobs:
+            (result.skipped if is_finished(out_dir, job) else todo).append(job if not is_finished(out_dir, job) else job.id)
+        log.info("%d jobs: %d finished before, %d to run on %s x%d", len(jobs), len(result.skipped), len(todo), backend.value, workers)
+        if todo:
+            runner = _local(todo, out_dir, workers) if backend is Backend.LOCAL else _ray(todo, out_dir, workers, address)
+            with tqdm(total=len(jobs), initial=len(result.skipped), unit="job", desc="ablate", disable=not progress) as bar:
+                for outcome in runner:
+                    result.outcomes.append(outcome)
+                    if outcome.error is None:
+                        result.ran.append(outcome.id)
+                    else:
+                        result.failed[outcome.id] = outcome.error
+                        log.warning("job %s failed: %s", outcome.id, outcome.error)
+                    if on_outcome is not None:
+                        on_outcome(outcome)
+                    bar.set_postfix(failed=len(result.failed))
+                    bar.update(1)
+        result.summary = write_summary(out_dir, jobs, spec)
+    result.wall_s = time.perf_counter() - t0
+    return result
+
+
+class _lock:
+    """An exclusive ``flock`` on ``out_dir/.lock`` (released when the process
+    ends, however it ends)."""
+
+    def __init__(self, out_dir: Path):
+        self.path = out_dir / ".lock"
+        self.fd: int | None = None
+
+    def __enter__(self) -> "_lock":
+        self.fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o644)
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(self.fd)
+            raise GslamError(f"{self.path.parent}: another gslam ablate is running on this folder") from None
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.fd is not None:
+            fcntl.flock(self.fd, fcntl.LOCK_UN)
+            os.close(self.fd)
+
+
+def _clean_leftovers(out_dir: Path) -> None:
+    """Remove temporary folders and files of a sweep that was killed (hidden
+    names: every writer builds ``.<name>.*`` beside its target)."""
+    for sub in ("inputs", "jobs", "failed"):
+        d = out_dir / sub
+        if not d.is_dir():
+            continue
+        for p in d.iterdir():
+            if p.name.startswith("."):
+                log.info("removing leftover %s", p)
+                shutil.rmtree(p) if p.is_dir() else p.unlink()

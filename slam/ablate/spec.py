@@ -1,0 +1,191 @@
+"""The ablation spec: which inputs, which base config, which variants and
+which sweeps (``gslam ablate SPEC.yaml``).
+
+Every model forbids unknown keys, so a typo in a spec stops before any job
+runs, with one line naming the spec file and the key. Paths in a spec are
+relative to the spec file. A sweep key is a dotted path into the pipeline
+config (``gating.inflation``) or, with the prefix ``scenario.``, into the
+scenario of a simulated input (``scenario.sensors.gyro.noise_rad_s``). A
+path segment that meets a list selects elements by index (``0``), by their
+``name`` field (``yaw_compass_gyro``) or by a glob over names (``yaw_*``,
+``*``); see :func:`slam.ablate.jobs.set_path`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from slam.config import load_yaml
+from slam.errors import GslamError
+
+SCENARIO_PREFIX = "scenario."
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class SeedRange(_Strict):
+    """``count`` consecutive seeds from ``first``."""
+
+    first: int = Field(1, ge=0)
+    count: int = Field(ge=1)
+
+    def seeds(self) -> list[int]:
+        return list(range(self.first, self.first + self.count))
+
+
+class ScenarioInput(_Strict):
+    """A scenario YAML simulated once per seed (``seeds``: a list or a range)."""
+
+    path: Path
+    seeds: list[int] | SeedRange = Field(min_length=1)
+
+    def seed_list(self) -> list[int]:
+        return list(self.seeds) if isinstance(self.seeds, list) else self.seeds.seeds()
+
+
+class RecordedInput(_Strict):
+    """A recorded run (bag, log or run folder) used as it is; ``name`` labels
+    it in job ids and tables (default: the file name)."""
+
+    path: Path
+    name: str | None = None
+
+    def label(self) -> str:
+        return self.name or self.path.name.split(".")[0]
+
+
+class InputsSpec(_Strict):
+    scenarios: list[ScenarioInput] = Field(default_factory=list)
+    recorded: list[RecordedInput] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _some(self) -> "InputsSpec":
+        if not self.scenarios and not self.recorded:
+            raise ValueError("at least one scenario or recorded input is needed")
+        return self
+
+
+class Distribution(_Strict):
+    """One randomly sampled parameter: exactly one of ``uniform: [lo, hi]``,
+    ``log_uniform: [lo, hi]``, ``integer: [lo, hi]`` (inclusive) or
+    ``choice: [values]``."""
+
+    uniform: tuple[float, float] | None = None
+    log_uniform: tuple[float, float] | None = None
+    integer: tuple[int, int] | None = None
+    choice: list[Any] | None = Field(None, min_length=1)
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> "Distribution":
+        given = [k for k in ("uniform", "log_uniform", "integer", "choice") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError("give exactly one of uniform, log_uniform, integer, choice")
+        lo_hi = self.uniform or self.log_uniform or self.integer
+        if lo_hi is not None and lo_hi[0] > lo_hi[1]:
+            raise ValueError("the lower bound exceeds the upper bound")
+        if self.log_uniform is not None and self.log_uniform[0] <= 0:
+            raise ValueError("log_uniform bounds must be > 0")
+        return self
+
+
+class RandomSweep(_Strict):
+    """``samples`` points drawn with ``seed`` (the same spec draws the same
+    points), each parameter independently."""
+
+    samples: int = Field(ge=1)
+    seed: int = Field(0, ge=0)
+    params: dict[str, Distribution] = Field(min_length=1)
+
+
+class SweepSpec(_Strict):
+    """``grid``: a mapping key -> values (their full product), or a list of
+    such mappings (the union of their products: one-at-a-time sweeps).
+    ``random``: seeded random samples. With both, every grid point is
+    combined with every random sample."""
+
+    grid: dict[str, list[Any]] | list[dict[str, list[Any]]] = Field(default_factory=dict)
+    random: RandomSweep | None = None
+
+    def grids(self) -> list[dict[str, list[Any]]]:
+        return self.grid if isinstance(self.grid, list) else [self.grid]
+
+    def keys(self) -> list[str]:
+        keys: list[str] = []
+        for g in self.grids():
+            keys += [k for k in g if k not in keys]
+        if self.random is not None:
+            keys += [k for k in self.random.params if k not in keys]
+        return keys
+
+
+class AblationSpec(_Strict):
+    """Root of an ablation spec (e.g. ``configs/ablations/gating_policy.yaml``).
+
+    ``variants``: name -> dotted overrides (as ``configs/variants.yaml``);
+    none given means one variant ``base``. ``set``: overrides for every job.
+    ``plots``: write each run's PNG figures (off by default: they cost more
+    than a short run's mapping).
+    """
+
+    name: str
+    description: str = ""
+    config: Path
+    inputs: InputsSpec
+    variants: dict[str, dict[str, Any]] = Field(default_factory=lambda: {"base": {}})
+    set: dict[str, Any] = Field(default_factory=dict)
+    sweep: SweepSpec = SweepSpec()
+    plots: bool = False
+    metrics: list[str] | None = None
+
+    @model_validator(mode="after")
+    def _names(self) -> "AblationSpec":
+        if not self.variants:
+            raise ValueError("variants: at least one variant is needed")
+        for name in self.variants:
+            if not name or any(c in name for c in "/\\ "):
+                raise ValueError(f"variants: name '{name}' must be non-empty without '/', '\\' or spaces")
+        for key in self.sweep.keys():
+            if not key or key.startswith(".") or key.endswith(".") or ".." in key:
+                raise ValueError(f"sweep: '{key}' is not a dotted key")
+        return self
+
+    def resolved(self, base_dir: Path) -> "AblationSpec":
+        """A copy with every path made absolute against ``base_dir``."""
+
+        def absolute(p: Path) -> Path:
+            return p if p.is_absolute() else (base_dir / p).resolve()
+
+        inputs = InputsSpec(
+            scenarios=[s.model_copy(update={"path": absolute(s.path)}) for s in self.inputs.scenarios],
+            recorded=[r.model_copy(update={"path": absolute(r.path)}) for r in self.inputs.recorded],
+        )
+        return self.model_copy(update={"config": absolute(self.config), "inputs": inputs})
+
+
+def load_spec(path: str | Path, max_seeds: int | None = None) -> AblationSpec:
+    """Read and validate an ablation spec; ``max_seeds`` keeps only the first
+    seeds of each scenario input (a quick look at a long spec). Bad input
+    raises :class:`GslamError` naming the file and the key."""
+    path = Path(path)
+    tree = load_yaml(path)
+    try:
+        spec = AblationSpec.model_validate(tree)
+    except ValidationError as e:
+        first = e.errors()[0]
+        loc = ".".join(str(p) for p in first["loc"])
+        if first["type"] == "extra_forbidden":
+            raise GslamError(f"{path}: unknown spec key '{loc}'") from None
+        raise GslamError(f"{path}: {loc}: {first['msg']}") from None
+    spec = spec.resolved(path.resolve().parent)
+    if max_seeds is not None:
+        scenarios = [s.model_copy(update={"seeds": s.seed_list()[:max_seeds]}) for s in spec.inputs.scenarios]
+        spec = spec.model_copy(update={"inputs": spec.inputs.model_copy(update={"scenarios": scenarios})})
+    for p in [spec.config] + [s.path for s in spec.inputs.scenarios] + [r.path for r in spec.inputs.recorded]:
+        if not p.exists():
+            raise GslamError(f"{path}: {p} not found")
+    return spec
