@@ -254,11 +254,14 @@ class PipelineConfig(Strict):
 # --- loading -------------------------------------------------------------
 
 
-def _format_pydantic(source: str, err: ValidationError) -> str:
-    first = err.errors()[0]
+def describe_validation_error(source: str, err: ValidationError, what: str = "config") -> str:
+    """One line for a pydantic error: the file, the key and what is wrong;
+    an unknown key first, since a typo is what the user must see."""
+    errors = err.errors()
+    first = next((e for e in errors if e["type"] == "extra_forbidden"), errors[0])
     loc = ".".join(str(p) for p in first["loc"])
     if first["type"] == "extra_forbidden":
-        return f"{source}: unknown config key '{loc}'"
+        return f"{source}: unknown {what} key '{loc}'"
     return f"{source}: {loc}: {first['msg']}"
 
 
@@ -333,7 +336,7 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
     try:
         config = PipelineConfig.model_validate(tree)
     except ValidationError as e:
-        raise GslamError(_format_pydantic(source, e)) from None
+        raise GslamError(describe_validation_error(source, e)) from None
     # The validation package checks its own sections (imported here, not at
     # module level: it builds on this module).
     from validation.config import parse_sections

@@ -21,7 +21,7 @@ import numpy as np
 from slam.recording import Recording, Trajectory
 from validation.config import GatingConfig, ValidationConfig
 from validation.diagnosis import Diagnoser, DiagnosisResult
-from validation.gating import FactorGate, Gate, GatingAction, oracle_decisions
+from validation.gating import FactorGate, Gate, oracle_decisions
 from validation.metrics import validation_metrics
 from validation.observers import ObserverLog, observe, unary_checks
 from validation.streams import fixed_rate_steps, validation_streams
@@ -148,15 +148,3 @@ def run_validation(
     metrics["keyframes_inflated"] = inflated
     log.info("validation (%s): %d steps in %.3f s; excluded keyframes %s", config.mode, len(step_t), elapsed, excluded)
     return ValidationOutcome(step_t, observer_log, results, decisions, weights, metrics, elapsed, sm_poses)
-
-
-def suspected_components(decisions: list[dict[str, FactorGate]], gating: GatingConfig) -> list[set[str]]:
-    """Per step, the components whose factors are not simply included."""
-    out = []
-    for d in decisions:
-        comps: set[str] = set()
-        for factor, gate in d.items():
-            if gate.action is not GatingAction.INCLUDE:
-                comps.update(gating.factors.get(factor, ()))
-        out.append(comps)
-    return out

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from slam.config import load_yaml
+from slam.config import describe_validation_error, load_yaml
 from slam.errors import GslamError
 
 Point = tuple[float, float]
@@ -222,8 +222,4 @@ def load_scenario(path: str | Path) -> Scenario:
     try:
         return Scenario.model_validate(tree)
     except ValidationError as e:
-        first = e.errors()[0]
-        loc = ".".join(str(p) for p in first["loc"])
-        if first["type"] == "extra_forbidden":
-            raise GslamError(f"{path}: unknown scenario key '{loc}'") from None
-        raise GslamError(f"{path}: {loc}: {first['msg']}") from None
+        raise GslamError(describe_validation_error(str(path), e, "scenario")) from None
