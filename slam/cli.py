@@ -23,6 +23,7 @@ examples:
   gslam map recording.bag --config my_robot.yaml --out runs/real --set input.topics.scan=/base_scan
   gslam compare runs/lab --config configs/telemax.yaml --out runs/lab_compare
   gslam demo --out runs/demo
+  gslam ablate configs/ablations/gating_policy.yaml --out runs/ablate_gating --workers 2
 """
 
 
@@ -70,7 +71,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         if not p.exists():
             raise GslamError(f"{p}: not found; run the demo from the repository root or pass --scenario/--config/--variants")
     out = Path(args.out)
-    run_dir = out / "run"
+    run_dir = out / Path(args.scenario).stem
     if not (run_dir / "truth.json").exists():
         sim = simulate(args.scenario, run_dir, seed=args.seed, progress=not args.quiet)
         print(f"simulated {sim.run_dir} ({sim.duration_s:.1f} s of the Telemax lab mission)")
@@ -79,6 +80,20 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print((res.out_dir / "comparison.md").read_text())
     print(f"result folders, tables and figures in {res.out_dir}")
     return 0
+
+
+def _cmd_ablate(args: argparse.Namespace) -> int:
+    from slam.ablate import load_spec, run_ablation
+
+    spec = load_spec(args.spec, max_seeds=args.seeds)
+    res = run_ablation(spec, args.out, workers=args.workers, backend=args.backend, address=args.address,
+                       progress=not args.quiet, source=args.spec)
+    print(res.summary.md_path.read_text())
+    print(f"{len(res.jobs)} jobs: {len(res.ran)} ran, {len(res.skipped)} already finished, "
+          f"{len(res.failed)} failed ({res.wall_s:.1f} s); wrote {res.out_dir}")
+    for job_id, error in res.failed.items():
+        print(f"  failed {job_id}: {error}")
+    return 1 if res.failed else 0
 
 
 def _print_metrics(out_dir: Path, metrics: dict) -> None:
@@ -147,6 +162,20 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--only", default="ungated,gated,oracle", help="variants to run (default ungated,gated,oracle)")
     d.add_argument("--seed", type=int, default=None)
     d.set_defaults(func=_cmd_demo)
+
+    a = sub.add_parser("ablate", help="run a sweep of configs, scenarios and seeds (resumable; local or Ray)",
+                       epilog="examples:\n  gslam ablate configs/ablations/gating_policy.yaml --out runs/ablate_gating\n"
+                              "  gslam ablate configs/ablations/paper_parameters.yaml --out runs/pp --workers 2 --seeds 3\n"
+                              "  gslam ablate SPEC.yaml --out /shared/runs/x --backend ray --address auto",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    a.add_argument("spec", help="ablation spec YAML (configs/ablations/*.yaml)")
+    a.add_argument("--out", required=True, help="sweep folder; running again skips finished jobs")
+    a.add_argument("--workers", type=int, default=None, help="parallel jobs (default: CPU count)")
+    a.add_argument("--backend", choices=["local", "ray"], default="local",
+                   help="local: process pool; ray: one Ray task per job (pip install \".[ray]\")")
+    a.add_argument("--address", default=None, help="Ray cluster address (e.g. auto); default: a local Ray instance")
+    a.add_argument("--seeds", type=int, default=None, help="only the first N seeds of each scenario (a quick look)")
+    a.set_defaults(func=_cmd_ablate)
     return p
 
 

@@ -151,7 +151,7 @@ def test_demo_simulates_and_maps(capsys, short_scenario_yaml, tmp_path, monkeypa
     )
     assert code == 0, stderr
     assert stdout.startswith("simulated ")
-    assert (out / "run" / "truth.json").is_file()
+    assert (out / Path(short_scenario_yaml).stem / "truth.json").is_file()
     results = [json.loads(p.read_text()) for p in out.rglob("metrics.json")]
     assert results and all(m["ate_rmse_m"] < 0.06 for m in results)
 
