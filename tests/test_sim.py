@@ -309,3 +309,21 @@ def test_same_seed_same_messages_different_seed_differs(tmp_path):
     assert a != c  # ... but other noise
     gt = [m for m in a if m[0] == "/ground_truth"]
     assert gt == [m for m in c if m[0] == "/ground_truth"]  # truth has no noise
+
+
+def test_laps_repeat_a_closed_path_and_refuse_an_open_one():
+    from pydantic import ValidationError
+
+    from slam.sim.robot import plan_motion
+    from slam.sim.scenario import RobotConfig
+
+    square = [(0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0), (0.0, 0.0)]
+    one = plan_motion(RobotConfig(waypoints=square, start_pause_s=0.0, end_pause_s=0.0))
+    three = plan_motion(RobotConfig(waypoints=square, laps=3, start_pause_s=0.0, end_pause_s=0.0))
+    assert RobotConfig(waypoints=square, laps=3).path() == square + square[1:] * 2
+    # Three laps: nearly three times the time (the robot does not stop at the
+    # start corner between laps, it takes it on an arc), back at the start.
+    assert 2.7 * one.duration < three.duration < 3.0 * one.duration
+    assert np.hypot(three.x[-1], three.y[-1]) < 1e-6
+    with pytest.raises(ValidationError, match="closed path"):
+        RobotConfig(waypoints=square[:-1], laps=2)

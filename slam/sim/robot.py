@@ -115,8 +115,9 @@ def _drive(points: list[np.ndarray], radii: list[float], cfg: RobotConfig) -> di
 def plan_motion(cfg: RobotConfig) -> Motion:
     """Ground truth of the whole run at ``cfg.truth_rate_hz``, starting at
     the first waypoint with yaw ``start_yaw_deg``."""
-    pts = [np.asarray(w[:2], dtype=float) for w in cfg.waypoints]
-    pauses = [w[2] if len(w) > 2 else 0.0 for w in cfg.waypoints]
+    waypoints = cfg.path()
+    pts = [np.asarray(w[:2], dtype=float) for w in waypoints]
+    pauses = [w[2] if len(w) > 2 else 0.0 for w in waypoints]
     w_max, alpha = np.radians(cfg.max_turn_rate_deg_s), np.radians(cfg.max_turn_accel_deg_s2)
     spot_limit = np.radians(cfg.spot_turn_above_deg)
     pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (t, v, yaw) each

@@ -14,7 +14,7 @@ from __future__ import annotations
 from enum import Enum
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from slam.config import describe_validation_error, load_yaml
 from slam.errors import GslamError
@@ -104,6 +104,7 @@ class RobotConfig(Strict):
     start_pause_s: float = Field(1.0, ge=0.0)
     end_pause_s: float = Field(1.0, ge=0.0)
     truth_rate_hz: float = Field(100.0, ge=100.0)
+    laps: int = Field(1, ge=1)
 
     @field_validator("waypoints")
     @classmethod
@@ -111,6 +112,16 @@ class RobotConfig(Strict):
         if any(len(w) == 3 and w[2] < 0.0 for w in v):
             raise ValueError("a waypoint's pause (third value, s) must be >= 0")
         return v
+
+    @model_validator(mode="after")
+    def _laps_close_the_loop(self) -> "RobotConfig":
+        if self.laps > 1 and tuple(self.waypoints[0][:2]) != tuple(self.waypoints[-1][:2]):
+            raise ValueError("laps > 1 needs a closed path: the last waypoint must equal the first")
+        return self
+
+    def path(self) -> list[tuple[float, ...]]:
+        """The waypoints of the whole run: the closed path driven ``laps`` times."""
+        return list(self.waypoints) + list(self.waypoints[1:]) * (self.laps - 1)
 
 
 # --- sensors -------------------------------------------------------------
