@@ -26,7 +26,7 @@ import numpy as np
 import yaml
 from pydantic import ValidationError
 
-from slam.ablate.spec import SCENARIO_PREFIX, AblationSpec, Distribution, RandomSweep
+from slam.ablate.spec import SCENARIO_PREFIX, AblationSpec, Distribution, RandomSweep, SweepSpec
 from slam.config import dump_config, load_config, load_yaml
 from slam.errors import GslamError
 from slam.sim.scenario import Scenario
@@ -161,21 +161,21 @@ def config_overrides(base_tree: dict[str, Any], pairs: list[tuple[str, Any]]) ->
 # --- sweep points ----------------------------------------------------------------
 
 
-def sweep_points(spec: AblationSpec) -> list[dict[str, Any]]:
+def sweep_points(sweep: SweepSpec) -> list[dict[str, Any]]:
     """Every point of the sweep, in a fixed order: each grid's product (the
     union over a list of grids, duplicates dropped), each combined with every
     random sample. No sweep gives the one empty point."""
     grid_points: list[dict[str, Any]] = []
-    for grid in spec.sweep.grids():
+    for grid in sweep.grids():
         keys = list(grid)
         for values in itertools.product(*(grid[k] for k in keys)):
             point = dict(zip(keys, values))
             if point not in grid_points:
                 grid_points.append(point)
     grid_points = grid_points or [{}]
-    if spec.sweep.random is None:
+    if sweep.random is None:
         return grid_points
-    samples = random_samples(spec.sweep.random)
+    samples = random_samples(sweep.random)
     return [{**g, **s} for g in grid_points for s in samples]
 
 
@@ -245,28 +245,31 @@ def expand_jobs(spec: AblationSpec, source: str = "spec") -> list[Job]:
     input and seed, then variant, then sweep point. ``source`` names the
     spec in error messages."""
     base_tree = load_yaml(spec.config)
-    points = sweep_points(spec)
     fixed = list(spec.set.items())
     plots = [("output.plots", spec.plots), ("output.progress", False)]
-    configs: dict[tuple[str, int], tuple[list[str], str, list[tuple[str, Any]]]] = {}
-    for vi, (variant, overrides) in enumerate(spec.variants.items()):
-        for pi, point in enumerate(points):
-            scen, conf = _split(fixed + list(overrides.items()) + list(point.items()))
+    configs: dict[tuple[str, str], tuple[list[str], str, list[tuple[str, Any]]]] = {}
+
+    def config_for(variant: str, point: dict[str, Any]) -> tuple[list[str], str, list[tuple[str, Any]]]:
+        key = (variant, json.dumps(point, sort_keys=True, default=str))
+        if key not in configs:
+            scen, conf = _split(fixed + list(spec.variants[variant].items()) + list(point.items()))
             where = f"{source}: variant '{variant}'" + (f", sweep point {point}" if point else "")
             try:
                 strings = config_overrides(base_tree, conf + plots)
                 cfg = load_config(spec.config, strings)
             except GslamError as e:
                 raise GslamError(f"{where}: {_strip_source(str(e), spec.config)}") from None
-            configs[(variant, pi)] = (strings, dump_config(cfg), scen)
+            configs[key] = (strings, dump_config(cfg), scen)
+        return configs[key]
 
     jobs: list[Job] = []
     scenario_cache: dict[tuple[str, str], dict[str, Any]] = {}
     for inp in spec.inputs.scenarios:
+        points = sweep_points(inp.sweep or spec.sweep)
         for seed in inp.seed_list():
             for variant in spec.variants:
-                for pi, point in enumerate(points):
-                    strings, dumped, scen = configs[(variant, pi)]
+                for point in points:
+                    strings, dumped, scen = config_for(variant, point)
                     ck = (str(inp.path), json.dumps(scen, default=str))
                     if ck not in scenario_cache:
                         scenario_cache[ck] = _scenario_tree(inp.path, scen, f"{source}: {inp.path.name}")
@@ -277,8 +280,8 @@ def expand_jobs(spec: AblationSpec, source: str = "spec") -> list[Job]:
                     jobs.append(_job(spec, name, seed, variant, point, strings, dumped, sim, None, body))
     for rec in spec.inputs.recorded:
         for variant in spec.variants:
-            for pi, point in enumerate(points):
-                strings, dumped, scen = configs[(variant, pi)]
+            for point in sweep_points(rec.sweep or spec.sweep):
+                strings, dumped, scen = config_for(variant, point)
                 if scen:
                     raise GslamError(f"{source}: recorded input {rec.path}: scenario keys apply to simulated inputs only")
                 jobs.append(_job(spec, rec.label(), None, variant, point, strings, dumped, None, str(rec.path), None))
@@ -289,7 +292,18 @@ def expand_jobs(spec: AblationSpec, source: str = "spec") -> list[Job]:
     return jobs
 
 
-def _job(spec, label, seed, variant, point, strings, dumped, sim, input_path, scenario_body) -> Job:
+def _job(
+    spec: AblationSpec,
+    label: str,
+    seed: int | None,
+    variant: str,
+    point: dict[str, Any],
+    strings: list[str],
+    dumped: str,
+    sim: SimulatedInput | None,
+    input_path: str | None,
+    scenario_body: dict[str, Any] | None,
+) -> Job:
     identity = {"input": scenario_body if sim is not None else input_path, "seed": seed, "config": dumped,
                 "variant": variant, "params": point}
     parts = [label] + ([f"s{seed}"] if seed is not None else []) + [variant]

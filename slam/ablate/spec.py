@@ -14,7 +14,7 @@ path segment that meets a list selects elements by index (``0``), by their
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -26,48 +26,6 @@ SCENARIO_PREFIX = "scenario."
 
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class SeedRange(_Strict):
-    """``count`` consecutive seeds from ``first``."""
-
-    first: int = Field(1, ge=0)
-    count: int = Field(ge=1)
-
-    def seeds(self) -> list[int]:
-        return list(range(self.first, self.first + self.count))
-
-
-class ScenarioInput(_Strict):
-    """A scenario YAML simulated once per seed (``seeds``: a list or a range)."""
-
-    path: Path
-    seeds: list[int] | SeedRange = Field(min_length=1)
-
-    def seed_list(self) -> list[int]:
-        return list(self.seeds) if isinstance(self.seeds, list) else self.seeds.seeds()
-
-
-class RecordedInput(_Strict):
-    """A recorded run (bag, log or run folder) used as it is; ``name`` labels
-    it in job ids and tables (default: the file name)."""
-
-    path: Path
-    name: str | None = None
-
-    def label(self) -> str:
-        return self.name or self.path.name.split(".")[0]
-
-
-class InputsSpec(_Strict):
-    scenarios: list[ScenarioInput] = Field(default_factory=list)
-    recorded: list[RecordedInput] = Field(default_factory=list)
-
-    @model_validator(mode="after")
-    def _some(self) -> "InputsSpec":
-        if not self.scenarios and not self.recorded:
-            raise ValueError("at least one scenario or recorded input is needed")
-        return self
 
 
 class Distribution(_Strict):
@@ -123,13 +81,61 @@ class SweepSpec(_Strict):
         return keys
 
 
+class SeedRange(_Strict):
+    """``count`` consecutive seeds from ``first``."""
+
+    first: int = Field(1, ge=0)
+    count: int = Field(ge=1)
+
+    def seeds(self) -> list[int]:
+        return list(range(self.first, self.first + self.count))
+
+
+class ScenarioInput(_Strict):
+    """A scenario YAML simulated once per seed (``seeds``: a list or a
+    range). ``sweep``, if given, replaces the spec's sweep for this input
+    (e.g. a scenario parameter only this scenario has)."""
+
+    path: Path
+    seeds: Annotated[list[int], Field(min_length=1)] | SeedRange
+    sweep: SweepSpec | None = None
+
+    def seed_list(self) -> list[int]:
+        return list(self.seeds) if isinstance(self.seeds, list) else self.seeds.seeds()
+
+
+class RecordedInput(_Strict):
+    """A recorded run (bag, log or run folder) used as it is; ``name`` labels
+    it in job ids and tables (default: the file name)."""
+
+    path: Path
+    name: str | None = None
+    sweep: SweepSpec | None = None
+
+    def label(self) -> str:
+        return self.name or self.path.name.split(".")[0]
+
+
+class InputsSpec(_Strict):
+    scenarios: list[ScenarioInput] = Field(default_factory=list)
+    recorded: list[RecordedInput] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _some(self) -> "InputsSpec":
+        if not self.scenarios and not self.recorded:
+            raise ValueError("at least one scenario or recorded input is needed")
+        return self
+
+
 class AblationSpec(_Strict):
     """Root of an ablation spec (e.g. ``configs/ablations/gating_policy.yaml``).
 
     ``variants``: name -> dotted overrides (as ``configs/variants.yaml``);
     none given means one variant ``base``. ``set``: overrides for every job.
     ``plots``: write each run's PNG figures (off by default: they cost more
-    than a short run's mapping).
+    than a short run's mapping). ``metrics``: the metric columns of
+    ``summary.md`` (default: ATE, detection delay, alarm fraction,
+    isolation precision and recall, faults missed, runtime).
     """
 
     name: str
@@ -149,10 +155,18 @@ class AblationSpec(_Strict):
         for name in self.variants:
             if not name or any(c in name for c in "/\\ "):
                 raise ValueError(f"variants: name '{name}' must be non-empty without '/', '\\' or spaces")
-        for key in self.sweep.keys():
+        for key in self.sweep_keys():
             if not key or key.startswith(".") or key.endswith(".") or ".." in key:
                 raise ValueError(f"sweep: '{key}' is not a dotted key")
         return self
+
+    def sweep_keys(self) -> list[str]:
+        """Every swept key, of the spec's sweep and the inputs' own."""
+        keys = self.sweep.keys()
+        for inp in [*self.inputs.scenarios, *self.inputs.recorded]:
+            if inp.sweep is not None:
+                keys += [k for k in inp.sweep.keys() if k not in keys]
+        return keys
 
     def resolved(self, base_dir: Path) -> "AblationSpec":
         """A copy with every path made absolute against ``base_dir``."""

@@ -1,0 +1,213 @@
+"""gslam ablate: spec validation, job expansion, resumable runs, failures,
+the summary against the run folders, and Ray against the local pool.
+
+Runs use the short compass scenario of conftest (about 24 s of robot time,
+well under a second per job)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+
+from slam.ablate import expand_jobs, load_spec, run_ablation
+from slam.ablate.jobs import config_overrides, set_path, sweep_points
+from slam.ablate.runner import dispatch_order
+from slam.cli import main
+from slam.config import load_config, load_yaml
+from slam.errors import GslamError
+
+from conftest import TELEMAX_CONFIG
+
+TIMING = ("runtime_s", "realtime_factor", "validation_time_s", "timings_s.", "input_path")
+
+
+def write_spec(path: Path, scenario: Path, **changes) -> Path:
+    spec = {
+        "name": "tiny",
+        "config": str(TELEMAX_CONFIG),
+        "inputs": {"scenarios": [{"path": str(scenario), "seeds": [1]}]},
+        "variants": {"ungated": {"validation.mode": "off"}, "gated": {"validation.mode": "on"}},
+        "sweep": {"grid": {"gating.inflation": [5.0, 20.0]}},
+    }
+    spec.update(changes)
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    return path
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with path.open() as f:
+        return list(csv.DictReader(f))
+
+
+# --- spec validation -----------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "changes, key",
+    [
+        ({"variant": {"a": {}}}, "variant"),
+        ({"variants": {"a": {"backend.optimiser": "batch"}}}, "backend.optimiser"),
+        ({"sweep": {"grid": {"scenario.sensors.gyro.noise": [0.1]}}}, "scenario.sensors.gyro.noise"),
+        ({"sweep": {"grid": {"validation.observers.relations.yaw_*.treshold": [5]}}}, "treshold"),
+        ({"sweep": {"grid": {"validation.observers.relations.compass_*.threshold": [5]}}}, "compass_*"),
+        ({"sweep": {"random": {"samples": 2, "params": {"gating.inflation": {"uniformm": [1, 2]}}}}}, "uniformm"),
+    ],
+)
+def test_a_typo_fails_before_any_job_naming_the_key(tmp_path, short_scenario_yaml, changes, key):
+    spec_path = write_spec(tmp_path / "spec.yaml", short_scenario_yaml, **changes)
+    with pytest.raises(GslamError, match=key.replace("*", r"\*")) as err:
+        run_ablation(load_spec(spec_path), tmp_path / "out", workers=1, progress=False)
+    assert "\n" not in str(err.value)
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_typo_is_one_line_and_exit_code_1(tmp_path, short_scenario_yaml, capsys):
+    spec_path = write_spec(tmp_path / "spec.yaml", short_scenario_yaml, variants={"a": {"gating.singel": "exclude"}})
+    assert main(["-q", "ablate", str(spec_path), "--out", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "singel" in err and "gating" in err and len(err.splitlines()) == 1
+
+
+# --- expansion -----------------------------------------------------------------
+
+
+def test_set_path_selects_list_elements_by_index_name_and_glob():
+    tree = {"r": [{"name": "yaw_a", "t": 1}, {"name": "yaw_b", "t": 1}, {"name": "dist", "t": 1}]}
+    set_path(tree, "r.yaw_*.t", 5)
+    assert [e["t"] for e in tree["r"]] == [5, 5, 1]
+    set_path(tree, "r.dist.t", 7)
+    set_path(tree, "r.0.t", 2)
+    assert [e["t"] for e in tree["r"]] == [2, 5, 7]
+    with pytest.raises(GslamError, match="index 3"):
+        set_path(tree, "r.3.t", 0)
+
+
+def test_list_overrides_reach_load_config():
+    base = load_yaml(TELEMAX_CONFIG)
+    strings = config_overrides(base, [("validation.observers.relations.yaw_*.threshold", 4), ("gating.inflation", 3.5)])
+    cfg = load_config(TELEMAX_CONFIG, strings)
+    rel = {r["name"]: r["threshold"] for r in cfg.validation["observers"]["relations"]}
+    assert rel["yaw_compass_gyro"] == rel["yaw_odo_gyro"] == 4
+    assert rel["distance_odo_sm"] == rel["speed_gps_odo"] == 10
+    assert cfg.gating["inflation"] == 3.5
+
+
+def test_grid_union_and_seeded_random_are_deterministic(tmp_path, short_scenario_yaml):
+    random = {"samples": 3, "seed": 7, "params": {"gating.inflation": {"log_uniform": [2, 50]},
+                                                  "validation.observers.relations.*.threshold": {"integer": [5, 15]}}}
+    grid = [{"gating.single": ["exclude", "inflate"]}, {"gating.holdoff_s": [2.0, 5.0, 8.0]}]
+    path = write_spec(tmp_path / "s.yaml", short_scenario_yaml, sweep={"grid": grid, "random": random})
+    spec = load_spec(path)
+    points = sweep_points(spec.sweep)
+    assert len(points) == (2 + 3) * 3
+    assert points == sweep_points(load_spec(path).sweep)
+    infl = [p["gating.inflation"] for p in points[:3]]
+    assert all(2 <= v <= 50 for v in infl) and len(set(infl)) == 3
+    other = write_spec(tmp_path / "o.yaml", short_scenario_yaml, sweep={"grid": grid, "random": {**random, "seed": 8}})
+    assert sweep_points(load_spec(other).sweep) != points
+    jobs = expand_jobs(spec)
+    assert len(jobs) == 2 * len(points)
+    assert [j.id for j in jobs] == [j.id for j in expand_jobs(load_spec(path))]
+    assert len({j.id for j in jobs}) == len(jobs)
+
+
+def test_scenario_sweeps_give_distinct_inputs(tmp_path, short_scenario_yaml):
+    path = write_spec(tmp_path / "s.yaml", short_scenario_yaml, variants={"base": {}},
+                      sweep={"grid": {"scenario.world.disturbers.*.moment_A_m2": [10.0, 100.0]}})
+    jobs = expand_jobs(load_spec(path))
+    assert len({j.simulated.key for j in jobs}) == 2
+    assert [d["moment_A_m2"] for d in jobs[1].simulated.scenario["world"]["disturbers"]] == [100.0, 100.0]
+
+
+def test_dispatch_interleaves_inputs(tmp_path, short_scenario_yaml):
+    path = write_spec(tmp_path / "s.yaml", short_scenario_yaml,
+                      inputs={"scenarios": [{"path": str(short_scenario_yaml), "seeds": [1, 2, 3]}]})
+    jobs = expand_jobs(load_spec(path))
+    assert [j.seed for j in jobs[:4]] == [1, 1, 1, 1]
+    order = dispatch_order(jobs)
+    assert sorted(j.id for j in order) == sorted(j.id for j in jobs)
+    assert [j.seed for j in order[:6]] == [1, 2, 3, 1, 2, 3]
+
+
+# --- running, resuming, failing ------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory, short_scenario_yaml):
+    """The 4-job tiny spec run once on 2 local workers."""
+    root = tmp_path_factory.mktemp("ablate")
+    spec_path = write_spec(root / "spec.yaml", short_scenario_yaml)
+    result = run_ablation(load_spec(spec_path), root / "out", workers=2, progress=False)
+    return spec_path, result
+
+
+def test_summary_has_one_row_per_job_equal_to_metrics_json(finished):
+    _, res = finished
+    assert len(res.ran) == 4 and not res.failed and not res.skipped
+    rows = read_csv(res.out_dir / "summary.csv")
+    assert [r["job_id"] for r in rows] == [j.id for j in res.jobs]
+    for row in rows:
+        metrics = json.loads((res.out_dir / "jobs" / row["job_id"] / "metrics.json").read_text())
+        assert float(row["ate_rmse_m"]) == metrics["ate_rmse_m"]
+        assert float(row["runtime_s"]) == metrics["runtime_s"]
+        assert float(row["timings_s.optimise"]) == metrics["timings_s"]["optimise"]
+        if row["variant"] == "gated":
+            assert float(row["alarm_fraction"]) == metrics["alarm_fraction"]
+            assert float(row["detection_delay_s.IMU_YAW"]) == metrics["detection_delay_s"]["IMU_YAW"]
+        assert row["gating.inflation"] in ("5.0", "20.0")
+    md = (res.out_dir / "summary.md").read_text()
+    assert "| gated | 20 | 1/1 |" in md
+    assert (res.out_dir / "plots" / "gating.inflation.png").exists()
+
+
+def test_killed_sweep_resumes_only_missing_jobs(finished, tmp_path):
+    spec_path, res = finished
+    out = tmp_path / "out"
+    shutil.copytree(res.out_dir, out)
+    gone = [j.id for j in res.jobs[1:3]]
+    for job_id in gone:
+        shutil.rmtree(out / "jobs" / job_id)
+    # what kill -9 leaves: a half-written temp folder beside a job's place
+    (out / "jobs" / f".{gone[0]}.abc123").mkdir()
+    (out / "jobs" / f".{gone[0]}.abc123" / "trajectory.tum").write_text("1 2 3")
+    again = run_ablation(load_spec(spec_path), out, workers=2, progress=False)
+    assert sorted(again.ran) == sorted(gone)
+    assert len(again.skipped) == 2
+    assert not any(p.name.startswith(".") for p in (out / "jobs").iterdir())
+    assert len(read_csv(out / "summary.csv")) == 4
+    third = run_ablation(load_spec(spec_path), out, workers=1, progress=False)
+    assert third.ran == [] and len(third.skipped) == 4
+
+
+def test_a_failing_job_is_recorded_and_others_continue(tmp_path, short_scenario_yaml):
+    variants = {"ungated": {"validation.mode": "off"}, "broken": {"keyframes.period_s": 1000.0}}
+    spec_path = write_spec(tmp_path / "s.yaml", short_scenario_yaml, variants=variants, sweep={})
+    res = run_ablation(load_spec(spec_path), tmp_path / "out", workers=2, progress=False)
+    assert len(res.ran) == 1 and len(res.failed) == 1
+    (failed_id, error), = res.failed.items()
+    assert "fewer than 2 keyframes" in error
+    record = json.loads((tmp_path / "out" / "failed" / f"{failed_id}.json").read_text())
+    assert record["error"] == error
+    rows = {r["variant"]: r for r in read_csv(tmp_path / "out" / "summary.csv")}
+    assert rows["broken"]["status"] == "failed" and rows["ungated"]["status"] == "ok"
+    retry = run_ablation(load_spec(spec_path), tmp_path / "out", workers=1, progress=False)
+    assert retry.ran == [] and list(retry.failed) == [failed_id]
+
+
+def test_ray_gives_the_same_summary_as_local(finished, tmp_path):
+    ray = pytest.importorskip("ray", reason='the Ray backend needs ray (pip install ".[ray]")')
+    assert ray is not None
+    spec_path, res = finished
+    out = run_ablation(load_spec(spec_path), tmp_path / "ray", workers=2, backend="ray", progress=False)
+    assert len(out.ran) == 4 and not out.failed
+    local, remote = read_csv(res.out_dir / "summary.csv"), read_csv(tmp_path / "ray" / "summary.csv")
+
+    def strip(rows):
+        return [{k: v for k, v in r.items() if not k.startswith(TIMING)} for r in rows]
+
+    assert strip(local) == strip(remote)
