@@ -50,6 +50,10 @@ class BackendResult:
     ``factor_counts``: factors of each type in the graph. ``fallback_steps``:
     steps where every translational factor was excluded and the least
     penalised one was kept, inflated, so the graph stays connected.
+    ``update_latencies_s``: with iSAM2, the wall time (s) of each keyframe's
+    step as it would run online: building its factors, ``ISAM2.update`` and
+    reading back the new pose (needed for the next prediction); ``None``
+    for batch optimisation.
     """
 
     trajectory: Trajectory
@@ -58,6 +62,7 @@ class BackendResult:
     factor_counts: dict[str, int] = field(default_factory=dict)
     fallback_steps: int = 0
     iterations: int = 0
+    update_latencies_s: np.ndarray | None = None
 
 
 def _robust_kernel(kernel: str, c: float):
@@ -176,10 +181,13 @@ def optimise(
     config: BackendConfig,
     weights: FactorWeights | None = None,
     progress: bool = False,
+    isam2_params: gtsam.ISAM2Params | None = None,
 ) -> BackendResult:
     """Build the keyframe graph and optimise it (batch, GNC or iSAM2).
 
     ``initial_pose`` (x, y, yaw) anchors keyframe 0 in the world frame.
+    ``isam2_params``: iSAM2 settings (relinearisation threshold and skip)
+    instead of GTSAM's defaults; used only by the iSAM2 optimiser.
     """
     n = len(meas)
     builder = GraphBuilder(meas, weights if weights is not None else unit_weights(n), config)
@@ -190,7 +198,8 @@ def optimise(
         steps = tqdm(steps, desc="graph", unit="kf", leave=False)
 
     if config.optimizer == "isam2":
-        return _optimise_isam2(builder, meas, np.asarray(initial_pose, float), steps)
+        params = isam2_params if isam2_params is not None else gtsam.ISAM2Params()
+        return _optimise_isam2(builder, meas, np.asarray(initial_pose, float), steps, params)
 
     start = time.perf_counter()
     graph, initial = gtsam.NonlinearFactorGraph(), gtsam.Values()
@@ -217,10 +226,12 @@ def optimise(
     )
 
 
-def _optimise_isam2(builder: GraphBuilder, meas: Measurements, initial_pose: np.ndarray, steps) -> BackendResult:
-    params = gtsam.ISAM2Params()
+def _optimise_isam2(
+    builder: GraphBuilder, meas: Measurements, initial_pose: np.ndarray, steps, params: gtsam.ISAM2Params
+) -> BackendResult:
     isam = gtsam.ISAM2(params)
     build_s = opt_s = 0.0
+    latencies = np.zeros(len(meas))
     latest = gtsam.Pose2(*initial_pose)
     for k in steps:
         t0 = time.perf_counter()
@@ -238,6 +249,7 @@ def _optimise_isam2(builder: GraphBuilder, meas: Measurements, initial_pose: np.
         t2 = time.perf_counter()
         build_s += t1 - t0
         opt_s += t2 - t1
+        latencies[k] = t2 - t0
     t1 = time.perf_counter()
     estimate = isam.calculateEstimate()
     opt_s += time.perf_counter() - t1
@@ -247,4 +259,5 @@ def _optimise_isam2(builder: GraphBuilder, meas: Measurements, initial_pose: np.
         optimise_time_s=opt_s,
         factor_counts=dict(builder.counts),
         fallback_steps=builder.fallback_steps,
+        update_latencies_s=latencies,
     )

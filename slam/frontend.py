@@ -49,6 +49,44 @@ def scan_points(ranges: np.ndarray, angles: np.ndarray, min_range: float, max_ra
     return np.column_stack([rk * np.cos(ak), rk * np.sin(ak), np.zeros_like(rk)])
 
 
+class ScanProjector:
+    """:func:`scan_points` for many scans of one scanner, with the beam
+    directions computed once; the points are bit-identical to it.
+
+    ``angles`` (beams,) rad in the laser frame; ranges outside
+    [``min_range``, ``max_range``) m or not finite are dropped.
+    """
+
+    def __init__(self, angles: np.ndarray, min_range: float, max_range: float):
+        a = np.asarray(angles)
+        self.cos, self.sin = np.cos(a), np.sin(a)
+        self.min_range, self.max_range = min_range, max_range
+
+    def keep(self, ranges: np.ndarray) -> np.ndarray:
+        """Mask of the beams in range, same shape as ``ranges`` (one scan or (n, beams))."""
+        with np.errstate(invalid="ignore"):
+            return np.isfinite(ranges) & (ranges >= self.min_range) & (ranges < self.max_range)
+
+    def __call__(self, ranges: np.ndarray) -> np.ndarray:
+        """Points (m, 3) of one scan, z = 0, in beam order."""
+        r = np.asarray(ranges, dtype=np.float64)
+        keep = self.keep(r)
+        rk = r[keep]
+        out = np.zeros((len(rk), 3))
+        np.multiply(rk, self.cos[keep], out=out[:, 0])
+        np.multiply(rk, self.sin[keep], out=out[:, 1])
+        return out
+
+    def planar_points(self, ranges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points (m, 2) of scans ``ranges`` (n, beams), scan by scan in beam
+        order, and the scan (row) index of each point (m,)."""
+        r = np.asarray(ranges, dtype=np.float64)
+        keep = self.keep(r)
+        row, beam = np.nonzero(keep)
+        rk = r[row, beam]
+        return np.column_stack([rk * self.cos[beam], rk * self.sin[beam]]), row
+
+
 @dataclass
 class FrontendResult:
     """Scan-matching output.
@@ -135,8 +173,9 @@ def run_frontend(
         from tqdm import tqdm
 
         iterator = tqdm(iterator, desc="scan matching", unit="scan", leave=False)
+    project = ScanProjector(scans.angles, config.min_range_m, matcher.max_range)
     for i in iterator:
-        pts = scan_points(scans.ranges[i], scans.angles, config.min_range_m, matcher.max_range)
+        pts = project(scans.ranges[i])
         n_points[i] = len(pts)
         guess = guesses[i] if guesses is not None and usable[i] else None
         xyyaw[i] = matcher.register(pts, guess)

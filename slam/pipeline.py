@@ -23,7 +23,7 @@ import numpy as np
 from slam.backend import BackendResult, FactorWeights, optimise, unit_weights
 from slam.config import PipelineConfig, dump_config
 from slam.errors import GslamError
-from slam.frontend import FrontendResult, run_frontend, scan_points
+from slam.frontend import FrontendResult, ScanProjector, run_frontend
 from slam.measurements import Measurements, build_measurements, interpolate_poses, select_keyframes
 from slam.recording import Recording, Trajectory
 
@@ -267,21 +267,30 @@ class MappingPipeline:
             if points is not None:
                 plot_map(d / "map.png", points, est, title=f"{rec.name}: laser map")
 
-    def map_points(self) -> np.ndarray | None:
-        """Laser points of every keyframe in its optimised pose, voxel-thinned."""
+    def map_points(self, chunk: int = 2048) -> np.ndarray | None:
+        """Laser points of every keyframe in its optimised pose, voxel-thinned
+        (world frame, m, (n, 2)).
+
+        Keyframes are projected ``chunk`` at a time and each chunk thinned on
+        its own: the first point of a voxel over all chunks is the first of
+        the chunks' firsts, so the map does not depend on ``chunk``.
+        """
         from slam.io.pointcloud import voxel_downsample
 
         rec, meas = self.recording, self.measurements
         if rec.scans is None or meas.scan_index is None:
             return None
-        est, fe = self.backend.trajectory, self.config.frontend
+        est, fe, voxel = self.backend.trajectory, self.config.frontend, self.config.output.map_voxel_m
+        project = ScanProjector(rec.scans.angles, fe.min_range_m, min(fe.max_range_m, rec.scans.range_max))
         chunks = []
-        for k, i in enumerate(meas.scan_index):
-            p = scan_points(rec.scans.ranges[i], rec.scans.angles, fe.min_range_m, min(fe.max_range_m, rec.scans.range_max))
+        for lo in range(0, len(meas.scan_index), chunk):
+            p, row = project.planar_points(rec.scans.ranges[meas.scan_index[lo : lo + chunk]])
+            k = row + lo
             c, s = np.cos(est.yaw[k]), np.sin(est.yaw[k])
-            chunks.append(np.column_stack([est.x[k] + c * p[:, 0] - s * p[:, 1], est.y[k] + s * p[:, 0] + c * p[:, 1]]))
+            xy = np.column_stack([est.x[k] + c * p[:, 0] - s * p[:, 1], est.y[k] + s * p[:, 0] + c * p[:, 1]])
+            chunks.append(voxel_downsample(xy, voxel))
         points = np.concatenate(chunks) if chunks else np.zeros((0, 2))
-        return voxel_downsample(points, self.config.output.map_voxel_m)
+        return voxel_downsample(points, voxel)
 
 
 def _replace_dir(new: Path, target: Path) -> None:

@@ -28,7 +28,8 @@ _SHADE_COLORS = ("gold", "violet", "lightgreen", "lightskyblue", "wheat")
 def save_figure(fig: Figure, path: str | Path) -> None:
     """Write ``fig`` to ``path`` (format from the suffix) atomically."""
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=DPI, bbox_inches="tight")
+        # zlib level 1: the same pixels, written in a fraction of the time.
+        fig.savefig(tmp, dpi=DPI, bbox_inches="tight", pil_kwargs={"compress_level": 1})
     logger.debug("wrote figure %s", path)
 
 

@@ -3,6 +3,9 @@
 Both are read through ``rosbags.highlevel.AnyReader``. Only the topics named
 in :class:`slam.config.TopicsConfig` are read; each message is deserialised
 once even when two streams share a topic (gyro and compass from one Imu).
+In ROS 2 bags, topics whose messages share one layout are decoded in bulk,
+a chunk of messages at a time (:mod:`slam.io.cdr`); other topics, and ROS 1
+bags, message by message through rosbags. Both give the same streams.
 
 Message -> stream mapping (all times are header stamps):
 
@@ -22,6 +25,7 @@ Bad input raises :class:`GslamError` with one line naming the bag and topic.
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +39,7 @@ from slam.geometry import (
     wrap_angle,
     yaw_from_quaternion,
 )
+from slam.io import cdr
 from slam.recording import Compass, Gps, Gyro, Recording, Scans, Trajectory
 
 log = logging.getLogger(__name__)
@@ -49,6 +54,8 @@ POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 NAV_SAT_FIX = "sensor_msgs/msg/NavSatFix"
 
 _NS = 1_000_000_000
+BULK_CHUNK = 8192
+"""Messages of one topic decoded together: bounds the raw bytes held."""
 
 
 def _first_line(err: BaseException) -> str:
@@ -62,7 +69,9 @@ def _first_line(err: BaseException) -> str:
 class _Stream:
     """Collects one stream from the messages of one topic.
 
-    ``add`` takes a deserialised message; ``finish`` turns the lists into
+    ``add`` takes a deserialised message, ``add_columns`` the same fields of
+    a chunk of messages decoded in bulk (:func:`slam.io.cdr.decode_columns`;
+    a stream gets one or the other, never both); ``finish`` turns them into
     arrays and checks them; ``build`` returns the :mod:`slam.recording`
     object with times relative to ``t0_ns``.
     """
@@ -75,14 +84,43 @@ class _Stream:
         self.where = f"{bag}: {name} topic '{topic}'"
         self.msgtype = self.msgtypes[0]
         self.stamps: list[int] = []
+        self.blocks: list[dict[str, np.ndarray]] = []
+        self.n_bulk = 0  # messages received through add_columns
         self.ns = np.zeros(0, dtype=np.int64)
 
     def add(self, msg: Any) -> None:
         raise NotImplementedError
 
+    def bulk_fields(self) -> tuple[str, ...]:
+        """Fields ``add_columns`` needs (names of :mod:`slam.io.cdr`)."""
+        raise NotImplementedError
+
+    def add_columns(self, cols: dict[str, np.ndarray]) -> None:
+        n = len(cols["stamp_ns"])
+        self.check_columns(cols, self.n_bulk)
+        self.blocks.append(cols)
+        self.n_bulk += n
+
+    def check_columns(self, cols: dict[str, np.ndarray], offset: int) -> None:
+        """The checks :meth:`add` makes, for messages ``offset``, ``offset + 1``, ..."""
+
+    def reset_columns(self) -> None:
+        """Forget what ``add_columns`` got (the topic is read again one by one)."""
+        self.blocks, self.n_bulk = [], 0
+
+    def columns(self) -> dict[str, np.ndarray] | None:
+        """The bulk-decoded fields of every message (merged into one block
+        once), or None if the stream was read message by message."""
+        if not self.blocks:
+            return None
+        if len(self.blocks) > 1:
+            self.blocks = [{k: np.concatenate([b[k] for b in self.blocks]) for k in self.blocks[0]}]
+        return self.blocks[0]
+
     def finish(self) -> None:
         """Check the stamps are strictly increasing; subclasses check values."""
-        self.ns = np.asarray(self.stamps, dtype=np.int64)
+        cols = self.columns()
+        self.ns = cols["stamp_ns"] if cols is not None else np.asarray(self.stamps, dtype=np.int64)
         steps = np.diff(self.ns)
         bad = np.flatnonzero(steps <= 0)
         if bad.size:
@@ -124,6 +162,7 @@ class _ScanStream(_Stream):
     def __init__(self, name: str, topic: str, bag: Path) -> None:
         super().__init__(name, topic, bag)
         self.ranges: list[np.ndarray] = []
+        self.block: np.ndarray | None = None  # (n, beams) when decoded in bulk
         self.first: Any = None
 
     def add(self, msg: Any) -> None:
@@ -140,8 +179,34 @@ class _ScanStream(_Stream):
         self.stamps.append(_stamp(msg))
         self.ranges.append(msg.ranges)
 
+    def bulk_fields(self) -> tuple[str, ...]:
+        return ("angle_min", "angle_increment", "range_min", "range_max", "ranges")
+
+    def reset_columns(self) -> None:
+        super().reset_columns()
+        self.first = None
+
+    def check_columns(self, cols: dict[str, np.ndarray], offset: int) -> None:
+        if self.first is None:
+            head = (float(cols[k][0]) for k in ("angle_min", "angle_increment", "range_min", "range_max"))
+            self.first = _ScanHead(*head, cols["ranges"].shape[1])
+        first = self.first
+        beams = cols["ranges"].shape[1]  # one per chunk: its messages share one layout
+        if beams != first.beams:
+            raise GslamError(f"{self.where}: message {offset} has {beams} beams, the first had {first.beams}")
+        # As in add(): a NaN angle differs from everything, but message 0 is the reference.
+        differs = (cols["angle_min"] != first.angle_min) | (cols["angle_increment"] != first.angle_increment)
+        if offset == 0:
+            differs[0] = False
+        if differs.any():
+            raise GslamError(f"{self.where}: beam angles change at message {offset + int(np.argmax(differs))}")
+
     def finish(self) -> None:
         super().finish()
+        cols = self.columns()
+        if cols is not None:
+            self.block = cols["ranges"]
+            self.blocks = []  # the block is the only copy kept
         first = self.first
         angles = np.array([[first.angle_min, first.angle_increment]])
         self._finite("angle_min/angle_increment", angles)
@@ -149,13 +214,29 @@ class _ScanStream(_Stream):
     def build(self, t0_ns: int) -> Scans:
         first = self.first
         beams = np.arange(len(first.ranges), dtype=np.float64)
+        ranges = self.block if self.block is not None else np.stack(self.ranges)
         return Scans(
             t=self.t(t0_ns),
-            ranges=np.asarray(np.stack(self.ranges), dtype=np.float32),
+            ranges=np.asarray(ranges, dtype=np.float32),
             angles=float(first.angle_min) + beams * float(first.angle_increment),
             range_min=float(first.range_min),
             range_max=float(first.range_max),
         )
+
+
+@dataclass(frozen=True)
+class _ScanHead:
+    """The fields of a first LaserScan that :class:`_ScanStream` keeps."""
+
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    beams: int
+
+    @property
+    def ranges(self) -> range:  # only its length is used
+        return range(self.beams)
 
 
 class _GyroStream(_Stream):
@@ -189,9 +270,23 @@ class _GyroStream(_Stream):
             self.rates.append((w.z,))
         self.stamps.append(_stamp(msg))
 
+    def bulk_fields(self) -> tuple[str, ...]:
+        return ("angular_velocity", "orientation", "orientation_covariance") if self.world else ("angular_velocity",)
+
+    def check_columns(self, cols: dict[str, np.ndarray], offset: int) -> None:
+        if self.world:
+            _no_orientation(self.where, cols, offset, "gyro axis world_z needs one, use axis z")
+
     def finish(self) -> None:
         super().finish()
-        rows = np.asarray(self.rates, dtype=np.float64).reshape(len(self.rates), -1)
+        cols = self.columns()
+        if cols is None:
+            rows = np.asarray(self.rates, dtype=np.float64).reshape(len(self.rates), -1)
+        elif self.world:
+            rows = np.column_stack([cols["angular_velocity"], cols["orientation"]])
+        else:
+            rows = cols["angular_velocity"][:, 2:3]
+        self.blocks = []
         if self.world:
             self._finite("angular_velocity/orientation", rows)
             self.rate = world_yaw_rate(rows[:, :3], rows[:, 3:])
@@ -201,6 +296,17 @@ class _GyroStream(_Stream):
 
     def build(self, t0_ns: int) -> Gyro:
         return Gyro(t=self.t(t0_ns), rate=self.rate)
+
+
+def _no_orientation(where: str, cols: dict[str, np.ndarray], offset: int, hint: str) -> None:
+    """Raise for the first message without orientation (covariance[0] = -1);
+    the chunk ``cols`` starts at message ``offset``."""
+    missing = np.flatnonzero(cols["orientation_covariance"][:, 0] == -1.0)
+    if missing.size:
+        raise GslamError(
+            f"{where}: message {offset + int(missing[0])} has no orientation "
+            f"(orientation_covariance[0] = -1); {hint}"
+        )
 
 
 def world_yaw_rate(omega: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
@@ -237,9 +343,15 @@ class _CompassMagStream(_Stream):
         m = msg.magnetic_field
         self.fields.append((m.x, m.y, m.z))
 
+    def bulk_fields(self) -> tuple[str, ...]:
+        return ("magnetic_field",)
+
     def finish(self) -> None:
         super().finish()
-        self.field = np.asarray(self.fields, dtype=np.float64).reshape(-1, 3)
+        cols = self.columns()
+        field = self.fields if cols is None else cols["magnetic_field"]
+        self.field = np.asarray(field, dtype=np.float64).reshape(-1, 3)
+        self.blocks = []
         self._finite("magnetic_field", self.field)
 
     def build(self, t0_ns: int) -> Compass:
@@ -279,9 +391,17 @@ class _CompassImuStream(_Stream):
         q = msg.orientation
         self.quats.append((q.x, q.y, q.z, q.w))
 
+    def bulk_fields(self) -> tuple[str, ...]:
+        return ("orientation", "orientation_covariance")
+
+    def check_columns(self, cols: dict[str, np.ndarray], offset: int) -> None:
+        _no_orientation(self.where, cols, offset, "use compass source magnetic_field")
+
     def finish(self) -> None:
         super().finish()
-        self.quat = np.asarray(self.quats, dtype=np.float64).reshape(-1, 4)
+        cols = self.columns()
+        self.quat = np.asarray(self.quats if cols is None else cols["orientation"], dtype=np.float64).reshape(-1, 4)
+        self.blocks = []
         self._finite("orientation", self.quat)
 
     def build(self, t0_ns: int) -> Compass:
@@ -308,9 +428,17 @@ class _PoseStream(_Stream):
         p, q = pose.position, pose.orientation
         self.poses.append((p.x, p.y, q.x, q.y, q.z, q.w))
 
+    def bulk_fields(self) -> tuple[str, ...]:
+        return ("position", "orientation")
+
     def finish(self) -> None:
         super().finish()
-        self.pose = np.asarray(self.poses, dtype=np.float64).reshape(-1, 6)
+        cols = self.columns()
+        if cols is None:
+            self.pose = np.asarray(self.poses, dtype=np.float64).reshape(-1, 6)
+        else:
+            self.pose = np.column_stack([cols["position"][:, :2], cols["orientation"]]).astype(np.float64)
+        self.blocks = []
         self._finite("pose.position", self.pose[:, :2])
         self._finite("pose.orientation", self.pose[:, 2:])
 
@@ -351,9 +479,26 @@ class _GpsStream(_Stream):
         cov = msg.position_covariance
         self.rows.append((lat, lon, cov[0], cov[4], msg.position_covariance_type, status))
 
+    def bulk_fields(self) -> tuple[str, ...]:
+        return ("status", "latitude", "longitude", "position_covariance", "position_covariance_type")
+
+    def add_columns(self, cols: dict[str, np.ndarray]) -> None:
+        """Fixes without a position are dropped here, as in :meth:`add`."""
+        lat, lon = cols["latitude"], cols["longitude"]
+        keep = (cols["status"] >= 0) & ~np.isnan(lat) & ~np.isnan(lon)
+        cov = cols["position_covariance"][keep]
+        rows = np.column_stack([lat[keep], lon[keep], cov[:, 0], cov[:, 4], cols["position_covariance_type"][keep],
+                                cols["status"][keep]]).astype(np.float64)
+        dropped = np.array([np.count_nonzero(~keep)])
+        super().add_columns({"stamp_ns": cols["stamp_ns"][keep], "rows": rows, "dropped": dropped})
+
     def finish(self) -> None:
         super().finish()
-        rows = np.asarray(self.rows, dtype=np.float64).reshape(-1, 6)
+        cols = self.columns()
+        rows = np.asarray(self.rows if cols is None else cols["rows"], dtype=np.float64).reshape(-1, 6)
+        if cols is not None:
+            self.dropped = int(cols["dropped"].sum())
+        self.blocks = []
         self._finite("latitude/longitude", rows[:, :2])
         known = rows[:, 4] != 0
         with np.errstate(invalid="ignore"):
@@ -476,7 +621,13 @@ def _read_messages(
     reader: Any, path: Path, streams: list[_Stream], wanted: dict[str, list[Any]]
 ) -> dict[str, int]:
     """Feed every message of the wanted connections to its streams; return
-    the number of messages per topic."""
+    the number of messages per topic.
+
+    In a ROS 2 bag, the raw messages of a topic whose type :mod:`slam.io.cdr`
+    knows are held back and decoded in bulk, ``BULK_CHUNK`` at a time. If a
+    chunk does not decode in bulk (the layout changes), that topic is read
+    again message by message after the others.
+    """
     by_topic: dict[str, list[_Stream]] = {}
     for stream in streams:
         by_topic.setdefault(stream.topic, []).append(stream)
@@ -484,22 +635,72 @@ def _read_messages(
     conns = [c for cs in wanted.values() for c in cs]
     if not conns:  # rosbags reads every connection when given none
         return counts
+    ros2 = getattr(reader, "is2", False)  # ROS 1 messages are not CDR
+    bulk = {topic: [] for topic, group in by_topic.items() if ros2 and cdr.supported(group[0].msgtype)}
+    fallback: set[str] = set()
+
+    def decode(topic: str) -> None:
+        pending = bulk[topic]
+        group = by_topic[topic]
+        fields = sorted({f for s in group for f in s.bulk_fields()})
+        msgtype = group[0].msgtype
+        cols = cdr.decode_columns(msgtype, pending, fields) if topic not in fallback else None
+        # One message per chunk through rosbags: the layout must be the bag's.
+        if cols is not None and not cdr.agrees(_deserialize(reader, path, pending[-1], msgtype), cols, -1):
+            cols = None
+        if cols is None:
+            fallback.add(topic)
+            for s in group:
+                s.reset_columns()
+        else:
+            for s in group:
+                s.add_columns(cols)
+        pending.clear()
+
+    for topic, conn, raw in _raw_messages(reader, path, conns):
+        counts[topic] += 1
+        pending = bulk.get(topic)
+        if pending is None:
+            msg = _deserialize(reader, path, raw, conn.msgtype)
+            for stream in by_topic[topic]:
+                stream.add(msg)
+        elif topic not in fallback:
+            pending.append(raw)
+            if len(pending) >= BULK_CHUNK:
+                decode(topic)
+    for topic, pending in bulk.items():
+        if pending and topic not in fallback:
+            decode(topic)
+    if fallback:
+        log.info("%s: topics %s read message by message", path, ", ".join(sorted(fallback)))
+        again = [c for t in fallback for c in wanted[t]]
+        for topic, conn, raw in _raw_messages(reader, path, again):
+            msg = _deserialize(reader, path, raw, conn.msgtype)
+            for stream in by_topic[topic]:
+                stream.add(msg)
+    return counts
+
+
+def _raw_messages(reader: Any, path: Path, conns: list[Any]):
+    """(topic, connection, raw bytes) of every message on ``conns``."""
     messages = reader.messages(connections=conns)
-    deserialize = reader.deserialize
     while True:
         # Corrupt chunks surface as assorted exception types from rosbags,
         # lz4, sqlite3 or struct while iterating; all mean "broken file".
         try:
             conn, _, raw = next(messages)
-            msg = deserialize(raw, conn.msgtype)
         except StopIteration:
-            break
+            return
         except Exception as err:
             raise GslamError(f"{path}: corrupt bag ({_first_line(err)})") from None
-        counts[conn.topic] += 1
-        for stream in by_topic[conn.topic]:
-            stream.add(msg)
-    return counts
+        yield conn.topic, conn, raw
+
+
+def _deserialize(reader: Any, path: Path, raw: bytes, msgtype: str) -> Any:
+    try:
+        return reader.deserialize(raw, msgtype)
+    except Exception as err:
+        raise GslamError(f"{path}: corrupt bag ({_first_line(err)})") from None
 
 
 def read_rosbag(path: str | Path, config: InputConfig) -> Recording:
