@@ -254,12 +254,13 @@ class PipelineConfig(Strict):
 # --- loading -------------------------------------------------------------
 
 
-def describe_validation_error(source: str, err: ValidationError, what: str = "config") -> str:
-    """One line for a pydantic error: the file, the key and what is wrong;
-    an unknown key first, since a typo is what the user must see."""
+def describe_validation_error(source: str, err: ValidationError, what: str = "config", prefix: str = "") -> str:
+    """One line for a pydantic error: the file, the key (after ``prefix``)
+    and what is wrong; an unknown key first, since a typo is what the user
+    must see."""
     errors = err.errors()
     first = next((e for e in errors if e["type"] == "extra_forbidden"), errors[0])
-    loc = ".".join(str(p) for p in first["loc"])
+    loc = prefix + ".".join(str(p) for p in first["loc"])
     if first["type"] == "extra_forbidden":
         return f"{source}: unknown {what} key '{loc}'"
     return f"{source}: {loc}: {first['msg']}"

@@ -24,12 +24,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from slam.geometry import quaternion_from_yaw
 
-LASER_SCAN = "sensor_msgs/msg/LaserScan"
-IMU = "sensor_msgs/msg/Imu"
-MAGNETIC_FIELD = "sensor_msgs/msg/MagneticField"
-ODOMETRY = "nav_msgs/msg/Odometry"
-POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
-NAV_SAT_FIX = "sensor_msgs/msg/NavSatFix"
+from slam.io.rosbag import IMU, LASER_SCAN, MAGNETIC_FIELD, NAV_SAT_FIX, ODOMETRY, POSE_STAMPED
 
 
 def _ns(t: float) -> int:

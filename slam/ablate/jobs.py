@@ -27,7 +27,7 @@ import yaml
 from pydantic import ValidationError
 
 from slam.ablate.spec import SCENARIO_PREFIX, AblationSpec, Distribution, RandomSweep, SweepSpec
-from slam.config import dump_config, load_config, load_yaml
+from slam.config import describe_validation_error, dump_config, load_config, load_yaml
 from slam.errors import GslamError
 from slam.sim.scenario import Scenario
 
@@ -233,11 +233,7 @@ def _scenario_tree(path: Path, pairs: list[tuple[str, Any]], where: str) -> dict
     try:
         return Scenario.model_validate(tree).model_dump(mode="json")
     except ValidationError as e:
-        first = e.errors()[0]
-        loc = ".".join(str(p) for p in first["loc"])
-        if first["type"] == "extra_forbidden":
-            raise GslamError(f"{where}: unknown scenario key 'scenario.{loc}'") from None
-        raise GslamError(f"{where}: scenario.{loc}: {first['msg']}") from None
+        raise GslamError(describe_validation_error(where, e, "scenario", prefix="scenario.")) from None
 
 
 def expand_jobs(spec: AblationSpec, source: str = "spec") -> list[Job]:

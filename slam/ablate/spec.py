@@ -18,7 +18,7 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from slam.config import load_yaml
+from slam.config import describe_validation_error, load_yaml
 from slam.errors import GslamError
 
 SCENARIO_PREFIX = "scenario."
@@ -190,11 +190,7 @@ def load_spec(path: str | Path, max_seeds: int | None = None) -> AblationSpec:
     try:
         spec = AblationSpec.model_validate(tree)
     except ValidationError as e:
-        first = e.errors()[0]
-        loc = ".".join(str(p) for p in first["loc"])
-        if first["type"] == "extra_forbidden":
-            raise GslamError(f"{path}: unknown spec key '{loc}'") from None
-        raise GslamError(f"{path}: {loc}: {first['msg']}") from None
+        raise GslamError(describe_validation_error(str(path), e, "spec")) from None
     spec = spec.resolved(path.resolve().parent)
     if max_seeds is not None:
         scenarios = [s.model_copy(update={"seeds": s.seed_list()[:max_seeds]}) for s in spec.inputs.scenarios]
