@@ -261,8 +261,11 @@ def evaluate(
     after SE(2) alignment; ``ate_rmse_unaligned_m``: without it (m).
     ``rpe_trans_pct_<D>m`` / ``rpe_rot_deg_per_m_<D>m`` per delta D (m), and
     ``rpe_trans_pct`` / ``rpe_rot_deg_per_m`` for the first delta; None where
-    the reference path is too short for D (or no delta is given). ``final_error_m`` (m) and
-    ``n_matched`` (associated poses).
+    the reference path is too short for D (or no delta is given).
+    ``yaw_rmse_deg`` / ``yaw_max_deg``: heading error per associated pose,
+    without alignment (deg; meaningful when the estimate starts at the
+    reference's first pose or its heading is absolute, as with a compass).
+    ``final_error_m`` (m) and ``n_matched`` (associated poses).
     """
     m_est, m_ref = _matched(est, ref, max_dt)
     aligned = _ate_matched(m_est, m_ref, align=True)
@@ -287,6 +290,9 @@ def evaluate(
         out[f"rpe_rot_deg_per_m_{_delta_key(delta)}"] = rot
         if n == 0:
             out["rpe_trans_pct"], out["rpe_rot_deg_per_m"] = trans, rot
+    yaw_error = np.degrees(np.abs(wrap_angle(m_est.yaw - m_ref.yaw)))
+    out["yaw_rmse_deg"] = float(np.sqrt(np.mean(yaw_error**2)))
+    out["yaw_max_deg"] = float(yaw_error.max())
     out["final_error_m"] = float(unaligned.errors_m[-1])
     out["n_matched"] = len(m_est)
     return out

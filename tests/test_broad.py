@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from slam.errors import GslamError
 from slam.geometry import heading_from_magnetometer, wrap_angle
-from slam.io.broad import level_field, looks_like_broad, read_broad
+from slam.io.broad import gyro_heading, level_field, looks_like_broad, read_broad
 from slam.io.datasets import data_root
 
 FS = 100.0
@@ -72,6 +72,58 @@ def test_level_field_gives_the_known_heading():
     # The level field is the Earth field turned by the heading only: same dip.
     np.testing.assert_allclose(np.linalg.norm(level), STRENGTH_UT)
     assert np.degrees(np.arctan2(-level[0, 2], np.hypot(level[0, 0], level[0, 1]))) == pytest.approx(DIP_DEG)
+
+
+def _body_rates(rot: Rotation, fs: float) -> np.ndarray:
+    """Body-frame rates (n, 3) rad/s that carry ``rot[k]`` to ``rot[k + 1]``."""
+    steps = (rot[:-1].inv() * rot[1:]).as_rotvec() * fs
+    return np.vstack([steps, steps[-1:]])
+
+
+def _zyx_yaw(rot: Rotation) -> np.ndarray:
+    return rot.as_euler("ZYX")[:, 0]
+
+
+@pytest.mark.parametrize("motion", ["roll_while_pitched", "through_pitch_90"])
+def test_gyro_heading_is_the_zyx_yaw(motion):
+    """The gyro heading must follow the ZYX yaw the compass and the truth
+    use, where the rate about the vertical does not: rolling while pitched
+    40 deg (the yaw stays put; gyr . up swings by roll_rate * sin(pitch)),
+    and pitching through 90 deg and on to 120 deg (the ZYX yaw jumps by
+    180 deg)."""
+    fs = 400.0
+    t = np.arange(int(6.0 * fs)) / fs
+    ramp = np.clip(t - 1.0, 0.0, 4.0) / 4.0
+    if motion == "roll_while_pitched":
+        euler = np.column_stack([np.full_like(t, 0.5), np.full_like(t, np.radians(40.0)), np.radians(60.0) * np.sin(np.pi * ramp)])
+    else:
+        euler = None
+    if euler is not None:
+        rot = Rotation.from_euler("ZYX", euler)
+    else:  # about the body y axis from level to 121 deg (no sample at 90), heading 0.5 rad
+        rot = Rotation.from_euler("Z", 0.5) * Rotation.from_rotvec(np.outer(np.radians(121.0) * ramp, [0.0, 1.0, 0.0]))
+    gyr = _body_rates(rot, fs)
+    up = rot.inv().apply([0.0, 0.0, 1.0])
+    heading = gyro_heading(gyr, up, 1.0 / fs) + _zyx_yaw(rot[:1])[0]
+    # First-order quaternion steps: within 0.2 deg over 6 s.
+    np.testing.assert_allclose(wrap_angle(heading - _zyx_yaw(rot)), 0.0, atol=3e-3)
+    if motion == "roll_while_pitched":
+        vertical_rate = np.einsum("ij,ij->i", gyr, up)
+        assert np.max(np.abs(vertical_rate)) > 0.3  # what the old stream integrated
+    else:
+        assert abs(wrap_angle(_zyx_yaw(rot)[-1] - 0.5)) == pytest.approx(np.pi, abs=1e-6)
+
+
+def test_gyro_bias_at_rest_is_removed(tmp_path):
+    t = np.arange(int(20.0 * FS)) / FS
+    inv = orientation(t).inv()
+    w_world = np.zeros((len(t), 3))
+    w_world[(t >= 6.0) & (t < 10.0), 2] = RATE
+    bias = np.radians([0.3, -0.2, 0.5])  # deg/s, as on the real boards
+    rec = read_broad(write_trial(tmp_path / "biased.mat", imu_gyr=inv.apply(w_world) + bias))
+    turning = (rec.gyro.t >= 6.5) & (rec.gyro.t < 9.5)
+    np.testing.assert_allclose(rec.gyro.rate[turning], RATE, atol=1e-4)
+    np.testing.assert_allclose(rec.gyro.rate[rec.gyro.t > 10.5], 0.0, atol=1e-4)
 
 
 def test_synthetic_trial_headings_reference_and_faults(tmp_path):

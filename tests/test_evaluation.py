@@ -53,6 +53,15 @@ def test_identical_trajectories_have_zero_error(curve):
     assert m["n_matched"] == len(curve)
 
 
+def test_heading_error_is_wrapped_and_unaligned(curve):
+    # Half the poses 10 deg off, half 350 deg off (= -10 deg): RMSE 10 deg.
+    offset = np.where(np.arange(len(curve)) % 2 == 0, np.radians(10.0), np.radians(350.0))
+    m = evaluate(traj(curve.t, curve.x, curve.y, curve.yaw + offset), curve, deltas_m=[5.0])
+    assert m["yaw_rmse_deg"] == pytest.approx(10.0)
+    assert m["yaw_max_deg"] == pytest.approx(10.0)
+    assert m["ate_rmse_m"] == pytest.approx(0.0, abs=1e-9)
+
+
 def test_constant_offset_is_removed_by_alignment(curve):
     est = traj(curve.t, curve.x + 3.0, curve.y - 4.0, curve.yaw)
     assert ate(est, curve, align=False).rmse_m == pytest.approx(5.0)

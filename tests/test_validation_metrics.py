@@ -48,6 +48,8 @@ def test_metrics_from_diagnoses():
     assert m["validation_steps"] == 10
     # Alarms: steps 3, 4, 5, 9 (a non-empty top diagnosis) and 6 (none) -> 5 / 10.
     assert m["alarm_fraction"] == 0.5
+    # Of those, only step 6 lies outside every true fault interval.
+    assert m["false_alarm_fraction"] == 0.1
     # True sets: SM at 2, 3, 4, 5, 9; IMU_YAW at 7, 8 -> 7 component-steps.
     # Blamed (top diagnosis): 3 {SM}, 4 {SM}, 5 {ODO}, 9 {GPS} -> 4;
     # correct: 3 and 4 -> 2. Precision 2 / 4, recall 2 / 7.
@@ -58,7 +60,7 @@ def test_metrics_from_diagnoses():
     # does not count -> mean 0.75. IMU_YAW never -> None and one miss. GPS
     # has no fault intervals -> no entry.
     assert m["detection_delay_s"] == {"SM": 0.75, "IMU_YAW": None}
-    assert m["faults_missed"] == 1
+    assert m["faults_missed"] == 1 and m["faults_detected"] == 2
     assert m["blamed_steps"] == {"GPS": 1, "ODO": 1, "SM": 2}
     assert m["no_diagnosis_steps"] == 1
 
@@ -93,7 +95,7 @@ def test_no_faults_and_no_alarms():
 def test_no_faults_false_alarms_give_zero_precision_and_no_recall():
     results = [CLEAN] * 8 + [consistent({"ODO"}), consistent({"ODO", "GPS"})]
     m = validation_metrics(STEP_T, results, DECISIONS, GATING, {})
-    assert m["alarm_fraction"] == 0.2
+    assert m["alarm_fraction"] == m["false_alarm_fraction"] == 0.2
     assert m["isolation_precision"] == 0.0  # 0 of 3 blamed component-steps
     assert m["isolation_recall"] is None  # nothing was faulty
 

@@ -5,6 +5,9 @@ Definitions (validation steps at ``validation.rate_hz``):
 * ``alarm_fraction``: steps whose most probable diagnosis blames at least one
   component, or where no diagnosis exists, over all steps (oracle mode:
   steps where the gate acts on any factor).
+* ``false_alarm_fraction``: alarm steps at which no component is inside a
+  true fault interval, over all steps (equal to ``alarm_fraction`` on a
+  fault-free run).
 * ``isolation_precision`` / ``isolation_recall``: per step, the blamed set
   is the most probable diagnosis (oracle: the gated components), the true
   set the components inside a fault interval at that time; summed over
@@ -13,7 +16,8 @@ Definitions (validation steps at ``validation.rate_hz``):
 * ``detection_delay_s``: per component with true faults, the mean over its
   fault intervals of the time from onset to the first step, within the
   interval, at which any minimal diagnosis contains the component.
-  ``faults_missed`` counts intervals never detected within their span.
+  ``faults_missed`` counts intervals never detected within their span,
+  ``faults_detected`` those detected.
 """
 
 from __future__ import annotations
@@ -70,13 +74,14 @@ def validation_metrics(
     n_true = sum(len(s) for s in true_sets)
 
     delays: dict[str, float | None] = {}
-    missed = 0
+    missed = detected = 0
     for comp, intervals in faults.items():
         found = []
         for a, b in intervals:
             hits = [t for t, u in zip(step_t, union) if a <= t <= b and comp in u]
             if hits:
                 found.append(hits[0] - a)
+                detected += 1
             elif np.any((step_t >= a) & (step_t <= b)):
                 missed += 1
         if intervals:
@@ -89,10 +94,12 @@ def validation_metrics(
     return {
         "validation_steps": n,
         "alarm_fraction": round(float(alarm.mean()) if n else 0.0, 5),
+        "false_alarm_fraction": round(float((alarm & ~np.array([bool(s) for s in true_sets], dtype=bool)).mean()) if n else 0.0, 5),
         "isolation_precision": round(tp / n_blamed, 4) if n_blamed else None,
         "isolation_recall": round(tp / n_true, 4) if n_true else None,
         "detection_delay_s": delays,
         "faults_missed": missed,
+        "faults_detected": detected,
         "blamed_steps": dict(sorted(blamed_counts.items())),
         "no_diagnosis_steps": int(sum(1 for r in results if not r.consistent)) if results is not None else 0,
     }

@@ -15,9 +15,13 @@ heading with z up; world W, ENU):
    constant ``TILT_TIME_CONSTANT_S`` (3 s). The raw accelerometer alone is
    wrong by 5-20 deg while the hand accelerates, which through the 65 deg dip
    of the Earth field becomes a heading error of tens of degrees.
-2. **Gyro.** ``Recording.gyro`` is the rate about the vertical,
-   ``gyr . up`` (rad/s). Its integral is the heading change for moderate
-   tilts (the ZYX yaw rate differs by second-order terms in the tilt).
+2. **Gyro.** The trials start at rest: the gyro's mean over the first
+   ``reference_s`` seconds is its bias (0.1-0.5 deg/s, stable over a
+   trial) and is subtracted. ``Recording.gyro`` is the rate of the gyro's
+   own heading (:func:`gyro_heading`): the ZYX yaw of an attitude the gyro
+   propagates, its tilt held on the filtered up direction. That is the
+   heading the compass and the optical truth measure; the rate about the
+   vertical is not (it differs by ``roll_rate * sin(pitch)``).
 3. **Compass.** The field is rotated into L (tilt compensation, roll/pitch of
    the ZYX convention) and turned into a heading with
    :func:`slam.geometry.heading_from_magnetometer`. The optical world's x axis
@@ -116,6 +120,53 @@ def up_direction(acc: np.ndarray, gyr: np.ndarray, dt: float, time_constant_s: f
     return out
 
 
+def gyro_heading(gyr: np.ndarray, up: np.ndarray, dt: float) -> np.ndarray:
+    """The gyro's own heading (n,), rad, unwrapped, from 0: the ZYX yaw of an
+    attitude propagated by the gyro, whose tilt is pulled onto the filtered
+    ``up`` after every sample by the smallest rotation (about a horizontal
+    axis, which leaves the heading alone to first order).
+
+    This is the heading the compass and the optical truth measure (ZYX yaw).
+    The rate about the vertical, ``gyr . up``, is not: the two differ by
+    ``roll_rate * sin(pitch)``, large when the hand rolls the board while
+    pitched, and near pitch +-90 deg the ZYX yaw turns by up to 180 deg,
+    which the attitude follows and a rate about the vertical misses.
+    """
+    n = len(gyr)
+    yaw = np.empty(n)
+    qw, qx, qy, qz = 1.0, 0.0, 0.0, 0.0
+    # Start level with the filter's first tilt: roll and pitch from up[0].
+    roll0 = float(np.arctan2(up[0, 1], up[0, 2]))
+    pitch0 = float(np.arctan2(-up[0, 0], np.hypot(up[0, 1], up[0, 2])))
+    cr, sr, cp, sp = np.cos(roll0 / 2), np.sin(roll0 / 2), np.cos(pitch0 / 2), np.sin(pitch0 / 2)
+    qw, qx, qy, qz = cp * cr, cp * sr, sp * cr, -sp * sr  # R_y(pitch) R_x(roll), ZYX with yaw 0
+    for k, ((wx, wy, wz), (ux, uy, uz)) in enumerate(zip((gyr * (0.5 * dt)).tolist(), up.tolist())):
+        if k:
+            # q <- q * (1, w dt / 2), body-frame rates, then renormalised.
+            qw, qx, qy, qz = (
+                qw - qx * wx - qy * wy - qz * wz,
+                qx + qw * wx + qy * wz - qz * wy,
+                qy + qw * wy + qz * wx - qx * wz,
+                qz + qw * wz + qx * wy - qy * wx,
+            )
+        # v = R(q) up: the filter's up in the world; rotate it onto e_z.
+        vx = (1 - 2 * (qy * qy + qz * qz)) * ux + 2 * (qx * qy - qw * qz) * uy + 2 * (qx * qz + qw * qy) * uz
+        vy = 2 * (qx * qy + qw * qz) * ux + (1 - 2 * (qx * qx + qz * qz)) * uy + 2 * (qy * qz - qw * qx) * uz
+        vz = 2 * (qx * qz - qw * qy) * ux + 2 * (qy * qz + qw * qx) * uy + (1 - 2 * (qx * qx + qy * qy)) * uz
+        # Shortest rotation from v to e_z: quaternion (1 + vz, vy, -vx, 0), normalised; c * q.
+        cw, cx, cy = 1.0 + vz, vy, -vx
+        qw, qx, qy, qz = (
+            cw * qw - cx * qx - cy * qy,
+            cw * qx + cx * qw + cy * qz,
+            cw * qy - cx * qz + cy * qw,
+            cw * qz + cx * qy - cy * qx,
+        )
+        norm = (qw * qw + qx * qx + qy * qy + qz * qz) ** 0.5
+        qw, qx, qy, qz = qw / norm, qx / norm, qy / norm, qz / norm
+        yaw[k] = np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    return np.unwrap(yaw)
+
+
 def level_field(mag: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The field (n, 3) rotated from the IMU frame into the level frame
     (same heading, z up), and the ZYX pitch (n,) rad of the tilt ``up``."""
@@ -161,8 +212,8 @@ def read_broad(
     fault_threshold_deg: float = 20.0,
     max_pitch_deg: float = 60.0,
 ) -> Recording:
-    """Read a BROAD trial into a :class:`Recording` with ``gyro`` (rate about
-    the vertical), ``compass`` (tilt-compensated heading, field in tesla in
+    """Read a BROAD trial into a :class:`Recording` with ``gyro`` (rate of
+    the gyro's ZYX heading), ``compass`` (tilt-compensated heading, field in tesla in
     the level frame), ``groundtruth``, ``magnetic_reference`` and
     ``faults["IMU_YAW"]``, as described in the module docstring. Times are
     seconds from the first sample (``t0`` = 0: the files carry no clock).
@@ -186,8 +237,11 @@ def read_broad(
     max_pitch = np.radians(max_pitch_deg)
 
     # 1-2: tilt and the rate about the vertical.
+    # The trials start at rest: the mean rate over the first reference_s
+    # seconds is the gyro's bias (0.1-0.5 deg/s about z, stable over a trial).
+    gyr = gyr - gyr[t < reference_s].mean(axis=0)
     up = up_direction(acc, gyr, 1.0 / fs)
-    gyro = Gyro(t=t, rate=np.einsum("ij,ij->i", gyr, up))
+    gyro = Gyro(t=t, rate=np.gradient(gyro_heading(gyr, up, 1.0 / fs), t))
 
     # 3-4: compass and truth headings, ZYX yaw, in rad.
     field_level, pitch = level_field(mag * 1e-6, up)
