@@ -32,6 +32,7 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("rpe_trans_pct", "RPE trans [%]", "{:.2f}"),
     ("rpe_rot_deg_per_m", "RPE rot [deg/m]", "{:.4f}"),
     ("final_error_m", "final error [m]", "{:.3f}"),
+    ("yaw_rmse_deg", "yaw RMSE [deg]", "{:.2f}"),
     ("runtime_with_shared_s", "runtime [s]", "{:.2f}"),
     ("alarm_fraction", "alarm fraction", "{:.3f}"),
     ("isolation_precision", "isolation precision", "{:.3f}"),

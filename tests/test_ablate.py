@@ -76,6 +76,29 @@ def test_cli_typo_is_one_line_and_exit_code_1(tmp_path, short_scenario_yaml, cap
 # --- expansion -----------------------------------------------------------------
 
 
+def test_recorded_inputs_resolve_the_data_root_and_globs(tmp_path, monkeypatch):
+    data = tmp_path / "data"
+    (data / "logs").mkdir(parents=True)
+    for name in ("b.log", "a.log", "notes.txt"):
+        (data / "logs" / name).write_text("")
+    monkeypatch.setenv("GSLAM_DATA", str(data))
+    spec_path = tmp_path / "spec.yaml"
+    spec_path.write_text(yaml.safe_dump({
+        "name": "recorded",
+        "config": str(TELEMAX_CONFIG),
+        "inputs": {"recorded": [{"path": "{data}/logs/*.log"}, {"path": "{data}/logs/notes.txt", "name": "notes"}]},
+    }))
+    spec = load_spec(spec_path)
+    assert [(r.path, r.label()) for r in spec.inputs.recorded] == [
+        (data / "logs" / "a.log", "a"), (data / "logs" / "b.log", "b"), (data / "logs" / "notes.txt", "notes"),
+    ]
+    spec_path.write_text(yaml.safe_dump({
+        "name": "recorded", "config": str(TELEMAX_CONFIG), "inputs": {"recorded": [{"path": "{data}/logs/*.bag"}]},
+    }))
+    with pytest.raises(GslamError, match=r"spec\.yaml: recorded input \{data\}/logs/\*\.bag: no file matches"):
+        load_spec(spec_path)
+
+
 def test_set_path_selects_list_elements_by_index_name_and_glob():
     tree = {"r": [{"name": "yaw_a", "t": 1}, {"name": "yaw_b", "t": 1}, {"name": "dist", "t": 1}]}
     set_path(tree, "r.yaw_*.t", 5)

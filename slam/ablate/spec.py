@@ -106,7 +106,10 @@ class ScenarioInput(_Strict):
 
 class RecordedInput(_Strict):
     """A recorded run (bag, log or run folder) used as it is; ``name`` labels
-    it in job ids and tables (default: the file name)."""
+    it in job ids and tables (default: the file name). A path starting with
+    ``{data}`` is under the data root (``$GSLAM_DATA``, else
+    ``../shared/data``); a ``*`` in the file name makes one input per
+    matching file, each labelled by its file name."""
 
     path: Path
     name: str | None = None
@@ -181,6 +184,30 @@ class AblationSpec(_Strict):
         return self.model_copy(update={"config": absolute(self.config), "inputs": inputs})
 
 
+DATA_PLACEHOLDER = "{data}"
+
+
+def _expand_recorded(spec: AblationSpec, source: Path) -> AblationSpec:
+    """Resolve ``{data}`` and expand globs in the recorded inputs' paths."""
+    from slam.io.datasets import data_root
+
+    base_dir = source.resolve().parent
+    recorded: list[RecordedInput] = []
+    for rec in spec.inputs.recorded:
+        text = str(rec.path)
+        if text.startswith(DATA_PLACEHOLDER):
+            text = str(data_root()) + text[len(DATA_PLACEHOLDER):]
+        p = Path(text) if Path(text).is_absolute() else base_dir / text
+        if not any(c in p.name for c in "*?["):
+            recorded.append(rec.model_copy(update={"path": p}))
+            continue
+        matches = sorted(p.parent.glob(p.name))
+        if not matches:
+            raise GslamError(f"{source}: recorded input {rec.path}: no file matches {p}")
+        recorded += [rec.model_copy(update={"path": m, "name": None}) for m in matches]
+    return spec.model_copy(update={"inputs": spec.inputs.model_copy(update={"recorded": recorded})})
+
+
 def load_spec(path: str | Path, max_seeds: int | None = None) -> AblationSpec:
     """Read and validate an ablation spec; ``max_seeds`` keeps only the first
     seeds of each scenario input (a quick look at a long spec). Bad input
@@ -191,6 +218,7 @@ def load_spec(path: str | Path, max_seeds: int | None = None) -> AblationSpec:
         spec = AblationSpec.model_validate(tree)
     except ValidationError as e:
         raise GslamError(describe_validation_error(str(path), e, "spec")) from None
+    spec = _expand_recorded(spec, path)
     spec = spec.resolved(path.resolve().parent)
     if max_seeds is not None:
         scenarios = [s.model_copy(update={"seeds": s.seed_list()[:max_seeds]}) for s in spec.inputs.scenarios]
