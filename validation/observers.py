@@ -1,4 +1,4 @@
-"""Observers: the paper's Algorithm 3 and unary plausibility checks.
+"""Relation observers: the paper's Algorithm 3, over a whole run or online.
 
 A *relation* observer compares the qualitative trends (Algorithms 1 and 2,
 :mod:`validation.trends`) of two streams that should move together, e.g. the
@@ -15,13 +15,11 @@ relation observes nothing until both streams have had data for a warm-up
 time (``RelationConfig.warmup_s``), since trends from truncated windows are
 noise.
 
-A *unary* check tests one component against physics (the magnetometer's
-field strength and dip against the local Earth field, the GPS receiver's
-reported sigma); it says ``IMPLAUSIBLE`` once the deviation has lasted
-``hold_s`` and ``PLAUSIBLE`` otherwise.
-
-:func:`observe` runs everything over a whole run; :class:`ObserverBank` does
-the same one step at a time, with the same results.
+:func:`observe` runs every observer over a whole run; :class:`ObserverBank`
+does the same one step at a time, with the same results. The unary
+plausibility checks live in :mod:`validation.checks`, the configuration in
+:mod:`validation.observer_config` and the per-step log in
+:mod:`validation.observer_log`; their names are re-exported here.
 """
 
 from __future__ import annotations
@@ -29,191 +27,45 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Literal
 
 import numpy as np
-import pydantic
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from slam.config import load_yaml
-from slam.errors import GslamError
-from slam.recording import MagneticReference
-from validation.errors import ValidationError
-from validation.model import Observation, Plausibility, validate_mapping
-from validation.streams import (
-    ANGULAR_STREAMS,
-    STREAM_COMPONENT,
-    STREAM_NAMES,
-    StepStreams,
-    Stream,
-    StreamName,
-    resample_streams,
+from validation.checks import (
+    _HOLD_EPS_S,
+    GpsQualityCheck,
+    MagnetometerCheck,
+    UnaryCheck,
+    held,
+    unary_checks,
 )
+from validation.model import Observation, Plausibility
+from validation.observer_config import (
+    DEFAULT_RELATIONS,
+    Component,
+    GpsCheckConfig,
+    MagnetometerCheckConfig,
+    ObserversConfig,
+    RelationConfig,
+    load_observers_config,
+    observers_config,
+)
+from validation.observer_log import ObserverLog, RelationTrace, UnaryTrace
+from validation.streams import ANGULAR_STREAMS, STREAM_NAMES, StepStreams, Stream, resample_streams
 from validation.trends import Trend, TrendEstimator, trends
 
+__all__ = [
+    # Algorithm 3 and the observers defined here
+    "MismatchCounter", "ObserverBank", "StepObservations", "compare_trends", "observe", "observe_steps",
+    # re-exported from validation.observer_config
+    "Component", "DEFAULT_RELATIONS", "GpsCheckConfig", "MagnetometerCheckConfig", "ObserversConfig",
+    "RelationConfig", "load_observers_config", "observers_config",
+    # re-exported from validation.observer_log
+    "ObserverLog", "RelationTrace", "UnaryTrace",
+    # re-exported from validation.checks
+    "GpsQualityCheck", "MagnetometerCheck", "UnaryCheck", "held", "unary_checks",
+]
+
 logger = logging.getLogger(__name__)
-
-Component = Literal["ODO", "IMU_GYRO", "IMU_YAW", "SM", "GPS"]
-
-
-# --- configuration ------------------------------------------------------------
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class RelationConfig(_Strict):
-    """One relation observer: two streams whose trends should agree.
-
-    ``boundary`` is Algorithm 2's b in stream units per second (rad/s for
-    yaw, m/s for distance, m/s^2 for speed); ``boundary_a``/``boundary_b``
-    override it per stream. ``window_s`` is Algorithm 1's w; ``threshold``
-    is th, in steps. Components default to the streams' own.
-    ``warmup_s`` (default ``2 * window_s``): a stream's trend takes part only
-    once the stream has had data on every step for that long, since the
-    truncated windows after a start or a gap give slopes of noise that the
-    keep-previous rule of Algorithm 2 would hold on to.
-    ``max_counter`` caps the mismatch counter; None (the paper) leaves it
-    unbounded, so a fault that lasted N steps keeps ``NO_MATCH`` for about N
-    steps after it ends.
-    """
-
-    name: str
-    stream_a: StreamName
-    stream_b: StreamName
-    boundary: float = Field(gt=0.0)
-    window_s: float = Field(gt=0.0)
-    threshold: int = Field(ge=0)
-    max_counter: int | None = Field(None, ge=1)
-    warmup_s: float | None = Field(None, ge=0.0)
-    boundary_a: float | None = Field(None, gt=0.0)
-    boundary_b: float | None = Field(None, gt=0.0)
-    component_a: Component | None = None
-    component_b: Component | None = None
-
-    @model_validator(mode="after")
-    def _two_streams(self) -> "RelationConfig":
-        if self.stream_a == self.stream_b:
-            raise ValueError(f"relation {self.name!r} compares {self.stream_a!r} with itself")
-        if self.max_counter is not None and self.max_counter <= self.threshold:
-            raise ValueError(f"relation {self.name!r}: max_counter must exceed threshold")
-        return self
-
-    @property
-    def streams(self) -> tuple[str, str]:
-        return self.stream_a, self.stream_b
-
-    @property
-    def boundaries(self) -> tuple[float, float]:
-        return (self.boundary_a or self.boundary, self.boundary_b or self.boundary)
-
-    @property
-    def warmup(self) -> float:
-        return 2.0 * self.window_s if self.warmup_s is None else self.warmup_s
-
-    @property
-    def components(self) -> tuple[str, str]:
-        return (
-            self.component_a or STREAM_COMPONENT[self.stream_a],
-            self.component_b or STREAM_COMPONENT[self.stream_b],
-        )
-
-
-def _relation(name: str, a: str, b: str, boundary: float, window_s: float, threshold: int) -> RelationConfig:
-    return RelationConfig(
-        name=name, stream_a=a, stream_b=b, boundary=boundary, window_s=window_s, threshold=threshold
-    )
-
-
-# Thresholds are in steps: 10 is 1 s at the default 10 Hz validation rate,
-# about twice the longest mismatch a clean turn gives (noise moves the
-# instant either stream's slope crosses b).
-DEFAULT_RELATIONS: tuple[RelationConfig, ...] = (
-    # The paper's three yaw relations, pairwise.
-    _relation("yaw_compass_gyro", "compass_yaw", "gyro_yaw", 0.05, 2.0, 10),
-    _relation("yaw_compass_sm", "compass_yaw", "sm_yaw", 0.05, 2.0, 10),
-    _relation("yaw_gyro_sm", "gyro_yaw", "sm_yaw", 0.05, 2.0, 10),
-    _relation("distance_odo_sm", "odo_distance", "sm_distance", 0.05, 2.0, 10),
-    _relation("yaw_odo_gyro", "odo_yaw", "gyro_yaw", 0.05, 2.0, 10),
-    # GPS speed from 1 Hz fixes is noisy: a longer window, a wider band.
-    _relation("speed_gps_odo", "gps_speed", "odo_speed", 0.2, 4.0, 10),
-)
-
-
-class MagnetometerCheckConfig(_Strict):
-    """Field strength and dip against the local Earth field; the reference
-    comes from the recording unless ``strength_T``/``dip_deg`` are given."""
-
-    enabled: bool = True
-    name: str = "mag_plausible"
-    component: Component = "IMU_YAW"
-    strength_T: float | None = Field(None, gt=0.0)
-    dip_deg: float | None = Field(None, ge=-90.0, le=90.0)
-    tolerance_T: float = Field(5e-6, gt=0.0)
-    tolerance_dip_deg: float = Field(5.0, gt=0.0)
-    hold_s: float = Field(1.0, ge=0.0)
-
-
-class GpsCheckConfig(_Strict):
-    """The receiver's reported horizontal sigma against a maximum."""
-
-    enabled: bool = True
-    name: str = "gps_plausible"
-    component: Component = "GPS"
-    max_sigma_m: float = Field(5.0, gt=0.0)
-    hold_s: float = Field(0.0, ge=0.0)
-
-
-class ObserversConfig(_Strict):
-    """All observers; ``max_gap_s`` is the largest gap (s) between samples a
-    step may be interpolated across, ``stream_max_gap_s`` overrides it."""
-
-    relations: tuple[RelationConfig, ...] = DEFAULT_RELATIONS
-    magnetometer: MagnetometerCheckConfig = MagnetometerCheckConfig()
-    gps: GpsCheckConfig = GpsCheckConfig()
-    max_gap_s: float = Field(0.5, gt=0.0)
-    stream_max_gap_s: dict[str, float] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
-    gps_speed_window_s: float = Field(5.0, gt=0.0)
-
-    @model_validator(mode="after")
-    def _names(self) -> "ObserversConfig":
-        names = [r.name for r in self.relations] + [self.magnetometer.name, self.gps.name]
-        dupes = sorted({n for n in names if names.count(n) > 1})
-        if dupes:
-            raise ValueError(f"observer name {dupes[0]!r} used twice")
-        for key in self.stream_max_gap_s:
-            if key not in STREAM_NAMES:
-                raise ValueError(f"stream_max_gap_s: unknown stream {key!r}")
-        return self
-
-
-def observers_config(data: Mapping, source: str = "observers") -> ObserversConfig:
-    """Validate a mapping (e.g. a YAML section) as :class:`ObserversConfig`.
-
-    An unknown key is reported before anything else: a misspelt required key
-    is also a missing one, and the misspelling is what the user must see.
-    """
-    try:
-        return ObserversConfig.model_validate(data)
-    except pydantic.ValidationError as e:
-        for err in e.errors():
-            if err["type"] == "extra_forbidden":
-                loc = ".".join(str(p) for p in err["loc"])
-                raise ValidationError(f"{source}: unknown key '{loc}'") from None
-    return validate_mapping(ObserversConfig, data, source)
-
-
-def load_observers_config(path: str | Path) -> ObserversConfig:
-    """Read an :class:`ObserversConfig` from a YAML file."""
-    try:
-        data = load_yaml(path)
-    except GslamError as e:
-        raise ValidationError(str(e)) from None
-    return observers_config(data, str(path))
-
-_HOLD_EPS_S = 1e-9  # step times are sums of floats; 0.1 * 10 may land below 1.0
 
 
 # --- Algorithm 3 ------------------------------------------------------------
@@ -267,153 +119,6 @@ class MismatchCounter:
         if self.max_counter is not None:
             self.counter = min(self.counter, self.max_counter)
         return Observation.NO_MATCH if self.counter > self.threshold else Observation.MATCH
-
-
-# --- unary checks -------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class MagnetometerCheck:
-    """Field strength (T) and dip (rad, positive down) against the Earth field."""
-
-    name: str
-    component: str
-    strength_T: float
-    dip_rad: float
-    tolerance_T: float
-    tolerance_dip_rad: float
-    hold_s: float
-    streams: tuple[str, ...] = ("mag_strength", "mag_dip")
-
-    def deviant(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
-        """True where the field differs from the reference beyond a tolerance."""
-        return (np.abs(values["mag_strength"] - self.strength_T) > self.tolerance_T) | (
-            np.abs(values["mag_dip"] - self.dip_rad) > self.tolerance_dip_rad
-        )
-
-
-@dataclass(frozen=True)
-class GpsQualityCheck:
-    """The receiver's horizontal sigma (m) against a maximum."""
-
-    name: str
-    component: str
-    max_sigma_m: float
-    hold_s: float
-    streams: tuple[str, ...] = ("gps_sigma",)
-
-    def deviant(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
-        """True where the reported sigma exceeds the maximum."""
-        return np.asarray(values["gps_sigma"]) > self.max_sigma_m
-
-
-UnaryCheck = MagnetometerCheck | GpsQualityCheck
-
-
-def unary_checks(config: ObserversConfig, reference: MagneticReference | None = None) -> list[UnaryCheck]:
-    """The enabled unary checks; the magnetometer check needs a reference
-    field (config values first, then ``reference``) and is skipped without."""
-    checks: list[UnaryCheck] = []
-    mag = config.magnetometer
-    if mag.enabled:
-        strength, dip = (reference.strength_T, reference.dip_rad) if reference is not None else (None, None)
-        if mag.strength_T is not None:
-            strength = mag.strength_T
-        if mag.dip_deg is not None:
-            dip = np.radians(mag.dip_deg)
-        if strength is None or dip is None:
-            logger.warning("no magnetic reference field: the magnetometer check is off")
-        else:
-            checks.append(
-                MagnetometerCheck(
-                    mag.name, mag.component, float(strength), float(dip),
-                    mag.tolerance_T, float(np.radians(mag.tolerance_dip_deg)), mag.hold_s,
-                )
-            )
-    if config.gps.enabled:
-        g = config.gps
-        checks.append(GpsQualityCheck(g.name, g.component, g.max_sigma_m, g.hold_s))
-    return checks
-
-
-def held(t: np.ndarray, deviant: np.ndarray, hold_s: float) -> np.ndarray:
-    """True where ``deviant`` has been true on every step for at least ``hold_s``
-    (measured from the first step of the run; ``hold_s = 0`` flags at once)."""
-    n = len(t)
-    idx = np.arange(n)
-    starts = deviant & ~np.concatenate(([False], deviant[:-1]))
-    run_start = np.maximum.accumulate(np.where(starts, idx, 0)) if n else idx
-    return deviant & (t - t[run_start] >= hold_s - _HOLD_EPS_S)
-
-
-# --- the log ------------------------------------------------------------------
-
-
-@dataclass
-class RelationTrace:
-    """One relation observer over all steps (arrays of length m)."""
-
-    relation: RelationConfig
-    symbol_a: np.ndarray
-    symbol_b: np.ndarray
-    valid: np.ndarray
-    counter: np.ndarray
-    no_match: np.ndarray
-
-    def observation(self, k: int) -> Observation | None:
-        if not self.valid[k]:
-            return None
-        return Observation.NO_MATCH if self.no_match[k] else Observation.MATCH
-
-
-@dataclass
-class UnaryTrace:
-    """One unary check over all steps."""
-
-    name: str
-    component: str
-    valid: np.ndarray
-    deviant: np.ndarray
-    implausible: np.ndarray
-
-    def plausibility(self, k: int) -> Plausibility | None:
-        if not self.valid[k]:
-            return None
-        return Plausibility.IMPLAUSIBLE if self.implausible[k] else Plausibility.PLAUSIBLE
-
-
-@dataclass
-class ObserverLog:
-    """Per-step trends, counters and observations of every observer."""
-
-    t: np.ndarray
-    relations: dict[str, RelationTrace]
-    unary: dict[str, UnaryTrace]
-
-    def observations(self, k: int) -> dict[str, Observation | Plausibility]:
-        """The observations made at step ``k`` (observers without data left out)."""
-        out: dict[str, Observation | Plausibility] = {}
-        for name, r in self.relations.items():
-            if (obs := r.observation(k)) is not None:
-                out[name] = obs
-        for name, u in self.unary.items():
-            if (p := u.plausibility(k)) is not None:
-                out[name] = p
-        return out
-
-    def columns(self) -> dict[str, np.ndarray]:
-        """Flat named columns (for the per-step CSV log)."""
-        cols: dict[str, np.ndarray] = {"t": self.t}
-        for name, r in self.relations.items():
-            cols[f"{name}.trend_a"] = r.symbol_a
-            cols[f"{name}.trend_b"] = r.symbol_b
-            cols[f"{name}.valid"] = r.valid
-            cols[f"{name}.counter"] = r.counter
-            cols[f"{name}.no_match"] = r.no_match
-        for name, u in self.unary.items():
-            cols[f"{name}.valid"] = u.valid
-            cols[f"{name}.implausible"] = u.implausible
-        return cols
 
 
 # --- batch ----------------------------------------------------------------------

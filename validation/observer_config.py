@@ -1,0 +1,183 @@
+"""Configuration of the observers: relations, unary checks and their defaults.
+
+:class:`RelationConfig` describes one relation observer (Algorithm 3,
+:mod:`validation.observers`); :class:`MagnetometerCheckConfig` and
+:class:`GpsCheckConfig` the unary checks (:mod:`validation.checks`);
+:class:`ObserversConfig` nests them all with the resampling gaps, and
+:func:`observers_config` / :func:`load_observers_config` validate a mapping
+or a YAML file into it with one-line errors.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Literal
+
+import pydantic
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from slam.config import load_yaml
+from slam.errors import GslamError
+from validation.errors import ValidationError
+from validation.model import validate_mapping
+from validation.streams import STREAM_COMPONENT, STREAM_NAMES, StreamName
+
+Component = Literal["ODO", "IMU_GYRO", "IMU_YAW", "SM", "GPS"]
+
+
+# --- configuration ------------------------------------------------------------
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class RelationConfig(_Strict):
+    """One relation observer: two streams whose trends should agree.
+
+    ``boundary`` is Algorithm 2's b in stream units per second (rad/s for
+    yaw, m/s for distance, m/s^2 for speed); ``boundary_a``/``boundary_b``
+    override it per stream. ``window_s`` is Algorithm 1's w; ``threshold``
+    is th, in steps. Components default to the streams' own.
+    ``warmup_s`` (default ``2 * window_s``): a stream's trend takes part only
+    once the stream has had data on every step for that long, since the
+    truncated windows after a start or a gap give slopes of noise that the
+    keep-previous rule of Algorithm 2 would hold on to.
+    ``max_counter`` caps the mismatch counter; None (the paper) leaves it
+    unbounded, so a fault that lasted N steps keeps ``NO_MATCH`` for about N
+    steps after it ends.
+    """
+
+    name: str
+    stream_a: StreamName
+    stream_b: StreamName
+    boundary: float = Field(gt=0.0)
+    window_s: float = Field(gt=0.0)
+    threshold: int = Field(ge=0)
+    max_counter: int | None = Field(None, ge=1)
+    warmup_s: float | None = Field(None, ge=0.0)
+    boundary_a: float | None = Field(None, gt=0.0)
+    boundary_b: float | None = Field(None, gt=0.0)
+    component_a: Component | None = None
+    component_b: Component | None = None
+
+    @model_validator(mode="after")
+    def _two_streams(self) -> "RelationConfig":
+        if self.stream_a == self.stream_b:
+            raise ValueError(f"relation {self.name!r} compares {self.stream_a!r} with itself")
+        if self.max_counter is not None and self.max_counter <= self.threshold:
+            raise ValueError(f"relation {self.name!r}: max_counter must exceed threshold")
+        return self
+
+    @property
+    def streams(self) -> tuple[str, str]:
+        return self.stream_a, self.stream_b
+
+    @property
+    def boundaries(self) -> tuple[float, float]:
+        return (self.boundary_a or self.boundary, self.boundary_b or self.boundary)
+
+    @property
+    def warmup(self) -> float:
+        return 2.0 * self.window_s if self.warmup_s is None else self.warmup_s
+
+    @property
+    def components(self) -> tuple[str, str]:
+        return (
+            self.component_a or STREAM_COMPONENT[self.stream_a],
+            self.component_b or STREAM_COMPONENT[self.stream_b],
+        )
+
+
+def _relation(name: str, a: str, b: str, boundary: float, window_s: float, threshold: int) -> RelationConfig:
+    return RelationConfig(
+        name=name, stream_a=a, stream_b=b, boundary=boundary, window_s=window_s, threshold=threshold
+    )
+
+
+# Thresholds are in steps: 10 is 1 s at the default 10 Hz validation rate,
+# about twice the longest mismatch a clean turn gives (noise moves the
+# instant either stream's slope crosses b).
+DEFAULT_RELATIONS: tuple[RelationConfig, ...] = (
+    # The paper's three yaw relations, pairwise.
+    _relation("yaw_compass_gyro", "compass_yaw", "gyro_yaw", 0.05, 2.0, 10),
+    _relation("yaw_compass_sm", "compass_yaw", "sm_yaw", 0.05, 2.0, 10),
+    _relation("yaw_gyro_sm", "gyro_yaw", "sm_yaw", 0.05, 2.0, 10),
+    _relation("distance_odo_sm", "odo_distance", "sm_distance", 0.05, 2.0, 10),
+    _relation("yaw_odo_gyro", "odo_yaw", "gyro_yaw", 0.05, 2.0, 10),
+    # GPS speed from 1 Hz fixes is noisy: a longer window, a wider band.
+    _relation("speed_gps_odo", "gps_speed", "odo_speed", 0.2, 4.0, 10),
+)
+
+
+class MagnetometerCheckConfig(_Strict):
+    """Field strength and dip against the local Earth field; the reference
+    comes from the recording unless ``strength_T``/``dip_deg`` are given."""
+
+    enabled: bool = True
+    name: str = "mag_plausible"
+    component: Component = "IMU_YAW"
+    strength_T: float | None = Field(None, gt=0.0)
+    dip_deg: float | None = Field(None, ge=-90.0, le=90.0)
+    tolerance_T: float = Field(5e-6, gt=0.0)
+    tolerance_dip_deg: float = Field(5.0, gt=0.0)
+    hold_s: float = Field(1.0, ge=0.0)
+
+
+class GpsCheckConfig(_Strict):
+    """The receiver's reported horizontal sigma against a maximum."""
+
+    enabled: bool = True
+    name: str = "gps_plausible"
+    component: Component = "GPS"
+    max_sigma_m: float = Field(5.0, gt=0.0)
+    hold_s: float = Field(0.0, ge=0.0)
+
+
+class ObserversConfig(_Strict):
+    """All observers; ``max_gap_s`` is the largest gap (s) between samples a
+    step may be interpolated across, ``stream_max_gap_s`` overrides it."""
+
+    relations: tuple[RelationConfig, ...] = DEFAULT_RELATIONS
+    magnetometer: MagnetometerCheckConfig = MagnetometerCheckConfig()
+    gps: GpsCheckConfig = GpsCheckConfig()
+    max_gap_s: float = Field(0.5, gt=0.0)
+    stream_max_gap_s: dict[str, float] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
+    gps_speed_window_s: float = Field(5.0, gt=0.0)
+
+    @model_validator(mode="after")
+    def _names(self) -> "ObserversConfig":
+        names = [r.name for r in self.relations] + [self.magnetometer.name, self.gps.name]
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ValueError(f"observer name {dupes[0]!r} used twice")
+        for key in self.stream_max_gap_s:
+            if key not in STREAM_NAMES:
+                raise ValueError(f"stream_max_gap_s: unknown stream {key!r}")
+        return self
+
+
+def observers_config(data: Mapping, source: str = "observers") -> ObserversConfig:
+    """Validate a mapping (e.g. a YAML section) as :class:`ObserversConfig`.
+
+    An unknown key is reported before anything else: a misspelt required key
+    is also a missing one, and the misspelling is what the user must see.
+    """
+    try:
+        return ObserversConfig.model_validate(data)
+    except pydantic.ValidationError as e:
+        for err in e.errors():
+            if err["type"] == "extra_forbidden":
+                loc = ".".join(str(p) for p in err["loc"])
+                raise ValidationError(f"{source}: unknown key '{loc}'") from None
+    return validate_mapping(ObserversConfig, data, source)
+
+
+def load_observers_config(path: str | Path) -> ObserversConfig:
+    """Read an :class:`ObserversConfig` from a YAML file."""
+    try:
+        data = load_yaml(path)
+    except GslamError as e:
+        raise ValidationError(str(e)) from None
+    return observers_config(data, str(path))

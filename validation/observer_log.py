@@ -1,0 +1,84 @@
+"""The observers' per-step log: trends, counters and observations.
+
+:class:`RelationTrace` holds one relation observer (Algorithm 3,
+:mod:`validation.observers`) over every validation step,
+:class:`UnaryTrace` one unary check (:mod:`validation.checks`), and
+:class:`ObserverLog` all of them with the step times; it gives the
+observations at one step (for diagnosis) and flat columns (for the CSV log).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from validation.model import Observation, Plausibility
+from validation.observer_config import RelationConfig
+
+
+@dataclass
+class RelationTrace:
+    """One relation observer over all steps (arrays of length m)."""
+
+    relation: RelationConfig
+    symbol_a: np.ndarray
+    symbol_b: np.ndarray
+    valid: np.ndarray
+    counter: np.ndarray
+    no_match: np.ndarray
+
+    def observation(self, k: int) -> Observation | None:
+        if not self.valid[k]:
+            return None
+        return Observation.NO_MATCH if self.no_match[k] else Observation.MATCH
+
+
+@dataclass
+class UnaryTrace:
+    """One unary check over all steps."""
+
+    name: str
+    component: str
+    valid: np.ndarray
+    deviant: np.ndarray
+    implausible: np.ndarray
+
+    def plausibility(self, k: int) -> Plausibility | None:
+        if not self.valid[k]:
+            return None
+        return Plausibility.IMPLAUSIBLE if self.implausible[k] else Plausibility.PLAUSIBLE
+
+
+@dataclass
+class ObserverLog:
+    """Per-step trends, counters and observations of every observer."""
+
+    t: np.ndarray
+    relations: dict[str, RelationTrace]
+    unary: dict[str, UnaryTrace]
+
+    def observations(self, k: int) -> dict[str, Observation | Plausibility]:
+        """The observations made at step ``k`` (observers without data left out)."""
+        out: dict[str, Observation | Plausibility] = {}
+        for name, r in self.relations.items():
+            if (obs := r.observation(k)) is not None:
+                out[name] = obs
+        for name, u in self.unary.items():
+            if (p := u.plausibility(k)) is not None:
+                out[name] = p
+        return out
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Flat named columns (for the per-step CSV log)."""
+        cols: dict[str, np.ndarray] = {"t": self.t}
+        for name, r in self.relations.items():
+            cols[f"{name}.trend_a"] = r.symbol_a
+            cols[f"{name}.trend_b"] = r.symbol_b
+            cols[f"{name}.valid"] = r.valid
+            cols[f"{name}.counter"] = r.counter
+            cols[f"{name}.no_match"] = r.no_match
+        for name, u in self.unary.items():
+            cols[f"{name}.valid"] = u.valid
+            cols[f"{name}.implausible"] = u.implausible
+        return cols
