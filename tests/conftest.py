@@ -18,6 +18,7 @@ import pytest
 import yaml
 
 from slam.config import load_config
+from slam.io.datasets import data_root
 from slam.pipeline import MapResult, run_map
 from slam.sim import Scenario, SimulationResult, load_scenario, simulate_scenario
 
@@ -63,3 +64,12 @@ def mapped(short_run: SimulationResult, tmp_path_factory: pytest.TempPathFactory
         return cache[key]
 
     return get
+
+
+def real_data(relative: str) -> Path:
+    """A file under the data root (``$GSLAM_DATA``, else ``../shared/data``);
+    the calling test is skipped, naming the path, when it is absent."""
+    path = data_root() / relative
+    if not path.is_file():
+        pytest.skip(f"real data not found: {path} (set GSLAM_DATA to the data folder)")
+    return path

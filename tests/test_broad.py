@@ -10,10 +10,10 @@ import pytest
 from scipy.io import savemat
 from scipy.spatial.transform import Rotation
 
+from conftest import real_data
 from slam.errors import GslamError
 from slam.geometry import heading_from_magnetometer, wrap_angle
 from slam.io.broad import gyro_heading, level_field, looks_like_broad, read_broad
-from slam.io.datasets import data_root
 
 FS = 100.0
 STRENGTH_UT = 50.0
@@ -206,10 +206,7 @@ def test_looks_like_broad(tmp_path):
 
 
 def real_trial(name: str) -> Path:
-    path = data_root() / "broad" / f"{name}.mat"
-    if not path.is_file():
-        pytest.skip(f"real data not found: {path} (set GSLAM_DATA to the data folder)")
-    return path
+    return real_data(f"broad/{name}.mat")
 
 
 def test_real_undisturbed_and_attached_magnet():

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import real_data
 from slam.errors import GslamError
 from slam.io.carmen import chain_steps, looks_like_carmen, read_carmen
-from slam.io.datasets import data_root
 from slam.measurements import relative_poses
 
 CORRECTED = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, np.pi / 2], [1.0, 1.0, np.pi]])
@@ -214,10 +214,7 @@ def test_looks_like_carmen(tmp_path):
 
 
 def real_log(name: str) -> Path:
-    path = data_root() / "carmen" / f"{name}-corrected.log.gz"
-    if not path.is_file():
-        pytest.skip(f"real data not found: {path} (set GSLAM_DATA to the data folder)")
-    return path
+    return real_data(f"carmen/{name}-corrected.log.gz")
 
 
 def test_real_freiburg_079():

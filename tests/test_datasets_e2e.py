@@ -13,22 +13,15 @@ from pathlib import Path
 
 import pytest
 
+from conftest import real_data
 from slam.cli import main
-from slam.io.datasets import data_root
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def data_file(relative: str) -> Path:
-    path = data_root() / relative
-    if not path.is_file():
-        pytest.skip(f"real data not found: {path} (set GSLAM_DATA to the data folder)")
-    return path
-
-
 def gslam_map(tmp_path: Path, relative: str, config: str, gating: str = "off", *extra: str) -> dict:
     out = tmp_path / f"{Path(relative).stem}_{gating}"
-    code = main(["-q", "map", str(data_file(relative)), "--config", str(ROOT / "configs/datasets" / config),
+    code = main(["-q", "map", str(real_data(relative)), "--config", str(ROOT / "configs/datasets" / config),
                  "--out", str(out), "--gating", gating, "--set", "output.plots=false", *extra])
     assert code == 0
     for name in ("metrics.json", "trajectory.tum", "config.yaml"):

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import real_data
 from slam.errors import GslamError
 from slam.geometry import wrap_angle
-from slam.io.datasets import data_root
 from slam.io.librsf import dataset_files, looks_like_librsf, read_librsf
 
 V, W, DT, N = 0.5, 0.1, 0.1, 301  # m/s, rad/s, s: a circle of radius 5 m
@@ -124,9 +124,7 @@ def test_bad_inputs_give_one_line_errors(tmp_path):
 
 
 def test_real_corridor():
-    folder = data_root() / "librsf"
-    if not (folder / "Corridor_Input.txt").is_file():
-        pytest.skip(f"real data not found: {folder} (set GSLAM_DATA to the data folder)")
+    folder = real_data("librsf/Corridor_Input.txt").parent
     rec = read_librsf(folder)
     assert rec.name == "Corridor"
     assert rec.duration == pytest.approx(2269.0, abs=1.0)

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from bagfactory import IMU, BagBuilder, driving_bag
+from conftest import real_data
 from slam.config import InputConfig
 from slam.errors import GslamError
 from slam.geometry import geodetic_from_enu, wrap_angle
@@ -20,7 +20,6 @@ from slam.io.rosbag import read_rosbag
 
 T0 = 1_700_000_000.0
 NONE = {k: None for k in ("scan", "gyro", "compass", "odometry", "gps", "groundtruth")}
-DATA = Path(os.environ.get("GSLAM_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 
 
 def only(**topics: str | None) -> dict:
@@ -424,9 +423,7 @@ def test_truncated_or_damaged_bag(tmp_path):
 
 
 def test_real_husky_bag():
-    path = DATA / "rosbag" / "test1_husky_2015.bag"
-    if not path.is_file():
-        pytest.skip(f"real data not found: {path} (set GSLAM_DATA to the data folder)")
+    path = real_data("rosbag/test1_husky_2015.bag")
     cfg = config(
         {
             "scan": None,
@@ -521,9 +518,7 @@ def test_gyro_axis_errors(tmp_path):
 
 
 def test_real_husky_gyro_world_z_matches_orientation_yaw():
-    path = DATA / "rosbag" / "test1_husky_2015.bag"
-    if not path.is_file():
-        pytest.skip(f"real data not found: {path} (set GSLAM_DATA to the data folder)")
+    path = real_data("rosbag/test1_husky_2015.bag")
     topics = only(gyro="/imu/data", compass="/imu/data")
     cfg = config(topics, gyro={"axis": "world_z"}, compass={"source": "imu_orientation"})
     rec = read_rosbag(path, cfg)
