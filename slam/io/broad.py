@@ -120,6 +120,12 @@ def up_direction(acc: np.ndarray, gyr: np.ndarray, dt: float, time_constant_s: f
     return out
 
 
+def roll_pitch(up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """ZYX roll and pitch (n,) rad of the tilt given by unit up vectors (n, 3)
+    in the IMU frame."""
+    return np.arctan2(up[:, 1], up[:, 2]), np.arctan2(-up[:, 0], np.hypot(up[:, 1], up[:, 2]))
+
+
 def gyro_heading(gyr: np.ndarray, up: np.ndarray, dt: float) -> np.ndarray:
     """The gyro's own heading (n,), rad, unwrapped, from 0: the ZYX yaw of an
     attitude propagated by the gyro, whose tilt is pulled onto the filtered
@@ -136,8 +142,7 @@ def gyro_heading(gyr: np.ndarray, up: np.ndarray, dt: float) -> np.ndarray:
     yaw = np.empty(n)
     qw, qx, qy, qz = 1.0, 0.0, 0.0, 0.0
     # Start level with the filter's first tilt: roll and pitch from up[0].
-    roll0 = float(np.arctan2(up[0, 1], up[0, 2]))
-    pitch0 = float(np.arctan2(-up[0, 0], np.hypot(up[0, 1], up[0, 2])))
+    roll0, pitch0 = (float(a[0]) for a in roll_pitch(up[:1]))
     cr, sr, cp, sp = np.cos(roll0 / 2), np.sin(roll0 / 2), np.cos(pitch0 / 2), np.sin(pitch0 / 2)
     qw, qx, qy, qz = cp * cr, cp * sr, sp * cr, -sp * sr  # R_y(pitch) R_x(roll), ZYX with yaw 0
     for k, ((wx, wy, wz), (ux, uy, uz)) in enumerate(zip((gyr * (0.5 * dt)).tolist(), up.tolist())):
@@ -170,8 +175,7 @@ def gyro_heading(gyr: np.ndarray, up: np.ndarray, dt: float) -> np.ndarray:
 def level_field(mag: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The field (n, 3) rotated from the IMU frame into the level frame
     (same heading, z up), and the ZYX pitch (n,) rad of the tilt ``up``."""
-    roll = np.arctan2(up[:, 1], up[:, 2])
-    pitch = np.arctan2(-up[:, 0], np.hypot(up[:, 1], up[:, 2]))
+    roll, pitch = roll_pitch(up)
     cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
     mx, my, mz = mag[:, 0], mag[:, 1], mag[:, 2]
     # R_y(pitch) R_x(roll) m: undo roll, then pitch.
