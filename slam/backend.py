@@ -29,18 +29,31 @@ from slam.factors import (
     yaw_only_noise,
     yaw_prior_factor,
 )
-from slam.measurements import FACTOR_TYPES, Measurements
+from slam.measurements import FACTOR_DOFS, FACTOR_TYPES, Measurements
 from slam.recording import Trajectory
 
 log = logging.getLogger(__name__)
 
 FactorWeights = dict[str, np.ndarray]
-"""Per factor type, a sigma multiplier per step (K,); ``inf`` excludes."""
+"""Per factor type, sigma multipliers per step and degree of freedom
+(K, len(FACTOR_DOFS[type])); ``inf`` excludes that degree of freedom. A
+(K,) array applies to every degree of freedom of the step."""
 
 
 def unit_weights(n_steps: int) -> FactorWeights:
     """Every factor included with its configured noise."""
-    return {f: np.ones(n_steps) for f in FACTOR_TYPES}
+    return {f: np.ones((n_steps, len(FACTOR_DOFS[f]))) for f in FACTOR_TYPES}
+
+
+def dof_weights(weights: np.ndarray, factor: str) -> np.ndarray:
+    """``weights`` of one factor type as (K, dofs): a (K,) array is broadcast."""
+    w = np.asarray(weights, dtype=float)
+    dofs = len(FACTOR_DOFS[factor])
+    if w.ndim == 1:
+        return np.repeat(w[:, None], dofs, axis=1)
+    if w.ndim != 2 or w.shape[1] != dofs:
+        raise ValueError(f"weights of {factor}: expected (K,) or (K, {dofs}), got {w.shape}")
+    return w
 
 
 @dataclass
@@ -84,55 +97,68 @@ def _kernels(config: BackendConfig) -> dict[str, object]:
 
 
 class GraphBuilder:
-    """Turns measurements and weights into GTSAM factors, one step at a time."""
+    """Turns measurements and weights into GTSAM factors, one step at a time.
+
+    A weight scales the sigma of one degree of freedom of one factor; an
+    infinite weight gives that degree of freedom zero precision, and a
+    factor whose every degree of freedom is excluded is left out.
+    """
 
     BETWEEN = ("odometry", "scan_matching")
 
     def __init__(self, meas: Measurements, weights: FactorWeights, config: BackendConfig):
         self.meas = meas
-        self.weights = weights
+        self.weights = {f: dof_weights(w, f) for f, w in weights.items()}
         self.config = config
         self.robust = _kernels(config)
         self.counts = {f: 0 for f in FACTOR_TYPES}
         self.fallback_steps = 0
 
-    def _weight(self, factor: str, k: int) -> float:
+    def _weight(self, factor: str, k: int) -> np.ndarray:
         w = self.weights.get(factor)
-        return 1.0 if w is None else float(w[k])
+        return np.ones(len(FACTOR_DOFS[factor])) if w is None else w[k]
 
     def _available(self, factor: str, k: int) -> bool:
         m = self.meas.get(factor)
         return m is not None and bool(m.valid[k])
 
-    def _between_weights(self, k: int) -> dict[str, float]:
-        """Weights of the between factors at step k; if all are excluded,
-        keep the least penalised one inflated by ``fallback_inflation``."""
-        present = {f: self._weight(f, k) for f in self.BETWEEN if self._available(f, k)}
-        if not present or any(np.isfinite(w) for w in present.values()):
-            return present
-        self.fallback_steps += 1
-        keep = "odometry" if "odometry" in present else next(iter(present))
-        return {keep: self.config.fallback_inflation}
+    def _relative_weights(self, k: int) -> dict[str, np.ndarray]:
+        """Weights of the relative factors (between factors and the gyro) at
+        step k. Where validation leaves no relative constraint on x, y or
+        yaw, the least penalised measurement of that degree of freedom stays,
+        inflated by ``fallback_inflation``, so the graph stays connected."""
+        present = {f: self._weight(f, k).copy() for f in (*self.BETWEEN, "gyro") if self._available(f, k)}
+        fell_back = False
+        for d, dof in enumerate(("x", "y", "yaw")):
+            holders = [f for f in present if dof in FACTOR_DOFS[f]]
+            if not holders or any(np.isfinite(present[f][FACTOR_DOFS[f].index(dof)]) for f in holders):
+                continue
+            keep = "odometry" if "odometry" in holders else holders[0]
+            present[keep][FACTOR_DOFS[keep].index(dof)] = self.config.fallback_inflation
+            fell_back = True
+        self.fallback_steps += fell_back
+        return present
 
     def step(self, k: int) -> list[gtsam.NonlinearFactor]:
         """Factors of step ``k``; step 0 holds only what is measured at k = 0."""
         m, out = self.meas, []
         if k > 0:
-            for factor, w in self._between_weights(k).items():
-                if np.isfinite(w):
-                    meas = m.get(factor)
-                    out.append(between_factor(k, meas.delta[k], gaussian(meas.sigma[k] * w, self.robust[factor])))
-                    self.counts[factor] += 1
-            if self._available("gyro", k) and np.isfinite(w := self._weight("gyro", k)):
-                noise = yaw_only_noise(m.gyro.sigma[k] * w, self.robust["gyro"])
-                out.append(yaw_increment_factor(k, m.gyro.value[k], noise))
-                self.counts["gyro"] += 1
-        if self._available("compass", k) and np.isfinite(w := self._weight("compass", k)):
+            for factor, w in self._relative_weights(k).items():
+                if not np.any(np.isfinite(w)):
+                    continue
+                meas = m.get(factor)
+                if factor == "gyro":
+                    noise = yaw_only_noise(meas.sigma[k] * w[0], self.robust["gyro"])
+                    out.append(yaw_increment_factor(k, meas.value[k], noise))
+                else:
+                    noise = gaussian(meas.sigma[k] * w, self.robust[factor])
+                    out.append(between_factor(k, meas.delta[k], noise))
+                self.counts[factor] += 1
+        if self._available("compass", k) and np.isfinite(w := self._weight("compass", k)[0]):
             out.append(yaw_prior_factor(k, m.compass.value[k], gaussian([m.compass.sigma[k] * w], self.robust["compass"])))
             self.counts["compass"] += 1
-        if self._available("gps", k) and np.isfinite(w := self._weight("gps", k)):
-            s = m.gps.sigma[k] * w
-            out.append(position_prior_factor(k, m.gps.xy[k], gaussian([s, s], self.robust["gps"])))
+        if self._available("gps", k) and np.any(np.isfinite(w := self._weight("gps", k))):
+            out.append(position_prior_factor(k, m.gps.xy[k], gaussian(m.gps.sigma[k] * w, self.robust["gps"])))
             self.counts["gps"] += 1
         return out
 

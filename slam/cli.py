@@ -134,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--config", required=True, help="pipeline config YAML (e.g. configs/telemax.yaml)")
     m.add_argument("--out", required=True, help="result folder (replaced atomically)")
     m.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (repeatable)")
-    m.add_argument("--gating", choices=["off", "on", "oracle"], default=None,
+    m.add_argument("--gating", choices=["off", "on", "oracle", "interval_oracle"], default=None,
                    help="off: every factor in; on: causal sensor validation gates factors; "
                         "oracle: gate with the true fault intervals (default: the config's validation.mode)")
     m.set_defaults(func=_cmd_map)

@@ -23,8 +23,15 @@ def pose_key(k: int) -> int:
 
 
 def gaussian(sigmas: np.ndarray, robust: gtsam.noiseModel.mEstimator.Base | None = None) -> gtsam.noiseModel.Base:
-    """Diagonal noise with the given standard deviations, optionally robust."""
-    noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigmas, dtype=float))
+    """Diagonal noise with the given standard deviations, optionally robust.
+
+    An infinite sigma gives that component zero precision: the factor says
+    nothing about it (validation excluded that degree of freedom)."""
+    sigmas = np.asarray(sigmas, dtype=float)
+    if np.all(np.isfinite(sigmas)):
+        noise = gtsam.noiseModel.Diagonal.Sigmas(sigmas)
+    else:
+        noise = gtsam.noiseModel.Diagonal.Precisions(np.where(np.isfinite(sigmas), 1.0 / sigmas**2, 0.0))
     return gtsam.noiseModel.Robust.Create(robust, noise) if robust is not None else noise
 
 

@@ -19,6 +19,18 @@ from slam.recording import Recording, Trajectory
 
 FACTOR_TYPES: tuple[str, ...] = ("odometry", "gyro", "compass", "scan_matching", "gps")
 
+FACTOR_DOFS: dict[str, tuple[str, ...]] = {
+    "odometry": ("x", "y", "yaw"),
+    "gyro": ("yaw",),
+    "compass": ("yaw",),
+    "scan_matching": ("x", "y", "yaw"),
+    "gps": ("x", "y"),
+}
+"""The degrees of freedom of each factor type's measurement, in the order of
+its noise model: a between factor's x (along the keyframe's heading), y
+(to its left) and yaw in the frame of keyframe k-1; a prior's world x, y or
+yaw."""
+
 
 # --- small vectorised helpers ---------------------------------------------
 

@@ -156,7 +156,10 @@ class MappingPipeline:
         from validation.validator import run_validation
 
         rec = self.recording
-        if vcfg.mode == "oracle" and not any(rec.faults.values()):
+        if vcfg.mode == "oracle":
+            self.tight_oracle(vcfg.oracle_k_sigma)
+            return
+        if vcfg.mode == "interval_oracle" and not any(rec.faults.values()):
             log.info("oracle gating without true fault intervals: nothing will be gated")
         sm = self.frontend.poses if self.frontend is not None else None
         self.validation = run_validation(rec, sm, self.measurements.t, vcfg, gcfg)
@@ -164,6 +167,18 @@ class MappingPipeline:
         self.timings.validation_s = self.validation.time_s
         self.extra_metrics.update(self.validation.metrics)
         self.extra_outputs["validation.csv"] = self.validation.csv_text()
+
+    def tight_oracle(self, k_sigma: float) -> None:
+        """Exclude exactly the measurements (per degree of freedom) that are
+        wrong by more than ``k_sigma`` sigmas against the ground truth."""
+        from slam.truth import tight_oracle_weights
+
+        if self.recording.groundtruth is None:
+            raise GslamError(f"{self.input_path}: validation.mode oracle needs ground truth; the input has none")
+        oracle = tight_oracle_weights(self.measurements, self.recording.groundtruth, k_sigma)
+        self.weights = oracle.weights
+        self.extra_metrics.update(oracle.metrics())
+        self.extra_outputs["validation.csv"] = oracle.csv_text()
 
     def optimise(self) -> None:
         pose0 = self._initial_pose()

@@ -12,6 +12,8 @@ nominal error (millimetres and hundredths of a degree per scan here).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from slam.recording import Interval, Trajectory
@@ -75,3 +77,117 @@ def scan_matching_output_faults(
     for i in np.flatnonzero(wrong):
         marked[prev[i] : i] = True
     return intervals_from_mask(t, marked, merge_gap_s, min_duration_s)
+
+
+def measurement_errors(meas, groundtruth: Trajectory) -> dict[str, np.ndarray]:
+    """Error of every measurement against the truth, per factor type: (K, dofs)
+    in the order of :data:`slam.measurements.FACTOR_DOFS`, NaN where the
+    measurement is absent.
+
+    Between factors: the x, y and yaw of ``inverse(true step) * measured
+    step`` (frame of keyframe k-1, as GTSAM's residual); the gyro: measured
+    minus true yaw increment; the compass: measured minus true yaw (wrapped);
+    GPS: measured minus true position.
+    """
+    from slam.geometry import wrap_angle
+    from slam.measurements import FACTOR_DOFS, FACTOR_TYPES, interpolate_poses, relative_poses
+
+    true = interpolate_poses(groundtruth, meas.t)
+    step = np.zeros_like(true)
+    step[1:] = relative_poses(true[:-1], true[1:])
+    out: dict[str, np.ndarray] = {}
+    for factor in FACTOR_TYPES:
+        m = meas.get(factor)
+        if m is None:
+            continue
+        if factor in ("odometry", "scan_matching"):
+            err = relative_poses(step, m.delta)
+        elif factor == "gyro":
+            err = wrap_angle(m.value - step[:, 2])[:, None]
+        elif factor == "compass":
+            err = wrap_angle(m.value - true[:, 2])[:, None]
+        else:
+            err = m.xy - true[:, :2]
+        err = np.where(m.valid[:, None], err, np.nan)
+        out[factor] = err.reshape(len(meas.t), len(FACTOR_DOFS[factor]))
+    return out
+
+
+def measurement_sigmas(meas) -> dict[str, np.ndarray]:
+    """The configured sigma of every measurement, (K, dofs) per factor type."""
+    from slam.measurements import FACTOR_DOFS, FACTOR_TYPES
+
+    out: dict[str, np.ndarray] = {}
+    for factor in FACTOR_TYPES:
+        m = meas.get(factor)
+        if m is None:
+            continue
+        sigma = np.asarray(m.sigma, dtype=float)
+        dofs = len(FACTOR_DOFS[factor])
+        out[factor] = sigma if sigma.ndim == 2 else np.repeat(sigma[:, None], dofs, axis=1)
+    return out
+
+
+@dataclass
+class TightOracle:
+    """The tight oracle's decisions: ``weights`` per factor type (K, dofs),
+    ``inf`` where the measurement's error exceeds ``k_sigma`` sigmas, and
+    the normalised errors ``z`` (error / sigma, NaN where absent)."""
+
+    t: np.ndarray
+    k_sigma: float
+    z: dict[str, np.ndarray]
+    weights: dict[str, np.ndarray]
+
+    def metrics(self) -> dict:
+        """``alarm_fraction``: keyframes where any degree of freedom is
+        excluded; ``excluded_dofs``: per factor type and degree of freedom,
+        the keyframes excluded. Isolation figures need a diagnosis: null."""
+        from slam.measurements import FACTOR_DOFS
+
+        any_excluded = np.zeros(len(self.t), dtype=bool)
+        counts = {}
+        for factor, w in self.weights.items():
+            bad = ~np.isfinite(w)
+            any_excluded |= bad.any(axis=1)
+            counts[factor] = {d: int(bad[:, i].sum()) for i, d in enumerate(FACTOR_DOFS[factor])}
+        return {
+            "alarm_fraction": round(float(any_excluded.mean()) if len(self.t) else 0.0, 5),
+            "isolation_precision": None,
+            "isolation_recall": None,
+            "detection_delay_s": None,
+            "oracle_k_sigma": self.k_sigma,
+            "excluded_dofs": counts,
+        }
+
+    def csv_text(self) -> str:
+        """Per keyframe: each measurement's normalised error and whether it is excluded."""
+        import csv
+        import io
+
+        from slam.measurements import FACTOR_DOFS
+
+        cols: dict[str, list] = {"t": [round(float(x), 4) for x in self.t]}
+        for factor, z in self.z.items():
+            for i, d in enumerate(FACTOR_DOFS[factor]):
+                cols[f"{factor}.{d}.z"] = ["" if not np.isfinite(v) else round(float(v), 3) for v in z[:, i]]
+                cols[f"{factor}.{d}.excluded"] = [int(not np.isfinite(w)) for w in self.weights[factor][:, i]]
+        out = io.StringIO()
+        writer = csv.writer(out, lineterminator="\n")
+        writer.writerow(cols)
+        writer.writerows(zip(*cols.values()))
+        return out.getvalue()
+
+
+def tight_oracle_weights(meas, groundtruth: Trajectory, k_sigma: float) -> TightOracle:
+    """The tight oracle: every degree of freedom of every measurement whose
+    error against the truth exceeds ``k_sigma`` times its sigma is excluded
+    (``inf``); all others keep their noise (1)."""
+    errors, sigmas = measurement_errors(meas, groundtruth), measurement_sigmas(meas)
+    weights, zs = {}, {}
+    for factor, err in errors.items():
+        z = err / sigmas[factor]
+        with np.errstate(invalid="ignore"):
+            weights[factor] = np.where(np.abs(z) > k_sigma, np.inf, 1.0)
+        zs[factor] = z
+    return TightOracle(np.asarray(meas.t, dtype=float), k_sigma, zs, weights)

@@ -79,7 +79,7 @@ def test_shipped_pipeline_configs_found():
     assert TELEMAX_CONFIG in PIPELINE_CONFIGS
 
 
-@pytest.mark.parametrize("gating", [None, "on", "oracle"])
+@pytest.mark.parametrize("gating", [None, "on", "oracle", "interval_oracle"])
 @pytest.mark.parametrize("config", PIPELINE_CONFIGS, ids=lambda p: p.name)
 def test_map_with_every_shipped_pipeline_config(capsys, short_run, tmp_path, config, gating):
     out = tmp_path / "map"
@@ -107,7 +107,7 @@ def test_map_with_every_shipped_pipeline_config(capsys, short_run, tmp_path, con
 def test_dataset_configs_load(config):
     cfg = load_config(config)
     assert cfg.input.format in {"carmen", "broad", "librsf", "rosbag", "auto"}
-    assert validation_sections(cfg)[0].mode in {"off", "on", "oracle"}
+    assert validation_sections(cfg)[0].mode in {"off", "on", "oracle", "interval_oracle"}
 
 
 def test_dataset_configs_found():

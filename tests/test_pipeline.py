@@ -107,7 +107,7 @@ def test_map_ply_is_the_lab_seen_from_the_estimate(mapped):
 def test_short_run_accuracy(mapped):
     # Measured: ATE 0.024 m (off), 0.012 m (on), 0.013 m (oracle); RPE
     # 0.2-0.6 %, final error 0.01-0.04 m. Bounds with a 2.5x margin.
-    for mode in ("off", "on", "oracle"):
+    for mode in ("off", "on", "oracle", "interval_oracle"):
         m = mapped(mode).metrics
         assert m["ate_rmse_m"] < 0.06, mode
         assert m["final_error_m"] < 0.1, mode
@@ -119,9 +119,10 @@ def test_short_run_accuracy(mapped):
     off = mapped("off").metrics["ate_rmse_m"]
     assert mapped("on").metrics["ate_rmse_m"] < 0.75 * off
     assert mapped("oracle").metrics["ate_rmse_m"] < 0.75 * off
+    assert mapped("interval_oracle").metrics["ate_rmse_m"] < 0.75 * off
 
 
-@pytest.mark.parametrize("mode", ["on", "oracle"])
+@pytest.mark.parametrize("mode", ["on", "interval_oracle"])
 def test_gating_writes_validation_csv_and_metrics(mapped, mode):
     res = mapped(mode)
     assert listing(res.out_dir) == MAP_FILES | {"validation.csv"}
@@ -153,7 +154,7 @@ def test_causal_gating_finds_the_compass_fault(mapped, short_run):
 
 
 def test_oracle_gates_exactly_the_true_fault(mapped, short_run):
-    res = mapped("oracle")
+    res = mapped("interval_oracle")
     m = res.metrics
     assert m["isolation_precision"] == 1.0 and m["isolation_recall"] == 1.0
     assert m["detection_delay_s"]["IMU_YAW"] <= 0.1  # within one 10 Hz step
@@ -168,6 +169,26 @@ def test_oracle_gates_exactly_the_true_fault(mapped, short_run):
             assert compass == ("exclude" if a <= t <= b else "include"), t
             checked += 1
     assert checked > 0.9 * len(lines)
+
+
+def test_tight_oracle_excludes_exactly_the_wrong_measurements(mapped):
+    res = mapped("oracle")
+    k = res.metrics["oracle_k_sigma"]
+    header, *rows = [line.split(",") for line in (res.out_dir / "validation.csv").read_text().splitlines()]
+    assert len(rows) == res.metrics["n_poses"]
+    columns = {name: [row[i] for row in rows] for i, name in enumerate(header)}
+    checked = 0
+    for name in header:
+        if not name.endswith(".z"):
+            continue
+        excluded = columns[name.removesuffix(".z") + ".excluded"]
+        for z, x in zip(columns[name], excluded):
+            if z:  # empty where the measurement is absent
+                assert x == ("1" if abs(float(z)) > k else "0"), name
+                checked += 1
+    assert checked > 300  # 49 keyframes, 5 factor types
+    # The steel cabinet bends the compass by 20-30 deg: the oracle drops those headings.
+    assert res.metrics["excluded_dofs"]["compass"]["yaw"] > 0
 
 
 # --- optimisers and determinism ---------------------------------------------------

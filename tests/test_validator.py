@@ -266,7 +266,7 @@ def test_validation_csv_columns_and_rows(drift):
 
 def test_oracle_uses_the_true_faults_without_lookback(drift):
     rec, sm = drift
-    vcfg, gcfg = sections("oracle")
+    vcfg, gcfg = sections("interval_oracle")
     assert gcfg.lookback_s == 6.0  # ignored by the oracle
     out = run_validation(rec, sm, KEYFRAMES, vcfg, gcfg)
     assert out.results is None and out.observer_log is None
@@ -291,7 +291,7 @@ def test_oracle_uses_the_true_faults_without_lookback(drift):
 def test_oracle_without_faults_gates_nothing(drift):
     rec, sm = drift
     clean = Recording("clean", compass=rec.compass, gyro=rec.gyro, odometry=rec.odometry)
-    vcfg, gcfg = sections("oracle")
+    vcfg, gcfg = sections("interval_oracle")
     out = run_validation(clean, sm, KEYFRAMES, vcfg, gcfg)
     assert all(np.all(w == 1.0) for w in out.weights.values())
     assert out.metrics["alarm_fraction"] == 0.0

@@ -4,8 +4,12 @@
 
 * ``off``: no validation; every factor enters with its configured noise.
 * ``on``: causal validation, step by step, as it would run on the robot.
-* ``oracle``: gating from the simulator's true fault intervals; the bound
-  that validation can reach.
+* ``oracle``: the tight oracle, from ground truth: every degree of freedom
+  of every measurement whose error exceeds ``oracle_k_sigma`` times its
+  sigma is excluded, all others kept. The bound validation aims at.
+* ``interval_oracle``: gating from the true fault intervals of each
+  component (the simulator's labels): a component's factors are gated over
+  its whole fault interval, right or wrong.
 
 ``validation.model`` is the logical system model (a mapping, or a path to
 a YAML file relative to the config file that names it; the loader inlines
@@ -23,7 +27,7 @@ from validation.gating import GatingConfig
 from validation.model import SystemModel, validate_mapping
 from validation.observers import ObserversConfig, observers_config
 
-GatingMode = Literal["off", "on", "oracle"]
+GatingMode = Literal["off", "on", "oracle", "interval_oracle"]
 
 
 class ValidationConfig(BaseModel):
@@ -34,6 +38,7 @@ class ValidationConfig(BaseModel):
 
     mode: GatingMode = "off"
     rate_hz: float = Field(10.0, gt=0.0)
+    oracle_k_sigma: float = Field(3.0, gt=0.0)
     model: SystemModel | None = None
     observers: ObserversConfig = ObserversConfig()
 
@@ -63,10 +68,10 @@ def parse_sections(validation: Mapping[str, Any], gating: Mapping[str, Any]) -> 
     cfg = validate_mapping(ValidationConfig, data, "validation")
     cfg = cfg.model_copy(update={"observers": observers})
     gate = GatingConfig.from_mapping(dict(gating), "gating")
-    if cfg.mode != "off" and cfg.model is None:
+    if cfg.mode in ("on", "interval_oracle") and cfg.model is None:
         from validation.errors import ValidationError
 
-        raise ValidationError("validation.model: a system model is needed when validation.mode is on or oracle")
+        raise ValidationError("validation.model: a system model is needed when validation.mode is on or interval_oracle")
     _check_names(cfg, gate)
     return cfg, gate
 

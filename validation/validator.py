@@ -120,7 +120,7 @@ def run_validation(
     start = time.perf_counter()
     step_t = _step_times(keyframe_t, config.rate_hz)
     observer_log, results = None, None
-    if config.mode == "oracle":
+    if config.mode == "interval_oracle":
         decisions = oracle_decisions(gating, step_t, recording.faults)
     else:
         obs_cfg = config.observers
@@ -137,7 +137,7 @@ def run_validation(
             results.append(result)
             decisions.append(gate.step(float(t), result))
     # The oracle knows each onset exactly: no look-back.
-    lookback = 0.0 if config.mode == "oracle" else gating.lookback_s
+    lookback = 0.0 if config.mode == "interval_oracle" else gating.lookback_s
     weights = keyframe_weights(step_t, step_scales(step_t, decisions, lookback), keyframe_t)
     elapsed = time.perf_counter() - start
     metrics = validation_metrics(step_t, results, decisions, gating, recording.faults)

@@ -64,10 +64,15 @@ def _spot_turn(angle: float, w_max: float, alpha: float) -> tuple[np.ndarray, np
     return t, np.sign(angle) * np.maximum(w, 0.0)
 
 
-def _drive(points: list[np.ndarray], radii: list[float], cfg: RobotConfig) -> dict[str, np.ndarray]:
+def _drive(
+    points: list[np.ndarray], radii: list[float], speeds: list[float], cfg: RobotConfig
+) -> dict[str, np.ndarray]:
     """Dense samples (t, v, yaw) of one drive through ``points`` without
-    stopping; ``radii[i]`` is the fillet radius at interior point i."""
+    stopping; ``radii[i]`` is the fillet radius at interior point i,
+    ``speeds[i]`` the speed limit (m/s) of the leg ending at point i (an arc
+    takes the lower of its two legs')."""
     xs, ys, kappa = [np.array([points[0][0]])], [np.array([points[0][1]])], [np.zeros(1)]
+    limit = [np.array([speeds[1]])]
     start = points[0]
     for i in range(1, len(points)):
         p, q = points[i], points[i + 1] if i + 1 < len(points) else None
@@ -83,6 +88,7 @@ def _drive(points: list[np.ndarray], radii: list[float], cfg: RobotConfig) -> di
         xs.append(start[0] + f * (end[0] - start[0]))
         ys.append(start[1] + f * (end[1] - start[1]))
         kappa.append(np.zeros(n))
+        limit.append(np.full(n, speeds[i]))
         if q is not None and tangent > 0:
             r = radii[i]
             centre = end + r * np.sign(turn) * np.array([-np.sin(h_in), np.cos(h_in)])
@@ -91,13 +97,15 @@ def _drive(points: list[np.ndarray], radii: list[float], cfg: RobotConfig) -> di
             xs.append(centre[0] + r * np.cos(phi))
             ys.append(centre[1] + r * np.sin(phi))
             kappa.append(np.full(m, np.sign(turn) / r))
+            limit.append(np.full(m, min(speeds[i], speeds[i + 1])))
             start = np.array([xs[-1][-1], ys[-1][-1]])
         else:
             start = end
     x, y, k = np.concatenate(xs), np.concatenate(ys), np.concatenate(kappa)
+    v_leg = np.concatenate(limit)
     ds = np.hypot(np.diff(x), np.diff(y))
     w_max = np.radians(cfg.max_turn_rate_deg_s)
-    v_lim = np.minimum(cfg.max_speed_m_s, w_max / np.maximum(np.abs(k), 1e-9))
+    v_lim = np.minimum(v_leg, w_max / np.maximum(np.abs(k), 1e-9))
     v = v_lim.copy()
     v[0] = v[-1] = 0.0
     acc2 = 2.0 * cfg.max_accel_m_s2
@@ -118,6 +126,7 @@ def plan_motion(cfg: RobotConfig) -> Motion:
     waypoints = cfg.path()
     pts = [np.asarray(w[:2], dtype=float) for w in waypoints]
     pauses = [w[2] if len(w) > 2 else 0.0 for w in waypoints]
+    speeds = [w[3] if len(w) > 3 else cfg.max_speed_m_s for w in waypoints]
     w_max, alpha = np.radians(cfg.max_turn_rate_deg_s), np.radians(cfg.max_turn_accel_deg_s2)
     spot_limit = np.radians(cfg.spot_turn_above_deg)
     pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (t, v, yaw) each
@@ -158,7 +167,7 @@ def plan_motion(cfg: RobotConfig) -> Motion:
         # 2. Turn on the spot towards the first leg, then drive the run.
         heading = float(np.arctan2(*(run[1] - run[0])[::-1]))
         yaw = turn(yaw, heading)
-        d = _drive(run, radii, cfg)
+        d = _drive(run, radii, speeds[i : j + 1], cfg)
         d["yaw"] += yaw - d["yaw"][0]
         pieces.append((d["t"], d["v"], d["yaw"]))
         yaw = float(d["yaw"][-1])

@@ -89,12 +89,16 @@ class WorldConfig(Strict):
 
 
 class RobotConfig(Strict):
-    """A tracked vehicle driving through ``waypoints`` ([x, y] or
-    [x, y, pause_s]). Corners sharper than ``spot_turn_above_deg`` are turned
-    on the spot, the others on arcs of ``corner_radius_m``."""
+    """A tracked vehicle driving through ``waypoints``: ``[x, y]``,
+    ``[x, y, pause_s]`` (wait there) or ``[x, y, pause_s, max_speed_m_s]``
+    (a lower or higher speed limit on the leg that ends there; default
+    ``max_speed_m_s``). Corners sharper than ``spot_turn_above_deg`` are
+    turned on the spot, the others on arcs of ``corner_radius_m``."""
 
     start_yaw_deg: float = 0.0
-    waypoints: list[tuple[float, float] | tuple[float, float, float]] = Field(min_length=2)
+    waypoints: list[
+        tuple[float, float] | tuple[float, float, float] | tuple[float, float, float, float]
+    ] = Field(min_length=2)
     max_speed_m_s: float = Field(0.5, gt=0.0)
     max_accel_m_s2: float = Field(0.3, gt=0.0)
     max_turn_rate_deg_s: float = Field(30.0, gt=0.0)
@@ -109,8 +113,10 @@ class RobotConfig(Strict):
     @field_validator("waypoints")
     @classmethod
     def _pauses_nonnegative(cls, v: list[tuple[float, ...]]) -> list[tuple[float, ...]]:
-        if any(len(w) == 3 and w[2] < 0.0 for w in v):
+        if any(len(w) >= 3 and w[2] < 0.0 for w in v):
             raise ValueError("a waypoint's pause (third value, s) must be >= 0")
+        if any(len(w) == 4 and not w[3] > 0.0 for w in v):
+            raise ValueError("a waypoint's leg speed (fourth value, m/s) must be > 0")
         return v
 
     @model_validator(mode="after")
