@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import gtsam
@@ -29,7 +30,7 @@ from slam.factors import (
     yaw_only_noise,
     yaw_prior_factor,
 )
-from slam.measurements import FACTOR_DOFS, FACTOR_TYPES, Measurements
+from slam.measurements import FACTOR_DOFS, FACTOR_TYPES, Measurements, RelativeConstraint
 from slam.recording import Trajectory
 
 log = logging.getLogger(__name__)
@@ -76,6 +77,7 @@ class BackendResult:
     fallback_steps: int = 0
     iterations: int = 0
     update_latencies_s: np.ndarray | None = None
+    marginals: gtsam.Marginals | None = None
 
 
 def _robust_kernel(kernel: str, c: float):
@@ -106,13 +108,24 @@ class GraphBuilder:
 
     BETWEEN = ("odometry", "scan_matching")
 
-    def __init__(self, meas: Measurements, weights: FactorWeights, config: BackendConfig):
+    def __init__(
+        self,
+        meas: Measurements,
+        weights: FactorWeights,
+        config: BackendConfig,
+        constraints: Sequence[RelativeConstraint] = (),
+    ):
         self.meas = meas
         self.weights = {f: dof_weights(w, f) for f, w in weights.items()}
         self.config = config
         self.robust = _kernels(config)
         self.counts = {f: 0 for f in FACTOR_TYPES}
         self.fallback_steps = 0
+        self.constraints: dict[int, list[RelativeConstraint]] = {}
+        for c in constraints:
+            if not 0 <= c.i < len(meas) or not 0 <= c.j < len(meas) or c.i == c.j:
+                raise ValueError(f"constraint {c.label} {c.i}->{c.j}: keyframes out of range or equal")
+            self.constraints.setdefault(max(c.i, c.j), []).append(c)
 
     def _weight(self, factor: str, k: int) -> np.ndarray:
         w = self.weights.get(factor)
@@ -160,6 +173,10 @@ class GraphBuilder:
         if self._available("gps", k) and np.any(np.isfinite(w := self._weight("gps", k))):
             out.append(position_prior_factor(k, m.gps.xy[k], gaussian(m.gps.sigma[k] * w, self.robust["gps"])))
             self.counts["gps"] += 1
+        for c in self.constraints.get(k, ()):
+            noise = gaussian(c.sigma, self.robust.get(c.kind))
+            out.append(gtsam.BetweenFactorPose2(pose_key(c.i), pose_key(c.j), gtsam.Pose2(*c.delta), noise))
+            self.counts[c.label] = self.counts.get(c.label, 0) + 1
         return out
 
     def anchor(self, pose0: np.ndarray) -> gtsam.NonlinearFactor:
@@ -208,15 +225,20 @@ def optimise(
     weights: FactorWeights | None = None,
     progress: bool = False,
     isam2_params: gtsam.ISAM2Params | None = None,
+    constraints: Sequence[RelativeConstraint] = (),
+    marginals: bool = False,
 ) -> BackendResult:
     """Build the keyframe graph and optimise it (batch, GNC or iSAM2).
 
     ``initial_pose`` (x, y, yaw) anchors keyframe 0 in the world frame.
     ``isam2_params``: iSAM2 settings (relinearisation threshold and skip)
     instead of GTSAM's defaults; used only by the iSAM2 optimiser.
+    ``constraints``: between factors over any two keyframes, added at the
+    later one. ``marginals``: also return the estimate's marginal
+    covariances (:class:`gtsam.Marginals`; batch optimisers only).
     """
     n = len(meas)
-    builder = GraphBuilder(meas, weights if weights is not None else unit_weights(n), config)
+    builder = GraphBuilder(meas, weights if weights is not None else unit_weights(n), config, constraints)
     steps = range(n)
     if progress:
         from tqdm import tqdm
@@ -241,7 +263,8 @@ def optimise(
     result, iterations = _optimise_batch(graph, initial, config, anchor_index=0)
     done = time.perf_counter()
     if builder.fallback_steps:
-        log.warning("%d steps had every translational factor excluded; kept one inflated", builder.fallback_steps)
+        log.info("%d steps had every relative factor of a degree of freedom excluded; kept one inflated",
+                 builder.fallback_steps)
     return BackendResult(
         trajectory=_to_trajectory(meas.t, result),
         build_time_s=built - start,
@@ -249,7 +272,28 @@ def optimise(
         factor_counts=dict(builder.counts),
         fallback_steps=builder.fallback_steps,
         iterations=iterations,
+        marginals=_marginals(graph, result) if marginals else None,
     )
+
+
+WEAK_PRIOR_SIGMA = 1e4
+"""Sigma (m, rad) of the priors that make a graph determinate for its
+marginals where some degree of freedom has no measurement at all (a
+heading-only recording has no position): far above any real uncertainty."""
+
+
+def _marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> gtsam.Marginals:
+    """Marginal covariances of the estimate. Where the graph leaves a degree
+    of freedom unmeasured, weak priors on every pose make it determinate
+    without changing the others' covariances."""
+    try:
+        return gtsam.Marginals(graph, values)
+    except RuntimeError:
+        weak = gtsam.NonlinearFactorGraph(graph)
+        noise = gtsam.noiseModel.Isotropic.Sigma(3, WEAK_PRIOR_SIGMA)
+        for key in values.keys():
+            weak.add(gtsam.PriorFactorPose2(key, values.atPose2(key), noise))
+        return gtsam.Marginals(weak, values)
 
 
 def _optimise_isam2(

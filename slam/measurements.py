@@ -131,6 +131,22 @@ class PositionMeasurement:
     valid: np.ndarray
 
 
+@dataclass(frozen=True)
+class RelativeConstraint:
+    """A between factor from keyframe ``i`` to keyframe ``j`` (any two):
+    ``delta`` (x, y, yaw) in the frame of ``i``, ``sigma`` (3,) m, m, rad,
+    ``inf`` for a degree of freedom it says nothing about; ``kind`` is the
+    factor type whose robust kernel it takes, ``label`` what it is (counted
+    per label in the result)."""
+
+    i: int
+    j: int
+    delta: np.ndarray
+    sigma: np.ndarray
+    kind: str
+    label: str
+
+
 @dataclass
 class Measurements:
     """Everything the back-end needs, per keyframe step."""
@@ -237,3 +253,50 @@ def build_measurements(
     if factors.scan_matching.enabled and sm_poses is not None and scan_index is not None:
         m.scan_matching = _scan_matching(sm_poses, scan_index, factors.scan_matching)
     return m
+
+
+# --- residuals ---------------------------------------------------------------
+
+
+def measurement_residuals(meas: Measurements, reference: Trajectory) -> dict[str, np.ndarray]:
+    """Residual of every measurement against a reference trajectory at the
+    keyframes (the truth, or an estimate), per factor type: (K, dofs) in the
+    order of :data:`FACTOR_DOFS`, NaN where the measurement is absent.
+
+    Between factors: the x, y and yaw of ``inverse(reference step) *
+    measured step`` (frame of keyframe k-1, as GTSAM's residual); the gyro:
+    measured minus reference yaw increment; the compass: measured minus
+    reference yaw (wrapped); GPS: measured minus reference position.
+    """
+    true = interpolate_poses(reference, meas.t)
+    step = np.zeros_like(true)
+    step[1:] = relative_poses(true[:-1], true[1:])
+    out: dict[str, np.ndarray] = {}
+    for factor in FACTOR_TYPES:
+        m = meas.get(factor)
+        if m is None:
+            continue
+        if factor in ("odometry", "scan_matching"):
+            err = relative_poses(step, m.delta)
+        elif factor == "gyro":
+            err = wrap_angle(m.value - step[:, 2])[:, None]
+        elif factor == "compass":
+            err = wrap_angle(m.value - true[:, 2])[:, None]
+        else:
+            err = m.xy - true[:, :2]
+        err = np.where(m.valid[:, None], err, np.nan)
+        out[factor] = err.reshape(len(meas.t), len(FACTOR_DOFS[factor]))
+    return out
+
+
+def measurement_sigmas(meas: Measurements) -> dict[str, np.ndarray]:
+    """The configured sigma of every measurement, (K, dofs) per factor type."""
+    out: dict[str, np.ndarray] = {}
+    for factor in FACTOR_TYPES:
+        m = meas.get(factor)
+        if m is None:
+            continue
+        sigma = np.asarray(m.sigma, dtype=float)
+        dofs = len(FACTOR_DOFS[factor])
+        out[factor] = sigma if sigma.ndim == 2 else np.repeat(sigma[:, None], dofs, axis=1)
+    return out

@@ -79,6 +79,7 @@ class MappingPipeline:
         self._start = time.perf_counter()
         self.measurements: Measurements | None = None
         self.weights: FactorWeights | None = None
+        self.constraints: list = []
         self.backend: BackendResult | None = None
         self.metrics: dict[str, Any] = {}
         self.extra_metrics: dict[str, Any] = {}
@@ -122,7 +123,8 @@ class MappingPipeline:
 
     def label_scan_matching_faults(self) -> None:
         """Add the times where the front-end's output is wrong (against
-        ground truth) to the true SM fault intervals; see slam.truth."""
+        ground truth) to the true fault intervals of each scan-matching
+        modality; see slam.truth."""
         rec, ev = self.recording, self.config.evaluation
         if rec.groundtruth is None or self.frontend is None or not ev.sm_output_faults:
             return
@@ -131,7 +133,8 @@ class MappingPipeline:
         wrong = scan_matching_output_faults(
             self.frontend.poses, rec.groundtruth, ev.sm_fault_window_s, ev.sm_fault_trans_m, ev.sm_fault_yaw_deg
         )
-        rec.faults["SM"] = union_intervals(rec.faults.get("SM", []), wrong)
+        for name, intervals in wrong.items():
+            rec.faults[name] = union_intervals(rec.faults.get(name, []), intervals)
 
     def build_measurements(self) -> None:
         rec, cfg = self.recording, self.config
@@ -145,28 +148,46 @@ class MappingPipeline:
         self.measurements = build_measurements(rec, t, cfg.backend.factors, scan_idx, sm)
 
     def validate(self) -> None:
-        """Gate the factors per keyframe (``validation.mode`` on or oracle)."""
+        """Gate the factors per keyframe and degree of freedom
+        (``validation.mode``: on, oracle or interval_oracle); offline, also
+        the second pass (:mod:`slam.recheck`)."""
         from slam.config import validation_sections
+        from slam.measurements import FACTOR_DOFS
 
         vcfg, gcfg = validation_sections(self.config)
         n = len(self.measurements)
         if vcfg.mode == "off":
             self.weights = unit_weights(n)
             return
-        from validation.validator import run_validation
-
-        rec = self.recording
         if vcfg.mode == "oracle":
             self.tight_oracle(vcfg.oracle_k_sigma)
             return
+        from validation.validator import run_validation
+
+        rec = self.recording
         if vcfg.mode == "interval_oracle" and not any(rec.faults.values()):
             log.info("oracle gating without true fault intervals: nothing will be gated")
         sm = self.frontend.poses if self.frontend is not None else None
-        self.validation = run_validation(rec, sm, self.measurements.t, vcfg, gcfg)
+        self.validation = run_validation(
+            rec, sm, self.measurements.t, vcfg, gcfg, FACTOR_DOFS, rec.faults, rec.magnetic_reference
+        )
         self.weights = self.validation.weights
         self.timings.validation_s = self.validation.time_s
         self.extra_metrics.update(self.validation.metrics)
         self.extra_outputs["validation.csv"] = self.validation.csv_text()
+        if vcfg.mode == "on" and vcfg.offline:
+            self.second_pass(gcfg)
+
+    def second_pass(self, gating) -> None:
+        """Keep the blamed measurements that agree with the other sensors."""
+        from slam.recheck import recheck
+
+        t = time.perf_counter()
+        result = recheck(self.measurements, self.weights, self._initial_pose(), self.config.backend, gating)
+        self.weights = result.weights
+        self.constraints = result.constraints
+        self.extra_metrics.update(result.metrics)
+        self.timings.validation_s += time.perf_counter() - t
 
     def tight_oracle(self, k_sigma: float) -> None:
         """Exclude exactly the measurements (per degree of freedom) that are
@@ -183,7 +204,8 @@ class MappingPipeline:
     def optimise(self) -> None:
         pose0 = self._initial_pose()
         self.backend = optimise(
-            self.measurements, pose0, self.config.backend, self.weights, progress=self.progress
+            self.measurements, pose0, self.config.backend, self.weights, progress=self.progress,
+            constraints=self.constraints,
         )
         self.timings.graph_build_s = self.backend.build_time_s
         self.timings.optimise_s = self.backend.optimise_time_s

@@ -8,9 +8,12 @@ Conventions used everywhere in the project:
 * The world frame is ENU-like and planar: x east, y north, yaw measured from
   the x axis counter-clockwise, in radians, wrapped to (-pi, pi].
 * The body frame follows REP-103: x forward, y left, z up.
-* Component names (the diagnosis vocabulary) are the paper's:
-  ``ODO`` (track odometry), ``IMU_GYRO`` (gyroscope), ``IMU_YAW`` (compass),
-  ``SM`` (laser scan matching), ``GPS``.
+* Component names (the diagnosis vocabulary) are the paper's, one per
+  modality as in its Table 1: ``ODO_DIST`` and ``ODO_YAW`` (the distance
+  and the turn the track odometry reports), ``IMU_GYRO`` (gyroscope),
+  ``IMU_YAW`` (compass heading), ``SM_DIST``, ``SM_LAT`` and ``SM_YAW``
+  (scan matching's motion along the robot's heading, sideways, and its
+  turn), ``GPS``.
 """
 
 from __future__ import annotations
@@ -19,7 +22,33 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-COMPONENTS: tuple[str, ...] = ("ODO", "IMU_GYRO", "IMU_YAW", "SM", "GPS")
+COMPONENTS: tuple[str, ...] = ("ODO_DIST", "ODO_YAW", "IMU_GYRO", "IMU_YAW", "SM_DIST", "SM_LAT", "SM_YAW", "GPS")
+
+SENSOR_MODALITIES: dict[str, tuple[str, ...]] = {
+    "ODO": ("ODO_DIST", "ODO_YAW"),
+    "SM": ("SM_DIST", "SM_LAT", "SM_YAW"),
+}
+"""The modality components of a sensor with several; a fault label of the
+whole sensor (``SM``) stands for all of them."""
+
+
+def expand_sensor_labels(faults: dict[str, list]) -> dict[str, list]:
+    """Fault intervals with whole-sensor labels (``SM``, ``ODO``) given to each
+    of the sensor's modality components, merged with their own labels."""
+    spans: dict[str, list] = {}
+    for name, intervals in faults.items():
+        for comp in SENSOR_MODALITIES.get(name, (name,)):
+            spans.setdefault(comp, []).extend(tuple(iv) for iv in intervals)
+    out: dict[str, list] = {}
+    for comp, intervals in spans.items():
+        merged: list[list[float]] = []
+        for a, b in sorted(intervals):
+            if merged and a <= merged[-1][1]:
+                merged[-1][1] = max(merged[-1][1], b)
+            else:
+                merged.append([a, b])
+        out[comp] = [(a, b) for a, b in merged]
+    return out
 
 Interval = tuple[float, float]
 

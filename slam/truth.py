@@ -55,8 +55,11 @@ def scan_matching_output_faults(
     max_yaw_deg: float = 3.0,
     merge_gap_s: float = 1.0,
     min_duration_s: float = 0.5,
-) -> list[Interval]:
-    """Times (s) where the scan matcher's motion over ``window_s`` is wrong.
+) -> dict[str, list[Interval]]:
+    """Times (s) where the scan matcher's motion over ``window_s`` is wrong,
+    per modality: ``SM_DIST`` where its motion along the heading is off by
+    more than ``max_trans_m``, ``SM_LAT`` sideways, ``SM_YAW`` where its turn
+    is off by more than ``max_yaw_deg``.
 
     A scan is marked when the relative pose from the scan ``window_s``
     earlier differs from the true one by more than the limits; the marks are
@@ -71,60 +74,15 @@ def scan_matching_output_faults(
     valid = (t - window_s >= t[0]) & (t >= groundtruth.t[0]) & (t <= groundtruth.t[-1])
     e = relative_poses(est[prev], est) - relative_poses(true[prev], true)
     e[:, 2] = np.angle(np.exp(1j * e[:, 2]))
-    wrong = valid & ((np.hypot(e[:, 0], e[:, 1]) > max_trans_m) | (np.abs(e[:, 2]) > np.radians(max_yaw_deg)))
-    # A wrong window implicates every scan in it, from its start.
-    marked = wrong.copy()
-    for i in np.flatnonzero(wrong):
-        marked[prev[i] : i] = True
-    return intervals_from_mask(t, marked, merge_gap_s, min_duration_s)
-
-
-def measurement_errors(meas, groundtruth: Trajectory) -> dict[str, np.ndarray]:
-    """Error of every measurement against the truth, per factor type: (K, dofs)
-    in the order of :data:`slam.measurements.FACTOR_DOFS`, NaN where the
-    measurement is absent.
-
-    Between factors: the x, y and yaw of ``inverse(true step) * measured
-    step`` (frame of keyframe k-1, as GTSAM's residual); the gyro: measured
-    minus true yaw increment; the compass: measured minus true yaw (wrapped);
-    GPS: measured minus true position.
-    """
-    from slam.geometry import wrap_angle
-    from slam.measurements import FACTOR_DOFS, FACTOR_TYPES, interpolate_poses, relative_poses
-
-    true = interpolate_poses(groundtruth, meas.t)
-    step = np.zeros_like(true)
-    step[1:] = relative_poses(true[:-1], true[1:])
-    out: dict[str, np.ndarray] = {}
-    for factor in FACTOR_TYPES:
-        m = meas.get(factor)
-        if m is None:
-            continue
-        if factor in ("odometry", "scan_matching"):
-            err = relative_poses(step, m.delta)
-        elif factor == "gyro":
-            err = wrap_angle(m.value - step[:, 2])[:, None]
-        elif factor == "compass":
-            err = wrap_angle(m.value - true[:, 2])[:, None]
-        else:
-            err = m.xy - true[:, :2]
-        err = np.where(m.valid[:, None], err, np.nan)
-        out[factor] = err.reshape(len(meas.t), len(FACTOR_DOFS[factor]))
-    return out
-
-
-def measurement_sigmas(meas) -> dict[str, np.ndarray]:
-    """The configured sigma of every measurement, (K, dofs) per factor type."""
-    from slam.measurements import FACTOR_DOFS, FACTOR_TYPES
-
-    out: dict[str, np.ndarray] = {}
-    for factor in FACTOR_TYPES:
-        m = meas.get(factor)
-        if m is None:
-            continue
-        sigma = np.asarray(m.sigma, dtype=float)
-        dofs = len(FACTOR_DOFS[factor])
-        out[factor] = sigma if sigma.ndim == 2 else np.repeat(sigma[:, None], dofs, axis=1)
+    limits = {"SM_DIST": (0, max_trans_m), "SM_LAT": (1, max_trans_m), "SM_YAW": (2, np.radians(max_yaw_deg))}
+    out = {}
+    for name, (dof, limit) in limits.items():
+        wrong = valid & (np.abs(e[:, dof]) > limit)
+        # A wrong window implicates every scan in it, from its start.
+        marked = wrong.copy()
+        for i in np.flatnonzero(wrong):
+            marked[prev[i] : i] = True
+        out[name] = intervals_from_mask(t, marked, merge_gap_s, min_duration_s)
     return out
 
 
@@ -183,7 +141,9 @@ def tight_oracle_weights(meas, groundtruth: Trajectory, k_sigma: float) -> Tight
     """The tight oracle: every degree of freedom of every measurement whose
     error against the truth exceeds ``k_sigma`` times its sigma is excluded
     (``inf``); all others keep their noise (1)."""
-    errors, sigmas = measurement_errors(meas, groundtruth), measurement_sigmas(meas)
+    from slam.measurements import measurement_residuals, measurement_sigmas
+
+    errors, sigmas = measurement_residuals(meas, groundtruth), measurement_sigmas(meas)
     weights, zs = {}, {}
     for factor, err in errors.items():
         z = err / sigmas[factor]

@@ -167,29 +167,36 @@ def test_memo_returns_the_same_object_quickly():
 
 
 def test_shipped_model_blames_scan_matching_outdoors():
-    """The paper's scenario: every observer of SM disagrees, the rest agree."""
+    """The paper's scenario: every trend observer of scan matching disagrees,
+    the rest agree. One fault of the whole scan matcher explains its yaw,
+    distance and sideways mismatches."""
     model = load_model(TELEMAX)
     obs = {r: M for r in model.relations} | {"mag_plausible": PLAUS, "gps_plausible": PLAUS}
     for r in ("yaw_compass_sm", "yaw_gyro_sm", "distance_odo_sm", "lateral_odo_sm"):
         obs[r] = N
     result = Diagnoser(model).diagnose(obs)
     assert result.diagnoses[0] == {"SM"}
-    # The only other minimal diagnosis is the (far less probable) triple fault:
-    # 0.05*0.98*0.99*0.95^2 against 0.02*0.01*0.05*0.95^2.
-    assert result.diagnoses[1:] == sets(("ODO", "IMU_GYRO", "IMU_YAW"))
+    # Next, the scan matcher's heading with the odometry's distance, and
+    # the three modalities failing independently.
+    assert result.diagnoses[1] == {"SM_YAW", "ODO_DIST"}
+    assert {"SM_DIST", "SM_LAT", "SM_YAW"} in result.diagnoses
+    p = model.prior
+    odds = lambda c: p(c) / (1 - p(c))  # noqa: E731
     assert result.probabilities[0] / result.probabilities[1] == pytest.approx(
-        (0.05 * 0.98 * 0.99) / (0.02 * 0.01 * 0.05)
+        odds("SM") / (odds("SM_YAW") * odds("ODO_DIST"))
     )
 
 
-def test_shipped_model_prefers_scan_matching_for_a_lateral_mismatch():
-    """Only the sideways-travel observer disagrees: odometry or scan matching,
-    and the priors make the scan matcher (prone to sliding along a lone wall)
-    the likelier one."""
+@pytest.mark.parametrize("observer, modality", [("lateral_odo_sm", "SM_LAT"), ("distance_odo_sm", "SM_DIST")])
+def test_shipped_model_prefers_a_scan_matching_modality_for_one_mismatch(observer, modality):
+    """Only one translation observer disagrees: odometry or scan matching, and
+    the priors make the scan matcher's modality (prone to sliding along a
+    lone wall, to sticking in a corridor) the likelier one; the whole
+    sensor is less likely than one of its modalities."""
     model = load_model(TELEMAX)
-    obs = {r: M for r in model.relations} | {"lateral_odo_sm": N}
+    obs = {r: M for r in model.relations} | {observer: N}
     result = Diagnoser(model).diagnose(obs)
-    assert result.diagnoses == sets(("SM",), ("ODO",))
+    assert result.diagnoses == sets((modality,), ("SM",), ("ODO_DIST",), ("ODO",))
 
 
 # --- large models ---------------------------------------------------------

@@ -1,4 +1,5 @@
-"""Gating: policies, hold-off timing, the no-diagnosis fallback, oracle mode."""
+"""Gating: policies, per-degree-of-freedom scales, hold-off timing, the
+no-diagnosis fallback, offline and oracle actions."""
 
 from __future__ import annotations
 
@@ -6,11 +7,20 @@ import logging
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from slam.measurements import FACTOR_DOFS
 from validation.diagnosis import Diagnoser, DiagnosisResult
 from validation.errors import ValidationError
-from validation.gating import FactorGate, Gate, GatingAction, GatingConfig, oracle_decisions
+from validation.gating import (
+    Gate,
+    GatingAction,
+    GatingConfig,
+    factor_scales,
+    offline_actions,
+    oracle_actions,
+)
 from validation.model import Observation, Plausibility, load_model
 
 INC, INF, EXC = GatingAction.INCLUDE, GatingAction.INFLATE, GatingAction.EXCLUDE
@@ -27,52 +37,69 @@ CLEAN = result(set())
 NONE = DiagnosisResult(frozenset(), (), (), (), False, (), frozenset({"yaw_sm"}))
 
 
-def actions(decisions: dict[str, FactorGate]) -> dict[str, GatingAction]:
-    return {f: g.action for f, g in decisions.items()}
-
-
 def config(**kw) -> GatingConfig:
     return GatingConfig.from_mapping({"holdoff_s": 0.0, **kw})
 
 
-# --- policies -------------------------------------------------------------
+def scales(cfg: GatingConfig, actions) -> dict[str, list[float]]:
+    return {f: s.tolist() for f, s in factor_scales(cfg, actions, FACTOR_DOFS).items()}
+
+
+# --- policies and degrees of freedom ----------------------------------------------
 
 
 def test_empty_diagnosis_includes_everything():
-    out = Gate(config()).step(0.0, CLEAN)
-    assert set(out) == {"odometry", "gyro", "compass", "scan_matching", "gps"}
-    assert all(g == FactorGate(INC, 1.0) for g in out.values())
+    cfg = config()
+    out = Gate(cfg).step(0.0, CLEAN)
+    assert out == {}
+    assert all(v == [1.0] * len(FACTOR_DOFS[f]) for f, v in scales(cfg, out).items())
 
 
 @pytest.mark.parametrize("single, action, scale", [("exclude", EXC, math.inf), ("inflate", INF, 7.0)])
-def test_single_diagnosis(single, action, scale):
-    out = Gate(config(single=single, inflation=7.0)).step(0.0, result({"SM"}))
-    assert out["scan_matching"] == FactorGate(action, scale)
-    assert {f for f, g in out.items() if g.action is INC} == {"odometry", "gyro", "compass", "gps"}
+def test_single_diagnosis_gates_only_its_degrees_of_freedom(single, action, scale):
+    cfg = config(single=single, inflation=7.0)
+    out = Gate(cfg).step(0.0, result({"SM_DIST"}))
+    assert out == {"SM_DIST": action}
+    s = scales(cfg, out)
+    assert s["scan_matching"] == [scale, 1.0, 1.0]  # x only: the heading and sideways motion stay
+    assert all(v == [1.0] * len(FACTOR_DOFS[f]) for f, v in s.items() if f != "scan_matching")
+
+
+def test_a_whole_sensor_gates_every_degree_of_freedom_of_its_factor():
+    cfg = config()
+    s = scales(cfg, Gate(cfg).step(0.0, result({"SM"})))
+    assert s["scan_matching"] == [math.inf] * 3 and s["odometry"] == [1.0] * 3
 
 
 def test_ambiguous_inflate_all():
-    out = Gate(config(ambiguous="inflate_all", inflation=4.0)).step(0.0, result({"SM"}, {"ODO", "IMU_YAW"}))
-    assert actions(out) == {"odometry": INF, "gyro": INC, "compass": INF, "scan_matching": INF, "gps": INC}
-    assert out["compass"].sigma_scale == 4.0
+    cfg = config(ambiguous="inflate_all", inflation=4.0)
+    out = Gate(cfg).step(0.0, result({"SM_YAW"}, {"ODO_YAW", "IMU_YAW"}))
+    assert out == {"SM_YAW": INF, "ODO_YAW": INF, "IMU_YAW": INF}
+    s = scales(cfg, out)
+    assert s["odometry"] == [1.0, 1.0, 4.0] and s["compass"] == [4.0] and s["gyro"] == [1.0]
 
 
 def test_ambiguous_exclude_all():
-    out = Gate(config(ambiguous="exclude_all")).step(0.0, result({"SM"}, {"ODO"}))
-    assert actions(out) == {"odometry": EXC, "gyro": INC, "compass": INC, "scan_matching": EXC, "gps": INC}
+    out = Gate(config(ambiguous="exclude_all")).step(0.0, result({"SM_DIST"}, {"ODO_DIST"}))
+    assert out == {"SM_DIST": EXC, "ODO_DIST": EXC}
 
 
 @pytest.mark.parametrize("single", [EXC, INF])
 def test_ambiguous_most_probable(single):
     cfg = config(ambiguous="most_probable", single=single.value)
-    out = Gate(cfg).step(0.0, result({"IMU_YAW"}, {"SM"}))
-    assert actions(out) == {"odometry": INC, "gyro": INC, "compass": single, "scan_matching": INC, "gps": INC}
+    assert Gate(cfg).step(0.0, result({"IMU_YAW"}, {"SM_YAW"})) == {"IMU_YAW": single}
 
 
-def test_factor_takes_the_strongest_action_of_its_components():
-    cfg = config(factors={"heading": ["IMU_GYRO", "IMU_YAW"], "sm": ["SM"]}, ambiguous="most_probable")
-    gate = Gate(cfg)
-    assert actions(gate.step(0.0, result({"IMU_YAW"}))) == {"heading": EXC, "sm": INC}
+def test_degree_of_freedom_takes_the_strongest_action_of_its_components():
+    cfg = config(factors={"heading": {"yaw": ["IMU_GYRO", "IMU_YAW"]}, "sm": ["SM"]})
+    s = factor_scales(cfg, {"IMU_YAW": EXC, "IMU_GYRO": INF}, {"heading": ("yaw",), "sm": ("x", "yaw")})
+    assert s["heading"].tolist() == [math.inf] and s["sm"].tolist() == [1.0, 1.0]
+
+
+def test_a_plain_list_applies_to_every_degree_of_freedom():
+    cfg = config(factors={"gps": ["GPS"]})
+    assert cfg.components_of("gps", "x") == ["GPS"] == cfg.components_of("gps", "y")
+    assert factor_scales(cfg, {"GPS": EXC}, {"gps": ("x", "y")})["gps"].tolist() == [math.inf, math.inf]
 
 
 def test_with_real_diagnoser_scan_matching_is_gated():
@@ -81,14 +108,17 @@ def test_with_real_diagnoser_scan_matching_is_gated():
         "yaw_compass_sm": Observation.NO_MATCH,
         "yaw_gyro_sm": Observation.NO_MATCH,
         "distance_odo_sm": Observation.NO_MATCH,
+        "lateral_odo_sm": Observation.NO_MATCH,
         "mag_plausible": Plausibility.PLAUSIBLE,
     }
     gate = Gate(GatingConfig(), model)
     out = gate.step(80.0, Diagnoser(model).diagnose(obs))
-    assert actions(out) == {"odometry": INC, "gyro": INC, "compass": INC, "scan_matching": EXC, "gps": INC}
+    assert out == {"SM": EXC}  # one fault of the whole scan matcher explains all four
+    s = scales(GatingConfig(), out)
+    assert s["scan_matching"] == [math.inf] * 3 and s["odometry"] == [1.0] * 3
 
 
-# --- hold-off -------------------------------------------------------------
+# --- hold-off (causal) ----------------------------------------------------------
 
 
 def test_holdoff_returns_only_after_holdoff_s_of_clean_steps():
@@ -97,7 +127,7 @@ def test_holdoff_returns_only_after_holdoff_s_of_clean_steps():
     sm = {}
     for i in range(16):  # faulty at 0.0 .. 1.0, clean from 1.5 on
         t = i * dt
-        sm[t] = gate.step(t, result({"SM"}) if t <= 1.0 else CLEAN)["scan_matching"].action
+        sm[t] = gate.step(t, result({"SM"}) if t <= 1.0 else CLEAN).get("SM", INC)
     assert all(sm[t] is EXC for t in (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0))
     assert all(sm[t] is INC for t in (3.5, 4.0, 7.5))  # clean since 1.5: 3.5 - 1.5 = 2.0
 
@@ -105,23 +135,21 @@ def test_holdoff_returns_only_after_holdoff_s_of_clean_steps():
 def test_holdoff_restarts_when_suspected_again():
     gate = Gate(config(holdoff_s=1.0))
     seq = [(0.0, {"GPS"}), (0.5, set()), (1.0, {"GPS"}), (1.5, set()), (2.0, set()), (2.5, set())]
-    got = [gate.step(t, result(d))["gps"].action for t, d in seq]
+    got = [gate.step(t, result(d)).get("GPS", INC) for t, d in seq]
     assert got == [EXC, EXC, EXC, EXC, EXC, INC]
 
 
 def test_zero_holdoff_returns_at_the_first_clean_step():
     gate = Gate(config(holdoff_s=0.0))
-    assert gate.step(0.0, result({"ODO"}))["odometry"].action is EXC
-    assert gate.step(0.1, CLEAN)["odometry"].action is INC
+    assert gate.step(0.0, result({"ODO_DIST"})) == {"ODO_DIST": EXC}
+    assert gate.step(0.1, CLEAN) == {}
 
 
 def test_held_component_keeps_its_action_while_another_is_suspected():
     gate = Gate(config(holdoff_s=1.0))
     gate.step(0.0, result({"SM"}))
-    out = gate.step(0.5, result({"GPS"}))
-    assert out["scan_matching"].action is EXC and out["gps"].action is EXC
-    out = gate.step(1.5, result({"GPS"}))
-    assert out["scan_matching"].action is INC  # clean since 0.5
+    assert gate.step(0.5, result({"GPS"})) == {"SM": EXC, "GPS": EXC}
+    assert "SM" not in gate.step(1.5, result({"GPS"}))  # clean since 0.5
 
 
 def test_time_must_not_go_back():
@@ -131,7 +159,7 @@ def test_time_must_not_go_back():
         gate.step(0.5, CLEAN)
 
 
-# --- no diagnosis ---------------------------------------------------------
+# --- no diagnosis -----------------------------------------------------------------
 
 
 def test_no_diagnosis_keep_previous_and_message_once_per_episode(caplog):
@@ -143,7 +171,7 @@ def test_no_diagnosis_keep_previous_and_message_once_per_episode(caplog):
     assert len(caplog.records) == 1
     assert "no diagnosis" in caplog.records[0].getMessage()
     assert "yaw_sm" in caplog.records[0].getMessage()
-    assert actions(gate.step(2.0, CLEAN))["scan_matching"] is INC
+    assert gate.step(2.0, CLEAN) == {}
     gate.step(2.5, NONE)
     gate.step(3.0, NONE)
     assert len(caplog.records) == 2  # a new episode, a new message
@@ -152,10 +180,12 @@ def test_no_diagnosis_keep_previous_and_message_once_per_episode(caplog):
 def test_no_diagnosis_include_all_and_inflate_all():
     gate = Gate(config(no_diagnosis="include_all"))
     gate.step(0.0, result({"SM"}))
-    assert all(g == FactorGate(INC, 1.0) for g in gate.step(0.5, NONE).values())
-    gate = Gate(config(no_diagnosis="inflate_all", inflation=3.0))
+    assert gate.step(0.5, NONE) == {}
+    cfg = config(no_diagnosis="inflate_all", inflation=3.0)
+    gate = Gate(cfg)
     gate.step(0.0, result({"SM"}))
-    assert all(g == FactorGate(INF, 3.0) for g in gate.step(0.5, NONE).values())
+    s = scales(cfg, gate.step(0.5, NONE))
+    assert all(v == [3.0] * len(FACTOR_DOFS[f]) for f, v in s.items())
 
 
 def test_no_diagnosis_step_interrupts_the_holdoff():
@@ -163,21 +193,26 @@ def test_no_diagnosis_step_interrupts_the_holdoff():
     gate.step(0.0, result({"SM"}))
     gate.step(0.5, CLEAN)
     gate.step(1.0, NONE)
-    assert gate.step(1.5, CLEAN)["scan_matching"].action is EXC  # clean again only since 1.5
-    assert gate.step(2.5, CLEAN)["scan_matching"].action is INC
+    assert gate.step(1.5, CLEAN) == {"SM": EXC}  # clean again only since 1.5
+    assert gate.step(2.5, CLEAN) == {}
 
 
-# --- oracle and config ----------------------------------------------------
+# --- offline, oracle and config ---------------------------------------------------
 
 
-def test_oracle_decisions_from_fault_intervals():
+def test_offline_actions_follow_each_step_without_holdoff():
+    cfg = config(holdoff_s=5.0, no_diagnosis="keep_previous")
+    out = offline_actions(cfg, [CLEAN, result({"SM"}), CLEAN, result({"GPS"}), NONE, CLEAN])
+    assert out == [{}, {"SM": EXC}, {}, {"GPS": EXC}, {"GPS": EXC}, {}]
+
+
+def test_oracle_actions_from_fault_intervals():
     cfg = config(single="inflate", inflation=5.0)
     times = [60.0, 70.0, 100.0, 150.0, 150.5, 200.0]
-    out = oracle_decisions(cfg, times, {"SM": [(70.0, 150.0)], "GPS": [(0.0, 65.0), (199.0, 220.0)]})
-    assert [d["scan_matching"].action for d in out] == [INC, INF, INF, INF, INC, INC]
-    assert [d["gps"].action for d in out] == [INF, INC, INC, INC, INC, INF]
-    assert out[2]["scan_matching"].sigma_scale == 5.0
-    assert all(d["odometry"] == FactorGate(INC, 1.0) for d in out)
+    out = oracle_actions(cfg, times, {"SM_DIST": [(70.0, 150.0)], "GPS": [(0.0, 65.0), (199.0, 220.0)]})
+    assert [d.get("SM_DIST", INC) for d in out] == [INC, INF, INF, INF, INC, INC]
+    assert [d.get("GPS", INC) for d in out] == [INF, INC, INC, INC, INC, INF]
+    assert scales(cfg, out[2])["scan_matching"] == [5.0, 1.0, 1.0]
 
 
 def test_config_errors():
@@ -187,7 +222,10 @@ def test_config_errors():
         GatingConfig.from_mapping({"ambiguous": "guess"})
     with pytest.raises(ValidationError, match="inflation"):
         GatingConfig.from_mapping({"inflation": 0.5})
+    with pytest.raises(ValidationError, match="needs at least one component"):
+        GatingConfig.from_mapping({"factors": {"gps": {"x": []}}})
     model = load_model(TELEMAX)
-    cfg = GatingConfig.from_mapping({"factors": {"wheel": ["WHEEL"]}})
-    with pytest.raises(ValidationError, match="gating.factors.wheel: unknown component 'WHEEL'"):
+    cfg = GatingConfig.from_mapping({"factors": {"wheel": {"x": ["WHEEL"]}}})
+    with pytest.raises(ValidationError, match="gating.factors.wheel.x: unknown component 'WHEEL'"):
         Gate(cfg, model)
+    assert np.isinf(factor_scales(GatingConfig(), {"SM": EXC}, FACTOR_DOFS)["scan_matching"]).all()

@@ -16,10 +16,12 @@ from validation.observers import (
     MismatchCounter,
     ObserverBank,
     ObserversConfig,
-    compare_trends,
+    RelationConfig,
+    evidence,
     load_observers_config,
     observe,
     observe_steps,
+    run_observers,
     unary_checks,
 )
 from validation.streams import Stream, fixed_rate_steps, resample, resample_streams, validation_streams
@@ -34,7 +36,7 @@ def test_counter_by_hand():
     a = [0, 0, 1, 1, 1, 0, 0, 0, -1, -1]
     b = [0, 1, 1, 0, 0, 0, 1, 0, -1, 1]
     # mismatch:  .  x  .  x  x  .  x  .  .  x
-    counter, no_match = compare_trends(np.array(a), np.array(b), threshold=1)
+    counter, no_match = observe(np.array(a), np.array(b), threshold=1)
     assert counter.tolist() == [0, 1, 0, 1, 2, 1, 2, 1, 0, 1]
     assert no_match.tolist() == [False] * 4 + [True, False, True] + [False] * 3
     online = MismatchCounter(1)
@@ -46,7 +48,7 @@ def test_invalid_steps_hold_the_counter():
     a = np.array([1, 1, 1, 0, 0, 0])
     b = np.array([0, 0, 0, 0, 0, 0])
     valid = np.array([True, True, False, False, True, True])
-    counter, no_match = compare_trends(a, b, 0, valid)
+    counter, no_match = observe(a, b, 0, valid)
     assert counter.tolist() == [1, 2, 2, 2, 1, 0]
     assert no_match.tolist() == [True, True, False, False, True, False]  # no observation when invalid
     online = MismatchCounter(0)
@@ -57,13 +59,13 @@ def test_threshold_is_strict():
     c = MismatchCounter(3)
     obs = [c.update(1, 0) for _ in range(4)]
     assert [c_ is Observation.NO_MATCH for c_ in obs] == [False, False, False, True]  # 3 is not > 3
-    counter, no_match = compare_trends(np.ones(4, int), np.zeros(4, int), 3)
+    counter, no_match = observe(np.ones(4, int), np.zeros(4, int), 3)
     assert counter.tolist() == [1, 2, 3, 4] and no_match.tolist() == [False, False, False, True]
 
 
 def test_counter_cap():
     a = np.array([1] * 10 + [0] * 5)
-    counter, no_match = compare_trends(a, np.zeros(15, int), 2, max_counter=4)
+    counter, no_match = observe(a, np.zeros(15, int), 2, max_counter=4)
     assert counter.tolist() == [1, 2, 3, 4, 4, 4, 4, 4, 4, 4, 3, 2, 1, 0, 0]
     assert not no_match[12]
 
@@ -83,7 +85,7 @@ def test_relations_from_yaml(tmp_path):
     )
     cfg = load_observers_config(path)
     assert [r.name for r in cfg.relations] == ["yaw_gyro_sm", "dist"]
-    assert cfg.relations[0].components == ("IMU_GYRO", "SM")
+    assert cfg.relations[0].components == ("IMU_GYRO", "SM_YAW")
     assert cfg.relations[1].boundaries == (0.1, 0.2)
     assert [c.name for c in unary_checks(cfg)] == ["gps_plausible"]
 
@@ -99,7 +101,7 @@ def test_relations_from_yaml(tmp_path):
 
 def test_default_relations_cover_the_paper():
     pairs = {frozenset(r.components) for r in ObserversConfig().relations}
-    assert {frozenset(p) for p in [("IMU_YAW", "IMU_GYRO"), ("IMU_YAW", "SM"), ("IMU_GYRO", "SM")]} <= pairs
+    assert {frozenset(p) for p in [("IMU_YAW", "IMU_GYRO"), ("IMU_YAW", "SM_YAW"), ("IMU_GYRO", "SM_YAW")]} <= pairs
 
 
 # --- streams ---------------------------------------------------------------------------
@@ -151,7 +153,7 @@ def test_resample_validity_and_angles():
 def test_absent_stream_makes_no_observation():
     sc = yaw_scenario(duration_s=30.0, compass_drift=None)
     gps_rel = DEFAULT_RELATIONS[-1]
-    log = observe(sc.streams, [YAW_RELATION, gps_rel], sc.step_t)
+    log = run_observers(sc.streams, [YAW_RELATION, gps_rel], sc.step_t, rule="project")
     assert not log.relations[gps_rel.name].valid.any()
     warm = sc.step_t >= YAW_RELATION.warmup
     assert np.array_equal(log.relations[YAW_RELATION.name].valid, warm)
@@ -164,7 +166,7 @@ def test_gap_in_a_stream_invalidates_its_steps():
     c = sc.streams["compass_yaw"]
     keep = (c.t < 10.0) | (c.t > 15.0)
     streams = dict(sc.streams, compass_yaw=Stream(c.t[keep], c.values[keep], True))
-    log = observe(streams, [YAW_RELATION], sc.step_t)
+    log = run_observers(streams, [YAW_RELATION], sc.step_t, rule="project")
     trace = log.relations[YAW_RELATION.name]
     in_gap = (sc.step_t > 10.1) & (sc.step_t < 14.9)
     assert not trace.valid[in_gap].any()
@@ -183,7 +185,7 @@ def onset_and_clear(t, flag, after):
 def test_compass_drift_raises_no_match_and_clears():
     sc = yaw_scenario(duration_s=260.0)
     step = 1.0 / 10.0
-    log = observe(sc.streams, [YAW_RELATION, DEFAULT_RELATIONS[2]], sc.step_t)
+    log = run_observers(sc.streams, [YAW_RELATION, DEFAULT_RELATIONS[2]], sc.step_t, rule="project")
     trace = log.relations[YAW_RELATION.name]
     # No false alarm before the fault, through the turns at 20-50 s.
     assert not trace.no_match[sc.step_t < 70.0].any()
@@ -196,7 +198,7 @@ def test_compass_drift_raises_no_match_and_clears():
     assert not log.relations["yaw_gyro_sm"].no_match.any()
 
     capped = YAW_RELATION.model_copy(update={"max_counter": 20})
-    trace = observe(sc.streams, [capped], sc.step_t).relations[capped.name]
+    trace = run_observers(sc.streams, [capped], sc.step_t, rule="project").relations[capped.name]
     first, cleared = onset_and_clear(sc.step_t, trace.no_match, 70.0)
     assert 150.0 < cleared < 150.0 + YAW_RELATION.window_s + 20 * step + 1.0
     assert not trace.no_match[sc.step_t > cleared].any()
@@ -220,7 +222,7 @@ def test_magnetometer_check_flags_a_disturbed_field_only():
     step_t = np.arange(0.0, 99.0, 0.1)
     rec = mag_recording((40.0, 60.0), extra_T=20e-6)
     checks = unary_checks(cfg, rec.magnetic_reference)
-    log = observe(validation_streams(rec), [], step_t, checks)
+    log = run_observers(validation_streams(rec), [], step_t, checks)
     u = log.unary["mag_plausible"]
     assert u.component == "IMU_YAW" and u.valid.all()
     hold = cfg.magnetometer.hold_s
@@ -231,10 +233,10 @@ def test_magnetometer_check_flags_a_disturbed_field_only():
 
     # The reference field itself is plausible; so is the heading's own change.
     clean = mag_recording((0.0, 0.0), extra_T=0.0)
-    assert not observe(validation_streams(clean), [], step_t, checks).unary["mag_plausible"].implausible.any()
+    assert not run_observers(validation_streams(clean), [], step_t, checks).unary["mag_plausible"].implausible.any()
     # A dip change alone is caught.
     dip = mag_recording((40.0, 60.0), extra_T=0.0, extra_dip=np.radians(10.0))
-    assert observe(validation_streams(dip), [], step_t, checks).unary["mag_plausible"].implausible.sum() > 150
+    assert run_observers(validation_streams(dip), [], step_t, checks).unary["mag_plausible"].implausible.sum() > 150
 
 
 def test_gps_quality_check():
@@ -245,7 +247,7 @@ def test_gps_quality_check():
     rec = Recording("g", gps=Gps(tg, tg, tg, sigma, status))
     cfg = ObserversConfig()
     step_t = np.arange(0.0, 19.0, 0.5)
-    log = observe(validation_streams(rec), [], step_t, [check], cfg.max_gap_s, cfg.stream_max_gap_s)
+    log = run_observers(validation_streams(rec), [], step_t, [check], cfg.max_gap_s, cfg.stream_max_gap_s)
     u = log.unary["gps_plausible"]
     assert u.implausible[(step_t >= 8) & (step_t <= 12)].all()
     assert not u.implausible[(step_t <= 7) | (step_t >= 13)].any()
@@ -255,7 +257,8 @@ def test_gps_quality_check():
 # --- batch == online ------------------------------------------------------------------------
 
 
-def test_batch_and_online_agree():
+@pytest.mark.parametrize("rule", ["paper", "project"])
+def test_batch_and_online_agree(rule):
     sc = yaw_scenario(duration_s=120.0, compass_drift=(40.0, 70.0), seed=3)
     c = sc.streams["compass_yaw"]
     keep = (c.t < 80.0) | (c.t > 83.0)  # a gap in the middle
@@ -268,12 +271,14 @@ def test_batch_and_online_agree():
     relations = [
         *DEFAULT_RELATIONS[:3],
         DEFAULT_RELATIONS[0].model_copy(update={"name": "capped", "max_counter": 12, "boundary_b": 0.03}),
+        RelationConfig(name="res", kind="residual", stream_a="gyro_yaw", stream_b="compass_yaw",
+                       window_s=2.0, sigma_floor=0.03, threshold=3, max_counter=10),
     ]
     checks = [MagnetometerCheck("mag", "IMU_YAW", ref.strength_T, ref.dip_rad, 5e-6, 0.1, 1.0)]
 
     steps = resample_streams(streams, sc.step_t)
-    log = observe_steps(steps, relations, checks)
-    bank = ObserverBank(relations, checks, steps.angular)
+    log = observe_steps(steps, relations, checks, "trailing", rule)
+    bank = ObserverBank(relations, checks, steps.angular, rule)
     for k, t in enumerate(steps.t):
         out = bank.update(t, {n: v[k] for n, v in steps.values.items()})
         for r in relations:
@@ -283,6 +288,7 @@ def test_batch_and_online_agree():
             assert out.observations[r.name] == tr.observation(k)
         assert out.observations["mag"] == log.unary["mag"].plausibility(k)
     assert log.relations["capped"].no_match.any() and log.unary["mag"].implausible.any()
+    assert log.relations["res"].no_match.any()
     cols = log.columns()
     assert cols["capped.counter"] is log.relations["capped"].counter and len(cols["t"]) == len(steps.t)
 
@@ -291,3 +297,75 @@ def test_fixed_rate_steps():
     np.testing.assert_allclose(fixed_rate_steps(1.0, 2.0, 10.0), np.linspace(1.0, 2.0, 11))
     with pytest.raises(ValidationError):
         fixed_rate_steps(0.0, 1.0, 0.0)
+
+
+# --- offline: alarms dated by their evidence ----------------------------------------------
+
+
+def test_evidence_dates_an_alarm_from_its_first_to_its_last_mismatch():
+    a = np.array([0, 0, 1, 1, 1, 1, 0, 1, 1, 0, 0, 0, 0, 0, 1, 0, 0])
+    b = np.zeros(17, int)
+    valid = np.ones(17, bool)
+    counter, no_match = observe(a, b, 2, valid)
+    # counter:  0 0 1 2 3 4 3 4 5 4 3 2 1 0 1 0 0 ; alarm where > 2: steps 4-10
+    assert counter.tolist() == [0, 0, 1, 2, 3, 4, 3, 4, 5, 4, 3, 2, 1, 0, 1, 0, 0]
+    dated = evidence(a, b, 2, valid)
+    # from the first mismatch of the climb (step 2) to its last (step 8); the
+    # lone mismatch at 14 never raised an alarm
+    assert np.flatnonzero(dated).tolist() == list(range(2, 9))
+    # Mismatches while the counter drains do not extend the alarm: run
+    # backward, the counter climbs only from the alarm's last dense mismatch.
+    a = np.array([1] * 8 + [0, 0, 1, 0, 0, 1, 0, 0, 0, 0, 0, 0])
+    b = np.zeros(len(a), int)
+    counter, _ = observe(a, b, 3, np.ones(len(a), bool))
+    assert counter[13] > 0  # still draining at the noise mismatch at 13
+    assert np.flatnonzero(evidence(a, b, 3, np.ones(len(a), bool))).tolist() == list(range(0, 8))
+
+
+def test_offline_observer_has_no_delay_and_no_drain():
+    sc = yaw_scenario(duration_s=260.0)  # the compass drifts from 70 s to 150 s
+    causal = run_observers(sc.streams, [YAW_RELATION], sc.step_t, window="trailing", rule="project")
+    offline = run_observers(sc.streams, [YAW_RELATION], sc.step_t, window="centred", rule="project", offline=True)
+    c, o = causal.relations[YAW_RELATION.name].no_match, offline.relations[YAW_RELATION.name].no_match
+    first_c, cleared_c = onset_and_clear(sc.step_t, c, 60.0)
+    first_o, cleared_o = onset_and_clear(sc.step_t, o, 60.0)
+    assert first_o < first_c - 1.0 and abs(first_o - 70.0) < 1.5
+    assert cleared_o < cleared_c - 60.0 and abs(cleared_o - 150.0) < 2.0
+
+
+def test_offline_unary_check_flags_the_whole_deviation():
+    cfg = ObserversConfig(relations=())
+    step_t = np.arange(0.0, 99.0, 0.1)
+    rec = mag_recording((40.0, 60.0), extra_T=20e-6)
+    checks = unary_checks(cfg, rec.magnetic_reference)
+    u = run_observers(validation_streams(rec), [], step_t, checks, offline=True).unary["mag_plausible"]
+    assert np.array_equal(u.implausible[np.abs(step_t - 40.0) > 0.06], ((step_t >= 40.0) & (step_t < 59.95))[np.abs(step_t - 40.0) > 0.06])
+
+
+# --- quantitative (residual) observers -------------------------------------------------------
+
+
+def test_residual_observer_sees_a_wrong_size_that_trends_miss():
+    t = np.arange(0.0, 60.0, 0.1)
+    odo = 0.4 * t  # odometry distance, 0.4 m/s
+    sm = np.where(t < 20, 0.4 * t, np.where(t < 40, 8.0 + 4.0 * (t - 20), 88.0 + 0.4 * (t - 40)))  # 10x too fast
+    streams = {"odo_distance": Stream(t, odo), "sm_distance": Stream(t, sm)}
+    trend = RelationConfig(name="trend", stream_a="odo_distance", stream_b="sm_distance", boundary=0.1,
+                           window_s=2.0, threshold=5)
+    res = RelationConfig(name="res", kind="residual", stream_a="odo_distance", stream_b="sm_distance",
+                         window_s=2.0, sigma_floor=0.05, sigma_rel=0.05, threshold=5)
+    log = run_observers(streams, [trend, res], t, window="centred", offline=True)
+    assert not log.relations["trend"].no_match.any()  # both '+' all along
+    flagged = t[log.relations["res"].no_match]
+    assert 18.5 < flagged[0] < 20.0 and 40.0 < flagged[-1] < 41.5
+    assert log.relations["res"].no_match[(t > 20.5) & (t < 39.5)].all()
+    z = log.relations["res"].z
+    assert np.all(np.abs(z[(t > 3) & (t < 18)]) < 1e-9)  # exact agreement outside
+
+
+def test_residual_config_needs_its_noise():
+    with pytest.raises(ValueError, match="sigma_floor"):
+        RelationConfig(name="r", kind="residual", stream_a="odo_distance", stream_b="sm_distance",
+                       window_s=2.0, threshold=1)
+    with pytest.raises(ValueError, match="boundary"):
+        RelationConfig(name="r", stream_a="odo_distance", stream_b="sm_distance", window_s=2.0, threshold=1)

@@ -267,9 +267,11 @@ def test_run_folder_shifts_faults_and_attaches_sidecar(tmp_path, ros):
     rec = read_recording(run, InputConfig())
     assert rec.name == "straight_42"
     assert rec.t0 == pytest.approx(T0, abs=1e-6)
-    assert rec.faults["SM"] == [pytest.approx((-1.8, -1.4))]
+    # A whole-sensor label (as older run folders have) stands for every modality.
+    for modality in ("SM_DIST", "SM_LAT", "SM_YAW"):
+        assert rec.faults[modality] == [pytest.approx((-1.8, -1.4))]
     assert rec.faults["GPS"] == [pytest.approx((-2.0, -1.9)), pytest.approx((-1.5, -1.1))]
-    assert rec.faults["ODO"] == []
+    assert rec.faults["ODO_DIST"] == [] and rec.faults["ODO_YAW"] == []
     ref = rec.magnetic_reference
     assert (ref.strength_T, ref.dip_rad, ref.declination_rad) == (4.5e-5, 1.1, 0.05)
     # The sidecar datum is used: the first fix (at the bag datum) is 10 m NE of it.
@@ -281,7 +283,7 @@ def test_run_folder_shifts_faults_and_attaches_sidecar(tmp_path, ros):
 
 def test_run_folder_without_datum_uses_first_fix(tmp_path):
     rec = read_recording(_run_folder(tmp_path, 2, truth_t0=T0 + 0.5, gps_datum=False), InputConfig())
-    assert rec.faults["SM"] == [pytest.approx((0.7, 1.1))]
+    assert rec.faults["SM_YAW"] == [pytest.approx((0.7, 1.1))]
     assert (rec.gps.x[0], rec.gps.y[0]) == (0.0, 0.0)
 
 

@@ -133,7 +133,7 @@ def test_scan_geometry_single_wall_is_degenerate_room_is_not():
 def test_scan_constraint_counts_returns():
     ranges = np.array([[1.0, np.inf, 2.0]])
     hit = np.array([[0, -1, 1]])
-    count, eig = scan_constraint(ranges, hit, np.zeros((1, 3)), np.array([[1.0, 0.0], [0.0, 1.0]]))
+    count, eig, _ = scan_constraint(ranges, hit, np.zeros((1, 3)), np.array([[1.0, 0.0], [0.0, 1.0]]))
     assert count[0] == 2
     assert abs(eig[0]) < 1e-12  # two points cannot constrain three degrees of freedom
 
@@ -259,12 +259,12 @@ def test_short_run_writes_a_valid_bag_and_truth(tmp_path):
     truth = json.loads((run / "truth.json").read_text())
     assert truth["seed"] == 5 and truth["t0"] == 1_700_000_000.0
     assert load_scenario(run / "scenario.yaml") == load_scenario(tmp_path / "tiny.yaml")
-    assert set(truth["faults"]) == {"ODO", "IMU_GYRO", "IMU_YAW", "SM", "GPS"}
+    assert set(truth["faults"]) == {"ODO_DIST", "ODO_YAW", "IMU_GYRO", "IMU_YAW", "SM_DIST", "SM_LAT", "SM_YAW", "GPS"}
     assert truth["faults"]["IMU_YAW"], "passing 0.7 m from the steel must bend the compass"
     assert truth["gps_datum"] == {"lat_deg": 49.0, "lon_deg": 8.4}
     # Only the mud patch (x 12..14 m) makes the tracks slip beyond nominal.
     motion = plan_motion(load_scenario(tmp_path / "tiny.yaml").robot)
-    (odo,) = truth["faults"]["ODO"]
+    (odo,) = truth["faults"]["ODO_DIST"]
     x_at = np.interp(odo, motion.t, motion.x)
     assert x_at[0] == pytest.approx(12.0, abs=0.05) and x_at[1] == pytest.approx(14.0, abs=0.05)
     with AnyReader([run / "bag"]) as reader:

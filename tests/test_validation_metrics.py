@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from validation.diagnosis import DiagnosisResult
-from validation.gating import FactorGate, GatingAction, GatingConfig, factor_decisions, oracle_decisions
+from validation.gating import GatingAction, GatingConfig, oracle_actions
 from validation.metrics import validation_metrics
 
-GATING = GatingConfig()  # factors: odometry ODO, gyro IMU_GYRO, compass IMU_YAW, scan_matching SM, gps GPS
+GATING = GatingConfig()
 STEP_T = np.arange(10.0)  # steps at 0, 1, ..., 9 s
 
 
@@ -40,11 +40,11 @@ FAULTS = {
     "IMU_YAW": [(7.0, 8.0)],
     "GPS": [],
 }
-DECISIONS = [factor_decisions(GATING, {}) for _ in STEP_T]  # not used with results
+DECISIONS = [{} for _ in STEP_T]  # not used with results
 
 
 def test_metrics_from_diagnoses():
-    m = validation_metrics(STEP_T, RESULTS, DECISIONS, GATING, FAULTS)
+    m = validation_metrics(STEP_T, RESULTS, DECISIONS, FAULTS)
     assert m["validation_steps"] == 10
     # Alarms: steps 3, 4, 5, 9 (a non-empty top diagnosis) and 6 (none) -> 5 / 10.
     assert m["alarm_fraction"] == 0.5
@@ -68,7 +68,7 @@ def test_metrics_from_diagnoses():
 def test_detection_counts_only_steps_inside_the_interval():
     # SM blamed at 1 s, before its fault (2-5 s), and never during it.
     results = [CLEAN, consistent({"SM"})] + [CLEAN] * 8
-    m = validation_metrics(STEP_T, results, DECISIONS, GATING, {"SM": [(2.0, 5.0)]})
+    m = validation_metrics(STEP_T, results, DECISIONS, {"SM": [(2.0, 5.0)]})
     assert m["detection_delay_s"] == {"SM": None}
     assert m["faults_missed"] == 1
     # Blamed once, wrongly: precision 0 / 1; recall 0 / 4.
@@ -79,14 +79,14 @@ def test_detection_counts_only_steps_inside_the_interval():
 def test_interval_bounds_are_closed():
     # Fault exactly 3-4 s: steps 3 and 4 are both inside.
     results = [CLEAN] * 4 + [consistent({"IMU_YAW"})] + [CLEAN] * 5
-    m = validation_metrics(STEP_T, results, DECISIONS, GATING, {"IMU_YAW": [(3.0, 4.0)]})
+    m = validation_metrics(STEP_T, results, DECISIONS, {"IMU_YAW": [(3.0, 4.0)]})
     assert m["detection_delay_s"] == {"IMU_YAW": 1.0}
     assert m["isolation_precision"] == 1.0 and m["isolation_recall"] == 0.5  # 1 of steps 3, 4
     assert m["faults_missed"] == 0
 
 
 def test_no_faults_and_no_alarms():
-    m = validation_metrics(STEP_T, [CLEAN] * 10, DECISIONS, GATING, {})
+    m = validation_metrics(STEP_T, [CLEAN] * 10, DECISIONS, {})
     assert m["alarm_fraction"] == 0.0
     assert m["isolation_precision"] is None and m["isolation_recall"] is None
     assert m["detection_delay_s"] == {} and m["faults_missed"] == 0 and m["blamed_steps"] == {}
@@ -94,7 +94,7 @@ def test_no_faults_and_no_alarms():
 
 def test_no_faults_false_alarms_give_zero_precision_and_no_recall():
     results = [CLEAN] * 8 + [consistent({"ODO"}), consistent({"ODO", "GPS"})]
-    m = validation_metrics(STEP_T, results, DECISIONS, GATING, {})
+    m = validation_metrics(STEP_T, results, DECISIONS, {})
     assert m["alarm_fraction"] == m["false_alarm_fraction"] == 0.2
     assert m["isolation_precision"] == 0.0  # 0 of 3 blamed component-steps
     assert m["isolation_recall"] is None  # nothing was faulty
@@ -103,9 +103,9 @@ def test_no_faults_false_alarms_give_zero_precision_and_no_recall():
 # --- oracle mode (results None): the gated components are the blamed set ---
 
 
-def gates(**actions: GatingAction) -> dict[str, FactorGate]:
-    """Decisions of one step from per-component actions."""
-    return factor_decisions(GATING, actions)
+def gates(**actions: GatingAction) -> dict[str, GatingAction]:
+    """The actions of one step."""
+    return dict(actions)
 
 
 EXC, INF = GatingAction.EXCLUDE, GatingAction.INFLATE
@@ -120,7 +120,7 @@ def test_oracle_metrics_from_decisions():
         + [gates()] * 2                # 8, 9
     )
     faults = {"SM": [(2.0, 5.0)], "IMU_YAW": [(7.0, 8.0)]}
-    m = validation_metrics(STEP_T, None, decisions, GATING, faults)
+    m = validation_metrics(STEP_T, None, decisions, faults)
     # Alarms: 2, 3, 4, 5, 7 -> 0.5. Blamed 5 component-steps, all true;
     # true: SM 2-5 (4) + IMU_YAW 7, 8 (2) = 6 -> recall 5 / 6.
     assert m["alarm_fraction"] == 0.5
@@ -132,19 +132,28 @@ def test_oracle_metrics_from_decisions():
     assert m["no_diagnosis_steps"] == 0
 
 
-def test_oracle_factor_with_two_components_blames_both():
-    cfg = GatingConfig(factors={"heading": ["IMU_GYRO", "IMU_YAW"], "sm": ["SM"]})
-    decisions = [factor_decisions(cfg, {})] * 5 + [factor_decisions(cfg, {"IMU_YAW": EXC})] * 5
-    m = validation_metrics(STEP_T, None, decisions, cfg, {"IMU_YAW": [(5.0, 9.0)]})
-    # Steps 5-9 blame {IMU_GYRO, IMU_YAW}: 10 blamed, 5 true -> precision 0.5.
-    assert m["isolation_precision"] == 0.5 and m["isolation_recall"] == 1.0
-    assert m["blamed_steps"] == {"IMU_GYRO": 5, "IMU_YAW": 5}
+def test_a_blamed_sensor_counts_as_all_its_modalities():
+    results = [CLEAN] * 5 + [consistent({"SM"})] * 5
+    expand = {"SM": ("SM_DIST", "SM_LAT", "SM_YAW")}
+    m = validation_metrics(STEP_T, results, DECISIONS, {"SM_DIST": [(5.0, 9.0)]}, expand)
+    # Steps 5-9 blame SM_DIST, SM_LAT and SM_YAW: 15 blamed, 5 true -> precision 1/3.
+    assert m["isolation_precision"] == round(1 / 3, 4) and m["isolation_recall"] == 1.0
+    assert m["blamed_steps"] == {"SM_DIST": 5, "SM_LAT": 5, "SM_YAW": 5}
+    assert m["detection_delay_s"] == {"SM_DIST": 0.0}
+
+
+def test_blame_end_lag():
+    # IMU_YAW at fault 2-5 s, blamed 3-7 s: the blame ends 2 s after the fault.
+    results = [CLEAN] * 3 + [consistent({"IMU_YAW"})] * 5 + [CLEAN] * 2
+    m = validation_metrics(STEP_T, results, DECISIONS, {"IMU_YAW": [(2.0, 5.0)]})
+    assert m["blame_end_lag_s"] == {"IMU_YAW": 2.0}
+    assert m["detection_delay_s"] == {"IMU_YAW": 1.0}
 
 
 def test_oracle_decisions_are_perfect():
     faults = {"SM": [(2.0, 5.0)], "GPS": [(8.0, 20.0)]}
-    decisions = oracle_decisions(GATING, STEP_T, faults)
-    m = validation_metrics(STEP_T, None, decisions, GATING, faults)
+    decisions = oracle_actions(GATING, STEP_T, faults)
+    m = validation_metrics(STEP_T, None, decisions, faults)
     # Gated: SM at 2-5, GPS at 8, 9 -> 6 of 10 steps.
     assert m["alarm_fraction"] == 0.6
     assert m["isolation_precision"] == 1.0 and m["isolation_recall"] == 1.0
@@ -152,7 +161,7 @@ def test_oracle_decisions_are_perfect():
 
 
 def test_interval_after_the_last_step_is_not_missed():
-    m = validation_metrics(STEP_T, [CLEAN] * 10, DECISIONS, GATING, {"SM": [(20.0, 30.0)]})
+    m = validation_metrics(STEP_T, [CLEAN] * 10, DECISIONS, {"SM": [(20.0, 30.0)]})
     assert m["faults_missed"] == 0 and m["detection_delay_s"] == {"SM": None}
 
 
@@ -160,5 +169,5 @@ def test_interval_after_the_last_step_is_not_missed():
 def test_metrics_are_json_ready(results):
     import json
 
-    m = validation_metrics(STEP_T, results, DECISIONS, GATING, FAULTS)
+    m = validation_metrics(STEP_T, results, DECISIONS, FAULTS)
     assert json.loads(json.dumps(m)) == m

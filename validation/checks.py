@@ -13,15 +13,22 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
-from slam.recording import MagneticReference
 from validation.observer_config import ObserversConfig
 
 logger = logging.getLogger(__name__)
 
 _HOLD_EPS_S = 1e-9  # step times are sums of floats; 0.1 * 10 may land below 1.0
+
+
+class MagneticReference(Protocol):
+    """The undisturbed local Earth field: strength (T) and dip (rad, positive down)."""
+
+    strength_T: float
+    dip_rad: float
 
 
 @dataclass(frozen=True)

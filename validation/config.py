@@ -11,6 +11,14 @@
   component (the simulator's labels): a component's factors are gated over
   its whole fault interval, right or wrong.
 
+``validation.pass`` decides how ``on`` runs:
+
+* ``offline`` (a recorded run): trend windows centred on each step, every
+  alarm dated by its evidence, and a second pass that keeps the blamed
+  measurements that agree with the other sensors (``gating.keep_k_sigma``);
+* ``causal``: as it would run on the robot, from past data only: trailing
+  windows, the counters' delay, hold-off and look-back.
+
 ``validation.model`` is the logical system model (a mapping, or a path to
 a YAML file relative to the config file that names it; the loader inlines
 it, so the ``config.yaml`` written beside a result is self-contained).
@@ -23,20 +31,24 @@ from typing import Any, Literal, Mapping
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from validation.gating import GatingConfig
+from validation.gating import GatingConfig, check_components
 from validation.model import SystemModel, validate_mapping
 from validation.observers import ObserversConfig, observers_config
+from validation.trends import Window
+from validation.yamlio import load_yaml
 
 GatingMode = Literal["off", "on", "oracle", "interval_oracle"]
+Pass = Literal["offline", "causal"]
 
 
 class ValidationConfig(BaseModel):
     """``rate_hz``: validation steps per second; observers' thresholds are
     counted in these steps."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
 
     mode: GatingMode = "off"
+    pass_: Pass = Field("offline", alias="pass")
     rate_hz: float = Field(10.0, gt=0.0)
     oracle_k_sigma: float = Field(3.0, gt=0.0)
     model: SystemModel | None = None
@@ -48,11 +60,20 @@ class ValidationConfig(BaseModel):
         # YAML 1.1 reads a bare on/off as a boolean.
         return {True: "on", False: "off"}.get(value, value) if isinstance(value, bool) else value
 
+    @property
+    def offline(self) -> bool:
+        return self.pass_ == "offline"
+
+    @property
+    def window(self) -> Window:
+        """The trend window: the observers' own, else the pass's."""
+        if self.observers.window is not None:
+            return self.observers.window
+        return "centred" if self.offline else "trailing"
+
 
 def inline_model(section: dict[str, Any], base_dir: Path) -> None:
     """Replace a ``model: path`` entry by the YAML it names (in place)."""
-    from slam.config import load_yaml
-
     model = section.get("model")
     if isinstance(model, str):
         path = Path(model)
@@ -68,10 +89,15 @@ def parse_sections(validation: Mapping[str, Any], gating: Mapping[str, Any]) -> 
     cfg = validate_mapping(ValidationConfig, data, "validation")
     cfg = cfg.model_copy(update={"observers": observers})
     gate = GatingConfig.from_mapping(dict(gating), "gating")
-    if cfg.mode in ("on", "interval_oracle") and cfg.model is None:
-        from validation.errors import ValidationError
+    from validation.errors import ValidationError
 
+    if cfg.mode in ("on", "interval_oracle") and cfg.model is None:
         raise ValidationError("validation.model: a system model is needed when validation.mode is on or interval_oracle")
+    if not cfg.offline and cfg.observers.window == "centred":
+        raise ValidationError(
+            "validation.observers.window: centred windows need the samples after each step; "
+            "validation.pass causal needs trailing (or null)"
+        )
     _check_names(cfg, gate)
     return cfg, gate
 
@@ -95,7 +121,4 @@ def _check_names(cfg: ValidationConfig, gate: GatingConfig) -> None:
     for check in (cfg.observers.magnetometer, cfg.observers.gps):
         if check.enabled and check.name not in model.unary_checks:
             raise ValidationError(f"validation.observers: check '{check.name}' is not in the model's unary_checks")
-    for factor, comps in gate.factors.items():
-        for c in comps:
-            if c not in model.components:
-                raise ValidationError(f"gating.factors.{factor}: unknown component '{c}'")
+    check_components(gate, model)

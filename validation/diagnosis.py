@@ -123,7 +123,10 @@ class Diagnoser:
     def _encode(self) -> list[list[int]]:
         """SD as CNF clauses."""
         m, v = self.model, self._var
-        cnf = [[-v("nab", c), v("ok", c)] for c in m.components]
+        cnf = []
+        for c in m.components:
+            sensor = m.sensor_of(c)
+            cnf.append([-v("nab", c), v("ok", c)] if sensor is None else [-v("nab", c), -v("nab", sensor), v("ok", c)])
         for r, (a, b) in m.relations.items():
             cnf.append([-v("ok", a), -v("ok", b), v("match", r)])
         for k, c in m.unary_checks.items():

@@ -59,7 +59,7 @@ def plot_yaw_trends(path: str | Path, recording: Recording, validation) -> None:
         lo, hi = min(d.min() for d in sane), max(d.max() for d in sane)
         pad = 0.2 * (hi - lo) + 10.0
         top.set_ylim(lo - pad, hi + pad)
-    _shade_faults(top, recording, {"IMU_YAW", "SM", "IMU_GYRO", "ODO"})
+    _shade_faults(top, recording, {"IMU_YAW", "SM_YAW", "IMU_GYRO", "ODO_YAW"})
     top.set_ylabel("yaw change [deg]")
     top.set_title(f"{recording.name}: yaw streams and their qualitative trends")
     top.legend(loc="best", fontsize="small")
@@ -70,7 +70,7 @@ def plot_yaw_trends(path: str | Path, recording: Recording, validation) -> None:
         ax.set_ylim(-1.4, 1.4)
         ax.set_ylabel(name, rotation=0, ha="right", fontsize="small")
         ax.grid(True, linewidth=0.5, alpha=0.5)
-        _shade_faults(ax, recording, {"IMU_YAW", "SM", "IMU_GYRO", "ODO"})
+        _shade_faults(ax, recording, {"IMU_YAW", "SM_YAW", "IMU_GYRO", "ODO_YAW"})
     axes[-1].set_xlabel("time [s]")
     save_figure(fig, path)
 

@@ -18,6 +18,10 @@ Definitions (validation steps at ``validation.rate_hz``):
   interval, at which any minimal diagnosis contains the component.
   ``faults_missed`` counts intervals never detected within their span,
   ``faults_detected`` those detected.
+* ``blame_end_lag_s``: per component with detected faults, the mean over
+  them of the time from the fault's end to the end of the blame (the run of
+  steps blaming the component that holds the interval's last blamed step);
+  negative when the blame ends before the fault.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from validation.diagnosis import DiagnosisResult
-from validation.gating import FactorGate, GatingAction, GatingConfig
+from validation.gating import Actions, GatingAction
 
 
 def _inside(t: np.ndarray, intervals: Sequence[tuple[float, float]]) -> np.ndarray:
@@ -37,33 +41,47 @@ def _inside(t: np.ndarray, intervals: Sequence[tuple[float, float]]) -> np.ndarr
     return mask
 
 
-def _blamed(results, decisions, gating: GatingConfig) -> tuple[list[set[str]], list[set[str]], np.ndarray]:
+def _blamed(
+    results, actions: list[Actions], expand: Mapping[str, Sequence[str]]
+) -> tuple[list[set[str]], list[set[str]], np.ndarray]:
     """Per step: the blamed set, the union of all minimal diagnoses, and
-    whether the step is an alarm."""
+    whether the step is an alarm; a blamed sensor counts as all its
+    modalities (``expand``)."""
+
+    def parts(comps) -> set[str]:
+        return {m for c in comps for m in expand.get(c, (c,))}
+
     if results is not None:
-        top = [set(r.diagnoses[0]) if r.consistent else set() for r in results]
-        union = [set().union(*r.diagnoses) if r.consistent else set() for r in results]
+        top = [parts(r.diagnoses[0]) if r.consistent else set() for r in results]
+        union = [parts(set().union(*r.diagnoses)) if r.consistent else set() for r in results]
         alarm = np.array([(not r.consistent) or bool(r.diagnoses[0]) for r in results], dtype=bool)
         return top, union, alarm
-    gated = []
-    for d in decisions:
-        comps: set[str] = set()
-        for factor, gate in d.items():
-            if gate.action is not GatingAction.INCLUDE:
-                comps.update(gating.factors.get(factor, ()))
-        gated.append(comps)
+    gated = [parts(c for c, a in act.items() if a is not GatingAction.INCLUDE) for act in actions]
     return gated, gated, np.array([bool(c) for c in gated], dtype=bool)
+
+
+def _blame_end_lag(step_t: np.ndarray, blamed: np.ndarray, a: float, b: float) -> float | None:
+    """Time from the fault's end ``b`` to the end of the blame run holding the
+    last blamed step within ``[a, b]``; None when nothing in it is blamed."""
+    inside = np.flatnonzero(blamed & (step_t >= a) & (step_t <= b))
+    if not len(inside):
+        return None
+    k = inside[-1]
+    while k + 1 < len(blamed) and blamed[k + 1]:
+        k += 1
+    return float(step_t[k] - b)
 
 
 def validation_metrics(
     step_t: np.ndarray,
     results: list[DiagnosisResult] | None,
-    decisions: list[dict[str, FactorGate]],
-    gating: GatingConfig,
+    actions: list[Actions],
     faults: Mapping[str, Sequence[tuple[float, float]]],
+    expand: Mapping[str, Sequence[str]] | None = None,
 ) -> dict:
-    """The metrics of the module docstring, JSON-ready."""
-    blamed, union, alarm = _blamed(results, decisions, gating)
+    """The metrics of the module docstring, JSON-ready; ``expand`` gives the
+    modalities a blamed sensor stands for (the model's ``sensors``)."""
+    blamed, union, alarm = _blamed(results, actions, expand or {})
     n = len(step_t)
     true_sets = [set() for _ in range(n)]
     for comp, intervals in faults.items():
@@ -74,18 +92,24 @@ def validation_metrics(
     n_true = sum(len(s) for s in true_sets)
 
     delays: dict[str, float | None] = {}
+    lags: dict[str, float | None] = {}
     missed = detected = 0
     for comp, intervals in faults.items():
-        found = []
+        found, ends = [], []
+        comp_blamed = np.array([comp in u for u in blamed], dtype=bool)
         for a, b in intervals:
             hits = [t for t, u in zip(step_t, union) if a <= t <= b and comp in u]
             if hits:
                 found.append(hits[0] - a)
                 detected += 1
+                lag = _blame_end_lag(step_t, comp_blamed, a, b)
+                if lag is not None:
+                    ends.append(lag)
             elif np.any((step_t >= a) & (step_t <= b)):
                 missed += 1
         if intervals:
             delays[comp] = round(float(np.mean(found)), 3) if found else None
+            lags[comp] = round(float(np.mean(ends)), 3) if ends else None
 
     blamed_counts = {}
     for b in blamed:
@@ -98,6 +122,7 @@ def validation_metrics(
         "isolation_precision": round(tp / n_blamed, 4) if n_blamed else None,
         "isolation_recall": round(tp / n_true, 4) if n_true else None,
         "detection_delay_s": delays,
+        "blame_end_lag_s": lags,
         "faults_missed": missed,
         "faults_detected": detected,
         "blamed_steps": dict(sorted(blamed_counts.items())),

@@ -1,7 +1,8 @@
 """The logical system model SD of the consistency-based diagnosis, read from YAML.
 
-A model names the diagnosable *components* (sensors such as ``ODO``,
-``IMU_GYRO``, ``IMU_YAW``, ``SM``, ``GPS``), the *relations* whose observers
+A model names the diagnosable *components* (a sensor's modalities, as in
+the paper's Table 1: ``ODO_DIST``, ``ODO_YAW``, ``IMU_GYRO``, ``IMU_YAW``,
+``SM_DIST``, ``SM_LAT``, ``SM_YAW``, ``GPS``), the *relations* whose observers
 compare the streams of two components, unary *plausibility checks* of one
 component, and optional rules. Its meaning, in Reiter's terms:
 
@@ -10,6 +11,13 @@ component, and optional rules. Its meaning, in Reiter's terms:
   ``no_match`` is ``¬match``, so ``match ∧ no_match -> ⊥``;
 * ``ok(S) -> plausible(S)`` for a unary check; ``implausible ∧ plausible -> ⊥``;
 * fault propagation ``ok(S1) <-> ok(S2)``: both are faulty or neither is;
+* a sensor with several modalities (``sensors``: e.g. ``SM`` with
+  ``SM_DIST``, ``SM_LAT``, ``SM_YAW``) propagates its own fault to all of
+  them: ``¬AB(M) ∧ ¬AB(S) -> ok(M)`` for each modality M of sensor S. A
+  modality can fail alone (a scan matcher in a corridor loses its distance
+  and keeps its heading), or the whole sensor with one fault (a scan
+  matcher in an open yard loses everything), which is then one fault, not
+  three;
 * failure masking on a relation, ``match(S1, S2) ∧ CORR(match(S1, S2)) ->
   ok(S1) ∧ ok(S2)``: a match is taken as evidence that both are healthy. With
   ``corr: false`` the assumption CORR cannot be retracted, so a match always
@@ -18,15 +26,15 @@ component, and optional rules. Its meaning, in Reiter's terms:
 
 Example (``configs/validation/telemax_model.yaml`` is the shipped one)::
 
-    components: [IMU_GYRO, IMU_YAW, SM]
+    components: [IMU_GYRO, IMU_YAW, SM_YAW, SM_DIST]
     relations:
-      yaw_gyro_sm: [IMU_GYRO, SM]
+      yaw_gyro_sm: [IMU_GYRO, SM_YAW]
     unary_checks:
       mag_plausible: IMU_YAW
-    fault_propagation: [[IMU_GYRO, IMU_YAW]]
+    fault_propagation: [[SM_YAW, SM_DIST]]
     failure_masking:
       - {relation: yaw_gyro_sm, corr: true, masking_prob: 0.05}
-    priors: {SM: 0.05}
+    priors: {SM_YAW: 0.05}
 """
 
 from __future__ import annotations
@@ -38,9 +46,8 @@ from typing import Any, TypeVar
 import pydantic
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from slam.config import load_yaml
-from slam.errors import GslamError
 from validation.errors import ValidationError
+from validation.yamlio import load_yaml
 
 DEFAULT_PRIOR = 0.01
 """Fault probability of a component the model gives no prior for."""
@@ -81,6 +88,7 @@ class SystemModel(_Strict):
     """The system description SD; see the module docstring for its logic."""
 
     components: tuple[str, ...] = Field(min_length=1)
+    sensors: dict[str, tuple[str, ...]] = Field(default_factory=dict)
     relations: dict[str, tuple[str, str]] = Field(default_factory=dict)
     unary_checks: dict[str, str] = Field(default_factory=dict)
     fault_propagation: tuple[tuple[str, str], ...] = ()
@@ -122,6 +130,15 @@ class SystemModel(_Strict):
                 raise ValueError(f"unary_checks.{name}: name already used by a relation")
         for i, pair in enumerate(self.fault_propagation):
             check(f"fault_propagation.{i}", pair)
+        owner: dict[str, str] = {}
+        for sensor, parts in self.sensors.items():
+            check("sensors", (sensor, *parts))
+            for part in parts:
+                if part == sensor or part in self.sensors:
+                    raise ValueError(f"sensors.{sensor}: {part!r} cannot be a modality of a sensor")
+                if part in owner:
+                    raise ValueError(f"sensors.{sensor}: {part!r} is already a modality of {owner[part]!r}")
+                owner[part] = sensor
         seen: set[str] = set()
         for i, rule in enumerate(self.failure_masking):
             if rule.relation not in self.relations:
@@ -135,6 +152,15 @@ class SystemModel(_Strict):
     def prior(self, component: str) -> float:
         """Prior fault probability of ``component`` (``DEFAULT_PRIOR`` if unset)."""
         return self.priors.get(component, DEFAULT_PRIOR)
+
+    def modalities(self, component: str) -> tuple[str, ...]:
+        """What a fault of ``component`` stands for: a sensor's modalities,
+        or the component itself."""
+        return self.sensors.get(component, (component,))
+
+    def sensor_of(self, component: str) -> str | None:
+        """The sensor a modality belongs to, if any."""
+        return next((s for s, parts in self.sensors.items() if component in parts), None)
 
     @property
     def observables(self) -> tuple[str, ...]:
@@ -162,8 +188,4 @@ def validate_mapping(model_type: type[_M], data: Any, source: str) -> _M:
 
 def load_model(path: str | Path) -> SystemModel:
     """Read a :class:`SystemModel` from a YAML file."""
-    try:
-        data = load_yaml(path)
-    except GslamError as e:
-        raise ValidationError(str(e)) from None
-    return validate_mapping(SystemModel, data, str(path))
+    return validate_mapping(SystemModel, load_yaml(path), str(path))

@@ -17,13 +17,14 @@ from typing import Literal
 import pydantic
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from slam.config import load_yaml
-from slam.errors import GslamError
 from validation.errors import ValidationError
 from validation.model import validate_mapping
 from validation.streams import STREAM_COMPONENT, STREAM_NAMES, StreamName
+from validation.trends import Rule, Window
+from validation.yamlio import load_yaml
 
-Component = Literal["ODO", "IMU_GYRO", "IMU_YAW", "SM", "GPS"]
+Component = str
+"""A component of the system model (checked against the model's list)."""
 
 
 # --- configuration ------------------------------------------------------------
@@ -34,12 +35,23 @@ class _Strict(BaseModel):
 
 
 class RelationConfig(_Strict):
-    """One relation observer: two streams whose trends should agree.
+    """One relation observer: two streams that should move together.
 
-    ``boundary`` is Algorithm 2's b in stream units per second (rad/s for
-    yaw, m/s for distance, m/s^2 for speed); ``boundary_a``/``boundary_b``
-    override it per stream. ``window_s`` is Algorithm 1's w; ``threshold``
-    is th, in steps. Components default to the streams' own.
+    ``kind: trend`` (the paper's) compares their qualitative trends:
+    ``boundary`` is Algorithm 1's b in stream units per second (rad/s for
+    yaw, m/s for distance, m/s^2 for speed), ``boundary_a``/``boundary_b``
+    override it per stream, and ``window_s`` is Algorithm 2's w.
+
+    ``kind: residual`` is quantitative: over a window of ``window_s``
+    (centred or trailing, as the trends') stream b should change by ``gain``
+    times stream a's change; a step is a mismatch where the residual
+    ``db - gain * da`` exceeds ``k_sigma`` times ``sqrt(sigma_floor^2 +
+    (sigma_rel * da)^2)`` (stream b's units). It sees what trend symbols
+    cannot: a scan matcher reporting 20 m/s while the odometry says 0.4 m/s
+    has the same ``+`` trend.
+
+    Both feed Algorithm 3: ``threshold`` is th, in steps. Components default
+    to the streams' own.
     ``warmup_s`` (default ``2 * window_s``): a stream's trend takes part only
     once the stream has had data on every step for that long, since the
     truncated windows after a start or a gap give slopes of noise that the
@@ -50,10 +62,15 @@ class RelationConfig(_Strict):
     """
 
     name: str
+    kind: Literal["trend", "residual"] = "trend"
     stream_a: StreamName
     stream_b: StreamName
-    boundary: float = Field(gt=0.0)
+    boundary: float | None = Field(None, gt=0.0)
     window_s: float = Field(gt=0.0)
+    gain: float = 1.0
+    sigma_floor: float | None = Field(None, gt=0.0)
+    sigma_rel: float = Field(0.0, ge=0.0)
+    k_sigma: float = Field(3.0, gt=0.0)
     threshold: int = Field(ge=0)
     max_counter: int | None = Field(None, ge=1)
     warmup_s: float | None = Field(None, ge=0.0)
@@ -68,6 +85,10 @@ class RelationConfig(_Strict):
             raise ValueError(f"relation {self.name!r} compares {self.stream_a!r} with itself")
         if self.max_counter is not None and self.max_counter <= self.threshold:
             raise ValueError(f"relation {self.name!r}: max_counter must exceed threshold")
+        if self.kind == "trend" and self.boundary is None:
+            raise ValueError(f"relation {self.name!r}: a trend relation needs a boundary")
+        if self.kind == "residual" and self.sigma_floor is None:
+            raise ValueError(f"relation {self.name!r}: a residual relation needs sigma_floor")
         return self
 
     @property
@@ -105,6 +126,7 @@ DEFAULT_RELATIONS: tuple[RelationConfig, ...] = (
     _relation("yaw_compass_sm", "compass_yaw", "sm_yaw", 0.05, 2.0, 10),
     _relation("yaw_gyro_sm", "gyro_yaw", "sm_yaw", 0.05, 2.0, 10),
     _relation("distance_odo_sm", "odo_distance", "sm_distance", 0.05, 2.0, 10),
+    _relation("lateral_odo_sm", "odo_lateral", "sm_lateral", 0.05, 2.0, 10),
     _relation("yaw_odo_gyro", "odo_yaw", "gyro_yaw", 0.05, 2.0, 10),
     # GPS speed from 1 Hz fixes is noisy: a longer window, a wider band.
     _relation("speed_gps_odo", "gps_speed", "odo_speed", 0.2, 4.0, 10),
@@ -137,8 +159,17 @@ class GpsCheckConfig(_Strict):
 
 class ObserversConfig(_Strict):
     """All observers; ``max_gap_s`` is the largest gap (s) between samples a
-    step may be interpolated across, ``stream_max_gap_s`` overrides it."""
+    step may be interpolated across, ``stream_max_gap_s`` overrides it.
 
+    ``window``: the trend windows of Algorithm 2, ``centred`` on each sample
+    (the paper's; it needs the samples after it, so offline validation only)
+    or ``trailing`` (causal); null takes the one of ``validation.pass``.
+    ``rule``: Algorithm 1's rule inside the band, ``paper`` as listed or the
+    ``project``'s (:mod:`validation.trends`).
+    """
+
+    window: Window | None = None
+    rule: Rule = "paper"
     relations: tuple[RelationConfig, ...] = DEFAULT_RELATIONS
     magnetometer: MagnetometerCheckConfig = MagnetometerCheckConfig()
     gps: GpsCheckConfig = GpsCheckConfig()
@@ -176,8 +207,4 @@ def observers_config(data: Mapping, source: str = "observers") -> ObserversConfi
 
 def load_observers_config(path: str | Path) -> ObserversConfig:
     """Read an :class:`ObserversConfig` from a YAML file."""
-    try:
-        data = load_yaml(path)
-    except GslamError as e:
-        raise ValidationError(str(e)) from None
-    return observers_config(data, str(path))
+    return observers_config(load_yaml(path), str(path))

@@ -19,7 +19,9 @@ from validation.observer_config import RelationConfig
 
 @dataclass
 class RelationTrace:
-    """One relation observer over all steps (arrays of length m)."""
+    """One relation observer over all steps (arrays of length m). A residual
+    relation's ``symbol_a`` is 1 on a mismatch (``symbol_b`` 0) and ``z`` its
+    normalised residual; a trend relation has no ``z``."""
 
     relation: RelationConfig
     symbol_a: np.ndarray
@@ -27,6 +29,7 @@ class RelationTrace:
     valid: np.ndarray
     counter: np.ndarray
     no_match: np.ndarray
+    z: np.ndarray | None = None
 
     def observation(self, k: int) -> Observation | None:
         if not self.valid[k]:
@@ -73,8 +76,11 @@ class ObserverLog:
         """Flat named columns (for the per-step CSV log)."""
         cols: dict[str, np.ndarray] = {"t": self.t}
         for name, r in self.relations.items():
-            cols[f"{name}.trend_a"] = r.symbol_a
-            cols[f"{name}.trend_b"] = r.symbol_b
+            if r.z is not None:
+                cols[f"{name}.z"] = np.round(np.where(r.valid, r.z, np.nan), 3)
+            else:
+                cols[f"{name}.trend_a"] = r.symbol_a
+                cols[f"{name}.trend_b"] = r.symbol_b
             cols[f"{name}.valid"] = r.valid
             cols[f"{name}.counter"] = r.counter
             cols[f"{name}.no_match"] = r.no_match

@@ -2,21 +2,33 @@
 
 A *relation* observer compares the qualitative trends (Algorithms 1 and 2,
 :mod:`validation.trends`) of two streams that should move together, e.g. the
-compass yaw and the integrated gyro yaw, at every validation step. A
-mismatch counter rises by one on a step where the two symbols differ and
-falls by one (not below zero) where they agree; the observation is
-``NO_MATCH`` while the counter exceeds the relation's threshold ``th`` and
-``MATCH`` otherwise. (The listing's ``count = counter + 1`` is read as the
-counter's own increment.) The comparison is strict: ``+`` against ``0`` is a
-mismatch. A step where either stream has no data makes no observation and
-leaves the counter unchanged; trends are computed over the steps where the
-stream has data, so a gap shortens the next windows as at the start; the
-relation observes nothing until both streams have had data for a warm-up
-time (``RelationConfig.warmup_s``), since trends from truncated windows are
-noise.
+compass yaw and the integrated gyro yaw, at every validation step.
+:func:`observe` is Algorithm 3 (observe): a mismatch counter rises by one on
+a step where the two symbols differ and falls by one (not below zero) where
+they agree; the observation is ``NO_MATCH`` while the counter exceeds the
+relation's threshold ``th`` and ``MATCH`` otherwise. (The listing's
+``count = counter + 1`` is read as the counter's own increment.) The
+comparison is strict: ``+`` against ``0`` is a mismatch. A step where either
+stream has no data makes no observation and leaves the counter unchanged;
+trends are computed over the steps where the stream has data, so a gap
+shortens the next windows as at the start; the relation observes nothing
+until both streams have had data for a warm-up time
+(``RelationConfig.warmup_s``), since trends from truncated windows are noise.
 
-:func:`observe` runs every observer over a whole run; :class:`ObserverBank`
-does the same one step at a time, with the same results. The unary
+Online, the counter's threshold is what makes an alarm reliable, at the
+price of a delay of ``th`` steps, and its drain keeps the alarm on after
+the streams agree again. Offline (:func:`evidence`), each alarm is dated
+by its evidence instead. Run forward, an alarm's evidence starts at the
+first mismatch of the climb that raised it (the step after the counter was
+last 0); run backward over the same steps, the counter climbs from the
+alarm's last mismatch. ``NO_MATCH`` holds where both runs' evidence does:
+from where the mismatches begin to where they end, without the ``th``
+steps of delay or the drain. Unary checks are dated the same way: a
+deviation that lasted ``hold_s`` is implausible over its whole run.
+
+:func:`run_observers` runs every observer over a whole run;
+:class:`ObserverBank` does the same one step at a time (trailing windows),
+with the same results as the batch run with trailing windows. The unary
 plausibility checks live in :mod:`validation.checks`, the configuration in
 :mod:`validation.observer_config` and the per-step log in
 :mod:`validation.observer_log`; their names are re-exported here.
@@ -50,12 +62,13 @@ from validation.observer_config import (
     observers_config,
 )
 from validation.observer_log import ObserverLog, RelationTrace, UnaryTrace
+from validation.quantitative import WindowChange, residual_test, window_changes
 from validation.streams import ANGULAR_STREAMS, STREAM_NAMES, StepStreams, Stream, resample_streams
-from validation.trends import Trend, TrendEstimator, trends
+from validation.trends import Rule, Trend, TrendEstimator, Window, abstract_stream
 
 __all__ = [
     # Algorithm 3 and the observers defined here
-    "MismatchCounter", "ObserverBank", "StepObservations", "compare_trends", "observe", "observe_steps",
+    "MismatchCounter", "ObserverBank", "StepObservations", "evidence", "observe", "observe_steps", "run_observers",
     # re-exported from validation.observer_config
     "Component", "DEFAULT_RELATIONS", "GpsCheckConfig", "MagnetometerCheckConfig", "ObserversConfig",
     "RelationConfig", "load_observers_config", "observers_config",
@@ -71,14 +84,14 @@ logger = logging.getLogger(__name__)
 # --- Algorithm 3 ------------------------------------------------------------
 
 
-def compare_trends(
+def observe(
     symbol_a: np.ndarray,
     symbol_b: np.ndarray,
     threshold: int,
     valid: np.ndarray | None = None,
     max_counter: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Algorithm 3 over whole sequences: ``(counter, no_match)`` per step.
+    """Algorithm 3 (observe) over whole sequences: ``(counter, no_match)`` per step.
 
     ``counter_k = counter_{k-1} + 1`` on a mismatch (symbols differ),
     ``max(0, counter_{k-1} - 1)`` on a match, unchanged where ``valid`` is
@@ -104,7 +117,7 @@ def compare_trends(
 
 
 class MismatchCounter:
-    """Algorithm 3 one step at a time."""
+    """Algorithm 3 (observe) one step at a time."""
 
     def __init__(self, threshold: int, max_counter: int | None = None) -> None:
         self.threshold = threshold
@@ -121,6 +134,46 @@ class MismatchCounter:
         return Observation.NO_MATCH if self.counter > self.threshold else Observation.MATCH
 
 
+def evidence(
+    symbol_a: np.ndarray,
+    symbol_b: np.ndarray,
+    threshold: int,
+    valid: np.ndarray,
+    max_counter: int | None = None,
+) -> np.ndarray:
+    """Offline ``NO_MATCH`` mask: every alarm of Algorithm 3 dated by its
+    evidence, run forward and backward (module docstring). Steps without
+    data stay False."""
+    a, b, v = np.asarray(symbol_a), np.asarray(symbol_b), np.asarray(valid, dtype=bool)
+    forward = _climbs(a, b, v, *observe(a, b, threshold, v, max_counter))
+    ra, rb, rv = a[::-1], b[::-1], v[::-1]
+    backward = _climbs(ra, rb, rv, *observe(ra, rb, threshold, rv, max_counter))[::-1]
+    return forward & backward
+
+
+def _climbs(symbol_a: np.ndarray, symbol_b: np.ndarray, valid: np.ndarray, counter: np.ndarray, no_match: np.ndarray) -> np.ndarray:
+    """Each alarm from the first mismatch of the climb that raised it to the
+    last mismatch before the counter returns to 0."""
+    m = len(counter)
+    mismatch = valid & (np.asarray(symbol_a) != np.asarray(symbol_b))
+    out = np.zeros(m, dtype=bool)
+    # Zero-counter steps (valid, counter 0) bound each climb.
+    zero = valid & (counter == 0)
+    zeros = np.flatnonzero(zero)
+    k = 0
+    alarm = np.flatnonzero(no_match)
+    while k < len(alarm):
+        first = alarm[k]
+        i = np.searchsorted(zeros, first)  # zeros before the alarm: zeros[:i]
+        start = zeros[i - 1] + 1 if i > 0 else 0
+        end_zero = zeros[i] if i < len(zeros) else m
+        hits = np.flatnonzero(mismatch[start:end_zero])
+        if len(hits):
+            out[start + hits[0] : start + hits[-1] + 1] = True
+        k = np.searchsorted(alarm, end_zero)
+    return out & valid
+
+
 # --- batch ----------------------------------------------------------------------
 
 
@@ -130,9 +183,17 @@ def _trend_key(relation: RelationConfig, side: int) -> tuple[str, float, float]:
 
 
 def observe_steps(
-    steps: StepStreams, relations: Sequence[RelationConfig], unary: Sequence[UnaryCheck] = ()
+    steps: StepStreams,
+    relations: Sequence[RelationConfig],
+    unary: Sequence[UnaryCheck] = (),
+    window: Window = "trailing",
+    rule: Rule = "paper",
+    offline: bool = False,
 ) -> ObserverLog:
-    """Run every observer over streams already resampled onto the steps."""
+    """Run every observer over streams already resampled onto the steps.
+
+    ``window`` and ``rule`` choose Algorithms 1-2's window and rule;
+    ``offline`` dates every alarm by its evidence (:func:`evidence`)."""
     m = len(steps.t)
     missing = np.zeros(m, dtype=bool)
     cache: dict[tuple[str, float, float], np.ndarray] = {}
@@ -144,19 +205,35 @@ def observe_steps(
         valid = steps.valid[name]
         if key not in cache:
             sym = np.zeros(m, dtype=np.int8)
-            sym[valid] = trends(
-                steps.t[valid], steps.values[name][valid], window_s, boundary, steps.angular[name]
+            sym[valid] = abstract_stream(
+                steps.t[valid], steps.values[name][valid], boundary, window_s, window, rule, steps.angular[name]
             ).symbol
             cache[key] = sym
         return cache[key], valid
 
+    def residual(rel: RelationConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        a, b = rel.streams
+        if a not in steps.values or b not in steps.values:
+            return np.zeros(m), np.zeros(m, dtype=bool), missing
+        da, ok_a = window_changes(steps.t, steps.values[a], steps.valid[a], rel.window_s, window)
+        db, ok_b = window_changes(steps.t, steps.values[b], steps.valid[b], rel.window_s, window)
+        z, mismatch = residual_test(rel, da, db)
+        return z, mismatch, ok_a & ok_b
+
     rel_traces: dict[str, RelationTrace] = {}
     for rel in relations:
-        sym_a, valid_a = symbols(_trend_key(rel, 0))
-        sym_b, valid_b = symbols(_trend_key(rel, 1))
-        valid = held(steps.t, valid_a, rel.warmup) & held(steps.t, valid_b, rel.warmup)
-        counter, no_match = compare_trends(sym_a, sym_b, rel.threshold, valid, rel.max_counter)
-        rel_traces[rel.name] = RelationTrace(rel, sym_a, sym_b, valid, counter, no_match)
+        if rel.kind == "residual":
+            z, mismatch, valid = residual(rel)
+            sym_a, sym_b = mismatch.astype(np.int8), np.zeros(m, dtype=np.int8)
+        else:
+            z = None
+            sym_a, valid_a = symbols(_trend_key(rel, 0))
+            sym_b, valid_b = symbols(_trend_key(rel, 1))
+            valid = held(steps.t, valid_a, rel.warmup) & held(steps.t, valid_b, rel.warmup)
+        counter, no_match = observe(sym_a, sym_b, rel.threshold, valid, rel.max_counter)
+        if offline:
+            no_match = evidence(sym_a, sym_b, rel.threshold, valid, rel.max_counter)
+        rel_traces[rel.name] = RelationTrace(rel, sym_a, sym_b, valid, counter, no_match, z)
         logger.debug("%s: no_match on %d of %d valid steps", rel.name, int(no_match.sum()), int(valid.sum()))
 
     unary_traces: dict[str, UnaryTrace] = {}
@@ -168,23 +245,39 @@ def observe_steps(
             valid = np.logical_and.reduce([steps.valid[s] for s in check.streams])
             with np.errstate(invalid="ignore"):
                 deviant = valid & check.deviant({s: steps.values[s] for s in check.streams})
-        unary_traces[check.name] = UnaryTrace(
-            check.name, check.component, valid, deviant, held(steps.t, deviant, check.hold_s)
-        )
+        implausible = held(steps.t, deviant, check.hold_s)
+        if offline:
+            implausible = _whole_runs(deviant, implausible)
+        unary_traces[check.name] = UnaryTrace(check.name, check.component, valid, deviant, implausible)
     return ObserverLog(steps.t, rel_traces, unary_traces)
 
 
-def observe(
+def _whole_runs(deviant: np.ndarray, held_mask: np.ndarray) -> np.ndarray:
+    """Every run of ``deviant`` that reaches ``held_mask`` anywhere, whole."""
+    out = np.zeros(len(deviant), dtype=bool)
+    d = np.concatenate(([False], deviant, [False]))
+    starts = np.flatnonzero(~d[:-1] & d[1:])
+    ends = np.flatnonzero(d[:-1] & ~d[1:])
+    for a, b in zip(starts, ends):
+        if held_mask[a:b].any():
+            out[a:b] = True
+    return out
+
+
+def run_observers(
     streams: Mapping[str, Stream],
     relations: Sequence[RelationConfig],
     step_times: np.ndarray,
     unary: Sequence[UnaryCheck] = (),
     max_gap_s: float = 0.5,
     stream_max_gap_s: Mapping[str, float] | None = None,
+    window: Window = "trailing",
+    rule: Rule = "paper",
+    offline: bool = False,
 ) -> ObserverLog:
     """Resample ``streams`` onto ``step_times`` (s) and run every observer."""
     steps = resample_streams(streams, step_times, max_gap_s, stream_max_gap_s)
-    return observe_steps(steps, relations, unary)
+    return observe_steps(steps, relations, unary, window, rule, offline)
 
 
 # --- online -----------------------------------------------------------------------
@@ -212,8 +305,10 @@ class ObserverBank:
         relations: Sequence[RelationConfig],
         unary: Sequence[UnaryCheck] = (),
         angular: Mapping[str, bool] | None = None,
+        rule: Rule = "paper",
     ) -> None:
         """``angular`` says which streams are angles (default: the yaw streams)."""
+        self.rule = rule
         self.relations = tuple(relations)
         self.angular = dict(angular) if angular is not None else {n: n in ANGULAR_STREAMS for n in STREAM_NAMES}
         self.unary = tuple(unary)
@@ -221,6 +316,7 @@ class ObserverBank:
         self._counters = {r.name: MismatchCounter(r.threshold, r.max_counter) for r in self.relations}
         self._run_start: dict[str, float | None] = {c.name: None for c in self.unary}
         self._present_since: dict[str, float | None] = {s: None for r in self.relations for s in r.streams}
+        self._changes: dict[tuple[str, float], WindowChange] = {}
 
     def update(self, t: float, values: Mapping[str, float | None]) -> StepObservations:
         """Process step ``t`` (s). ``values`` maps a stream to its value at the
@@ -230,16 +326,29 @@ class ObserverBank:
             v = values.get(name)
             return v is not None and bool(np.isfinite(v))
 
-        # 1. Trends of every stream with data at this step.
+        # 1. Trends of every stream with data at this step, and the windowed
+        #    changes of the residual relations' streams.
         current: dict[tuple[str, float, float], Trend] = {}
+        changes: dict[tuple[str, float], float | None] = {}
         for rel in self.relations:
+            if rel.kind == "residual":
+                for name in rel.streams:
+                    key = (name, rel.window_s)
+                    if key not in changes:
+                        tracker = self._changes.setdefault(
+                            key, WindowChange(rel.window_s, self.angular.get(name, False))
+                        )
+                        changes[key] = tracker.update(t, float(values[name]) if present(name) else None)
+                continue
             for side in (0, 1):
                 key = _trend_key(rel, side)
                 if key in current or not present(key[0]):
                     continue
                 est = self._estimators.get(key)
                 if est is None:
-                    est = self._estimators[key] = TrendEstimator(key[1], key[2], self.angular.get(key[0], False))
+                    est = self._estimators[key] = TrendEstimator(
+                        key[1], key[2], self.angular.get(key[0], False), self.rule
+                    )
                 current[key] = est.update(t, float(values[key[0]])).symbol
 
         # 2. Relations (Algorithm 3), once both streams are warm.
@@ -252,9 +361,15 @@ class ObserverBank:
 
         symbols, counters, observations = {}, {}, {}
         for rel in self.relations:
-            ka, kb = _trend_key(rel, 0), _trend_key(rel, 1)
-            valid = warm(ka[0], rel.warmup) and warm(kb[0], rel.warmup)
-            sym = (current.get(ka, Trend.ZERO), current.get(kb, Trend.ZERO))
+            if rel.kind == "residual":
+                da, db = (changes[(name, rel.window_s)] for name in rel.streams)
+                valid = da is not None and db is not None
+                mismatch = bool(residual_test(rel, np.array(da), np.array(db))[1]) if valid else False
+                sym = (Trend.PLUS if mismatch else Trend.ZERO, Trend.ZERO)
+            else:
+                ka, kb = _trend_key(rel, 0), _trend_key(rel, 1)
+                valid = warm(ka[0], rel.warmup) and warm(kb[0], rel.warmup)
+                sym = (current.get(ka, Trend.ZERO), current.get(kb, Trend.ZERO))
             counter = self._counters[rel.name]
             observations[rel.name] = counter.update(int(sym[0]), int(sym[1]), valid)
             symbols[rel.name] = sym

@@ -1,22 +1,27 @@
-"""The named streams the observers compare, derived from one recording.
+"""The named streams the observers compare, derived from one run's sensors.
 
-Relation streams (trend streams), with the component each one speaks for:
+Relation streams (trend streams), with the component each one speaks for
+(one component per modality, as in the paper's Table 1):
 
 ============== ========= ===================================================
 name           component values
 ============== ========= ===================================================
 compass_yaw    IMU_YAW   compass heading, rad (angular)
 gyro_yaw       IMU_GYRO  gyro yaw rate integrated by trapezoids, rad from 0
-sm_yaw         SM        scan-matching (KISS-ICP) yaw, rad (angular)
-odo_yaw        ODO       odometry yaw, rad (angular)
-odo_distance   ODO       path length of the odometry x/y, m
-sm_distance    SM        path length of the scan-matching x/y, m
-odo_lateral    ODO       sideways travel: sum of the body-frame lateral steps, m
-sm_lateral     SM        the same from scan matching, m
-odo_speed      ODO       derivative of odo_distance, m/s
+sm_yaw         SM_YAW    scan-matching (KISS-ICP) yaw, rad (angular)
+odo_yaw        ODO_YAW   odometry yaw, rad (angular)
+odo_distance   ODO_DIST  path length of the odometry x/y, m
+sm_distance    SM_DIST   path length of the scan-matching x/y, m
+odo_lateral    ODO_DIST  sideways travel: sum of the body-frame lateral steps, m
+sm_lateral     SM_LAT    the same from scan matching, m
+odo_speed      ODO_DIST  derivative of odo_distance, m/s
 gps_speed      GPS       speed from the slope of the fixes' x and y over a
                          window, m/s
 ============== ========= ===================================================
+
+The sensors come in as any object with the attributes of
+:class:`SensorSet` (``slam.recording.Recording`` is one); this package does
+not depend on the pipeline that reads them.
 
 Quality streams for the unary checks: ``mag_strength`` (T) and ``mag_dip``
 (rad, positive downward, assuming a level robot) from the raw compass field,
@@ -33,13 +38,12 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal, get_args
+from typing import Literal, Protocol, get_args
 
 import numpy as np
 
-from validation.trends import derivative
-from slam.recording import Recording, Trajectory
 from validation.errors import ValidationError
+from validation.trends import Window, derive_stream
 
 logger = logging.getLogger(__name__)
 
@@ -52,13 +56,13 @@ QualityStreamName = Literal["mag_strength", "mag_dip", "gps_sigma"]
 STREAM_COMPONENT: dict[str, str] = {
     "compass_yaw": "IMU_YAW",
     "gyro_yaw": "IMU_GYRO",
-    "sm_yaw": "SM",
-    "odo_yaw": "ODO",
-    "odo_distance": "ODO",
-    "sm_distance": "SM",
-    "odo_lateral": "ODO",
-    "sm_lateral": "SM",
-    "odo_speed": "ODO",
+    "sm_yaw": "SM_YAW",
+    "odo_yaw": "ODO_YAW",
+    "odo_distance": "ODO_DIST",
+    "sm_distance": "SM_DIST",
+    "odo_lateral": "ODO_DIST",
+    "sm_lateral": "SM_LAT",
+    "odo_speed": "ODO_DIST",
     "gps_speed": "GPS",
     "mag_strength": "IMU_YAW",
     "mag_dip": "IMU_YAW",
@@ -66,6 +70,51 @@ STREAM_COMPONENT: dict[str, str] = {
 }
 STREAM_NAMES: tuple[str, ...] = get_args(StreamName) + get_args(QualityStreamName)
 ANGULAR_STREAMS: frozenset[str] = frozenset({"compass_yaw", "sm_yaw", "odo_yaw"})
+
+
+class PoseSeries(Protocol):
+    """Planar poses over time: ``t`` (n,) s, ``x``/``y`` (n,) m, ``yaw`` (n,) rad."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    yaw: np.ndarray
+
+
+class RateSeries(Protocol):
+    """Yaw rate about the body z axis: ``t`` (n,) s, ``rate`` (n,) rad/s."""
+
+    t: np.ndarray
+    rate: np.ndarray
+
+
+class HeadingSeries(Protocol):
+    """Compass heading ``yaw`` (n,) rad, world frame; ``field`` (n, 3) T in the
+    body frame when it came from a magnetometer, else None."""
+
+    t: np.ndarray
+    yaw: np.ndarray
+    field: np.ndarray | None
+
+
+class FixSeries(Protocol):
+    """GPS fixes in the local world frame: ``x``/``y`` (n,) m, ``sigma`` (n,) m,
+    ``status`` (n,) int (negative: no position)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    sigma: np.ndarray
+    status: np.ndarray
+
+
+class SensorSet(Protocol):
+    """The sensors of one run; any may be None."""
+
+    compass: HeadingSeries | None
+    gyro: RateSeries | None
+    odometry: PoseSeries | None
+    gps: FixSeries | None
 
 
 @dataclass(frozen=True)
@@ -112,22 +161,26 @@ def lateral_travel(x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     return np.concatenate(([0.0], np.cumsum(step)))
 
 
-def _trajectory_streams(prefix: str, traj: Trajectory, streams: dict[str, Stream]) -> None:
+def _trajectory_streams(prefix: str, traj: PoseSeries, streams: dict[str, Stream]) -> None:
     streams[f"{prefix}_yaw"] = _clean(f"{prefix}_yaw", traj.t, traj.yaw, angular=True)
     streams[f"{prefix}_distance"] = _clean(f"{prefix}_distance", traj.t, path_length(traj.x, traj.y))
     streams[f"{prefix}_lateral"] = _clean(f"{prefix}_lateral", traj.t, lateral_travel(traj.x, traj.y, traj.yaw))
 
 
 def validation_streams(
-    recording: Recording, sm: Trajectory | None = None, gps_speed_window_s: float = 5.0
+    recording: SensorSet,
+    sm: PoseSeries | None = None,
+    gps_speed_window_s: float = 5.0,
+    window: Window = "trailing",
 ) -> dict[str, Stream]:
     """The named streams available in ``recording`` (plus scan matching).
 
     ``sm`` is the KISS-ICP trajectory over the scan times (world frame of
     the front-end); streams whose source is absent are simply not returned.
-    GPS speed is the norm of the regression slopes of x and y over a
-    trailing ``gps_speed_window_s``: differences of single fixes carry the
-    fixes' metre-level noise divided by 0.2 s, far above a robot's speed.
+    GPS speed is the norm of the regression slopes (Algorithm 2) of x and y
+    over ``gps_speed_window_s``, ``window`` centred or trailing: differences
+    of single fixes carry the fixes' metre-level noise divided by 0.2 s, far
+    above a robot's speed.
     """
     streams: dict[str, Stream] = {}
     if recording.compass is not None:
@@ -155,8 +208,8 @@ def validation_streams(
         x = _clean("gps_x", gps.t[fix], gps.x[fix])
         y = _clean("gps_y", gps.t[fix], gps.y[fix])
         if len(x.t) == len(y.t) and len(x.t) >= 2:
-            vx = derivative(x.t, x.values, gps_speed_window_s)
-            vy = derivative(y.t, y.values, gps_speed_window_s)
+            vx = derive_stream(x.t, x.values, gps_speed_window_s, window)
+            vy = derive_stream(y.t, y.values, gps_speed_window_s, window)
             streams["gps_speed"] = Stream(x.t, np.hypot(vx, vy))
         streams["gps_sigma"] = _clean("gps_sigma", gps.t[fix], gps.sigma[fix])
     logger.info("validation streams: %s", ", ".join(sorted(streams)))

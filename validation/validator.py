@@ -1,11 +1,14 @@
 """Sensor validation of one run, step by step: trends -> observers ->
-diagnosis -> gating decisions -> per-keyframe factor weights.
+diagnosis -> gating actions -> per-keyframe weights of every factor's
+degrees of freedom.
 
 Validation steps run at ``validation.rate_hz``. A keyframe's factors take
 the strongest decision of the validation steps since the previous keyframe
-(a between factor spans that interval; a prior sits at its end), so the
-decision for keyframe k uses only data up to its time: causal, as on the
-robot. In oracle mode the decisions come from the true fault intervals.
+(a between factor spans that interval; a prior sits at its end). Offline,
+the steps' trends use centred windows and the observers date each alarm by
+its evidence; causal, the decision for keyframe k uses only data up to its
+time, as on the robot. With ``interval_oracle`` the actions come from the
+true fault intervals.
 """
 
 from __future__ import annotations
@@ -14,34 +17,40 @@ import csv
 import io
 import logging
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from slam.recording import Recording, Trajectory
+from validation.checks import MagneticReference
 from validation.config import GatingConfig, ValidationConfig
 from validation.diagnosis import Diagnoser, DiagnosisResult
-from validation.gating import FactorGate, Gate, oracle_decisions
+from validation.gating import Actions, Gate, factor_scales, offline_actions, oracle_actions
 from validation.metrics import validation_metrics
-from validation.observers import ObserverLog, observe, unary_checks
-from validation.streams import fixed_rate_steps, validation_streams
+from validation.observers import ObserverLog, run_observers, unary_checks
+from validation.streams import PoseSeries, SensorSet, fixed_rate_steps, validation_streams
 
 log = logging.getLogger(__name__)
+
+Interval = tuple[float, float]
 
 
 @dataclass
 class ValidationOutcome:
     """Everything validation decided, per validation step, and the weights
-    per keyframe and factor type (sigma multipliers; ``inf`` excludes)."""
+    per keyframe, factor type and degree of freedom (sigma multipliers,
+    (K, dofs); ``inf`` excludes)."""
 
     step_t: np.ndarray
     observer_log: ObserverLog | None
     results: list[DiagnosisResult] | None
-    decisions: list[dict[str, FactorGate]]
+    actions: list[Actions]
+    factor_dofs: dict[str, tuple[str, ...]]
+    step_scales: dict[str, np.ndarray]
     weights: dict[str, np.ndarray]
     metrics: dict
     time_s: float
-    sm_poses: Trajectory | None = None
+    sm_poses: PoseSeries | None = None
 
     def csv_text(self) -> str:
         """The per-step log: trends, counters, observations, diagnoses, decisions."""
@@ -53,14 +62,18 @@ class ValidationOutcome:
         if self.results is not None:
             cols["consistent"] = [int(r.consistent) for r in self.results]
             cols["diagnoses"] = [_format_diagnoses(r) for r in self.results]
-        factors = sorted(self.decisions[0]) if self.decisions else []
-        for f in factors:
-            cols[f"gate.{f}"] = [d[f].action.value for d in self.decisions]
+        for factor in sorted(self.step_scales):
+            for i, dof in enumerate(self.factor_dofs[factor]):
+                cols[f"gate.{factor}.{dof}"] = [_action_name(s) for s in self.step_scales[factor][:, i]]
         out = io.StringIO()
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(cols)
         writer.writerows(zip(*cols.values()))
         return out.getvalue()
+
+
+def _action_name(scale: float) -> str:
+    return "exclude" if not np.isfinite(scale) else ("inflate" if scale > 1.0 else "include")
 
 
 def _format_diagnoses(result: DiagnosisResult) -> str:
@@ -69,40 +82,43 @@ def _format_diagnoses(result: DiagnosisResult) -> str:
     return " | ".join("{" + ",".join(sorted(d)) + "}" for d in result.diagnoses)
 
 
-def _step_times(keyframe_t: np.ndarray, rate_hz: float) -> np.ndarray:
-    return fixed_rate_steps(float(keyframe_t[0]), float(keyframe_t[-1]), rate_hz)
-
-
-def step_scales(step_t: np.ndarray, decisions: list[dict[str, FactorGate]], lookback_s: float) -> dict[str, np.ndarray]:
-    """Sigma scale per factor type and validation step, with every gating
-    decision also applied to the ``lookback_s`` before it."""
-    factors = sorted(decisions[0]) if decisions else []
+def step_scales(
+    step_t: np.ndarray,
+    actions: list[Actions],
+    gating: GatingConfig,
+    factor_dofs: Mapping[str, Sequence[str]],
+    lookback_s: float = 0.0,
+) -> dict[str, np.ndarray]:
+    """Sigma scale per factor type, validation step and degree of freedom
+    (m, dofs), with every gating decision also applied to the ``lookback_s``
+    before it."""
+    per_step = [factor_scales(gating, a, factor_dofs) for a in actions]
     scales = {}
-    for f in factors:
-        scale = np.array([d[f].sigma_scale for d in decisions])
+    for factor, dofs in factor_dofs.items():
+        scale = np.array([s[factor] for s in per_step]).reshape(len(actions), len(dofs))
         if lookback_s > 0:
             back = scale.copy()
             # Closed at the left: steps are sums of floats, so allow for round-off.
             first = np.searchsorted(step_t, step_t - lookback_s - 1e-9, side="left")
-            for k in np.flatnonzero(scale > 1.0):
+            for k in np.flatnonzero(np.any(scale > 1.0, axis=1)):
                 seg = back[first[k] : k]
                 np.maximum(seg, scale[k], out=seg)
             scale = back
-        scales[f] = scale
+        scales[factor] = scale
     return scales
 
 
 def keyframe_weights(step_t: np.ndarray, scales: dict[str, np.ndarray], keyframe_t: np.ndarray) -> dict[str, np.ndarray]:
-    """Per keyframe, the largest sigma scale of the steps in (t_{k-1}, t_k];
-    keyframe 0 takes the last step at or before it."""
+    """Per keyframe, the largest sigma scale of the steps in (t_{k-1}, t_k],
+    per degree of freedom; keyframe 0 takes the last step at or before it."""
     end = np.searchsorted(step_t, keyframe_t, side="right")
     start = np.concatenate([[max(end[0] - 1, 0)], end[:-1]])
     weights = {}
     for f, scale in scales.items():
-        w = np.ones(len(keyframe_t))
+        w = np.ones((len(keyframe_t), scale.shape[1]))
         for k, (a, b) in enumerate(zip(start, end)):
             if b > a:
-                w[k] = scale[a:b].max()
+                w[k] = scale[a:b].max(axis=0)
             elif b > 0:
                 w[k] = scale[b - 1]
         weights[f] = w
@@ -110,41 +126,54 @@ def keyframe_weights(step_t: np.ndarray, scales: dict[str, np.ndarray], keyframe
 
 
 def run_validation(
-    recording: Recording,
-    sm_poses: Trajectory | None,
+    sensors: SensorSet,
+    sm_poses: PoseSeries | None,
     keyframe_t: np.ndarray,
     config: ValidationConfig,
     gating: GatingConfig,
+    factor_dofs: Mapping[str, Sequence[str]],
+    faults: Mapping[str, Sequence[Interval]] | None = None,
+    magnetic_reference: MagneticReference | None = None,
 ) -> ValidationOutcome:
-    """Validate one run and decide the weight of every factor per keyframe."""
+    """Validate one run and decide the weight of every factor's degrees of
+    freedom per keyframe. ``factor_dofs`` names each factor type's degrees of
+    freedom in the order of its noise model; ``faults`` are the true fault
+    intervals (for ``interval_oracle`` and the metrics)."""
     start = time.perf_counter()
-    step_t = _step_times(keyframe_t, config.rate_hz)
+    faults = dict(faults or {})
+    step_t = fixed_rate_steps(float(keyframe_t[0]), float(keyframe_t[-1]), config.rate_hz)
     observer_log, results = None, None
     if config.mode == "interval_oracle":
-        decisions = oracle_decisions(gating, step_t, recording.faults)
+        actions = oracle_actions(gating, step_t, faults)
     else:
-        obs_cfg = config.observers
-        streams = validation_streams(recording, sm_poses, obs_cfg.gps_speed_window_s)
-        checks = unary_checks(obs_cfg, recording.magnetic_reference)
-        observer_log = observe(
-            streams, obs_cfg.relations, step_t, checks, obs_cfg.max_gap_s, obs_cfg.stream_max_gap_s
+        obs = config.observers
+        window = config.window
+        streams = validation_streams(sensors, sm_poses, obs.gps_speed_window_s, window)
+        checks = unary_checks(obs, magnetic_reference)
+        observer_log = run_observers(
+            streams, obs.relations, step_t, checks, obs.max_gap_s, obs.stream_max_gap_s,
+            window, obs.rule, config.offline,
         )
         diagnoser = Diagnoser(config.model)
-        gate = Gate(gating, config.model)
-        results, decisions = [], []
-        for k, t in enumerate(step_t):
-            result = diagnoser.diagnose(observer_log.observations(k))
-            results.append(result)
-            decisions.append(gate.step(float(t), result))
-    # The oracle knows each onset exactly: no look-back.
-    lookback = 0.0 if config.mode == "interval_oracle" else gating.lookback_s
-    weights = keyframe_weights(step_t, step_scales(step_t, decisions, lookback), keyframe_t)
+        results = [diagnoser.diagnose(observer_log.observations(k)) for k in range(len(step_t))]
+        if config.offline:
+            actions = offline_actions(gating, results)
+        else:
+            gate = Gate(gating, config.model)
+            actions = [gate.step(float(t), r) for t, r in zip(step_t, results)]
+    # The oracle knows each onset exactly and offline alarms are dated by
+    # their evidence: the look-back is for causal validation only.
+    causal = config.mode == "on" and not config.offline
+    lookback = gating.lookback_s if causal else 0.0
+    dofs = {f: tuple(d) for f, d in factor_dofs.items()}
+    scales = step_scales(step_t, actions, gating, dofs, lookback)
+    weights = keyframe_weights(step_t, scales, keyframe_t)
     elapsed = time.perf_counter() - start
-    metrics = validation_metrics(step_t, results, decisions, gating, recording.faults)
+    expand = config.model.sensors if config.model is not None else {}
+    metrics = validation_metrics(step_t, results, actions, faults, expand)
     metrics["validation_time_s"] = round(elapsed, 4)
-    excluded = {f: int(np.sum(~np.isfinite(w))) for f, w in weights.items()}
-    inflated = {f: int(np.sum(np.isfinite(w) & (w > 1))) for f, w in weights.items()}
-    metrics["keyframes_excluded"] = excluded
-    metrics["keyframes_inflated"] = inflated
-    log.info("validation (%s): %d steps in %.3f s; excluded keyframes %s", config.mode, len(step_t), elapsed, excluded)
-    return ValidationOutcome(step_t, observer_log, results, decisions, weights, metrics, elapsed, sm_poses)
+    metrics["keyframes_excluded"] = {f: int(np.sum(np.all(~np.isfinite(w), axis=1))) for f, w in weights.items()}
+    metrics["keyframes_gated"] = {f: int(np.sum(np.any(w > 1, axis=1))) for f, w in weights.items()}
+    log.info("validation (%s): %d steps in %.3f s; gated keyframes %s", config.mode, len(step_t), elapsed,
+             metrics["keyframes_gated"])
+    return ValidationOutcome(step_t, observer_log, results, actions, dofs, scales, weights, metrics, elapsed, sm_poses)

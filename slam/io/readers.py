@@ -5,12 +5,14 @@ A *run folder* (written by the simulator) is a directory holding ``bag/``
 and a ``truth.json`` sidecar::
 
     {"scenario": str, "seed": int, "t0": <absolute s>, "duration_s": float,
-     "faults": {"ODO": [[start, end], ...], "IMU_GYRO": ..., ...},
+     "faults": {"ODO_DIST": [[start, end], ...], "IMU_GYRO": ..., ...},
      "magnetic_reference": {"strength_T", "dip_rad", "declination_rad"},
      "gps_datum": {"lat_deg", "lon_deg"}}
 
 Fault intervals are seconds relative to the sidecar's ``t0``; they are
-shifted into the recording's time base (relative to ``Recording.t0``).
+shifted into the recording's time base (relative to ``Recording.t0``). A
+whole-sensor label (``SM``, ``ODO``, as older run folders have) stands for
+every modality of that sensor.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from slam.config import GpsInputConfig, InputConfig
 from slam.errors import GslamError
 from slam.io import broad, carmen, librsf
 from slam.io.rosbag import RosbagReader, is_rosbag
-from slam.recording import COMPONENTS, MagneticReference, Recording
+from slam.recording import COMPONENTS, SENSOR_MODALITIES, MagneticReference, Recording, expand_sensor_labels
 
 log = logging.getLogger(__name__)
 
@@ -141,7 +143,7 @@ def load_sidecar(path: str | Path) -> Sidecar:
         first = e.errors()[0]
         loc = ".".join(str(p) for p in first["loc"]) or "top level"
         raise GslamError(f"{path}: {loc}: {first['msg']}") from None
-    unknown = sorted(set(sidecar.faults) - set(COMPONENTS))
+    unknown = sorted(set(sidecar.faults) - set(COMPONENTS) - set(SENSOR_MODALITIES))
     if unknown:
         raise GslamError(
             f"{path}: faults: unknown component {unknown[0]!r}, expected one of {', '.join(COMPONENTS)}"
@@ -161,7 +163,7 @@ def attach_sidecar(rec: Recording, sidecar: Sidecar) -> None:
     shift = sidecar.t0 - rec.t0
     rec.faults = {
         name: [(start + shift, end + shift) for start, end in intervals]
-        for name, intervals in sidecar.faults.items()
+        for name, intervals in expand_sensor_labels(sidecar.faults).items()
     }
     mag = sidecar.magnetic_reference
     if mag is not None:

@@ -42,8 +42,9 @@ class LaserData:
     """``ranges`` (n, B) float32 m, inf without a return (REP-117), -inf
     closer than ``range_min``; ``angles`` (B,) rad in the laser frame (= body
     frame, the laser sits at the robot centre). From the noise-free scan:
-    ``returns`` (n,) the number of returns and ``min_eigenvalue`` (n,) the
-    degeneracy measure of :func:`slam.sim.faults.scan_constraint`."""
+    ``returns`` (n,) the number of returns, ``min_eigenvalue`` (n,) the
+    degeneracy measure of :func:`slam.sim.faults.scan_constraint` and
+    ``weak_direction`` (n, 3) its eigenvector (world x, world y, turn)."""
 
     t: np.ndarray
     ranges: np.ndarray
@@ -52,6 +53,7 @@ class LaserData:
     range_max: float
     returns: np.ndarray
     min_eigenvalue: np.ndarray
+    weak_direction: np.ndarray
 
 
 def laser_angles(cfg: LaserConfig) -> np.ndarray:
@@ -75,6 +77,7 @@ def simulate_laser(
     ranges = np.empty((len(t), len(angles)), dtype=np.float32)
     returns = np.empty(len(t), dtype=np.int64)
     min_eig = np.empty(len(t))
+    weak = np.empty((len(t), 3))
     for start in range(0, len(t), _CHUNK):
         ks = range(start, min(start + _CHUNK, len(t)))
         beam_yaw = angles[None, :] + pose["yaw"][ks.start : ks.stop, None]
@@ -83,7 +86,7 @@ def simulate_laser(
         for i, k in enumerate(ks):
             origin = np.array([pose["x"][k], pose["y"][k]])
             true[i], hit[i] = world.cast(origin, beam_yaw[i], cfg.max_range_m)
-        returns[ks.start : ks.stop], min_eig[ks.start : ks.stop] = scan_constraint(
+        returns[ks.start : ks.stop], min_eig[ks.start : ks.stop], weak[ks.start : ks.stop] = scan_constraint(
             true, hit, beam_yaw, world.normals
         )
         noisy = true + rng.normal(0.0, cfg.range_noise_m, true.shape)
@@ -91,7 +94,7 @@ def simulate_laser(
         ranges[ks.start : ks.stop] = np.where(noisy < cfg.min_range_m, -np.inf, noisy)
         if progress is not None:
             progress.update(len(ks))
-    return LaserData(t, ranges, angles, cfg.min_range_m, cfg.max_range_m, returns, min_eig)
+    return LaserData(t, ranges, angles, cfg.min_range_m, cfg.max_range_m, returns, min_eig, weak)
 
 
 # --- gyroscope ---------------------------------------------------------------

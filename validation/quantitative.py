@@ -1,0 +1,83 @@
+"""Quantitative relation observers: the residual of two streams' changes.
+
+Trend symbols compare the direction of two streams' changes, not their size:
+a scan matcher that reports 20 m/s while the odometry says 0.4 m/s has the
+same ``+`` trend. A *residual* relation (``RelationConfig.kind:
+residual``) compares the sizes. Over a window of ``w`` seconds, centred on
+the step (offline) or ending at it (causal), each stream changes by ``da``
+and ``db``; their residual and its expected spread are
+
+    r = db - gain * da,        sigma = sqrt(sigma_floor^2 + (sigma_rel * da)^2),
+
+and the step is a mismatch where ``|r| > k_sigma * sigma``. The mismatches
+feed Algorithm 3 like differing trend symbols do, so a residual observer's
+``NO_MATCH`` means the same to the diagnosis as a trend observer's.
+``sigma_floor`` is the noise of the two streams' changes over a window in
+stream b's units, ``sigma_rel`` the relative error of a scale (an odometry
+a few percent off), so the defaults come from the sensors' noise, or from
+``gslam calibrate``.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from validation.observer_config import RelationConfig
+from validation.trends import Window
+
+
+_TOL = 1e-6
+"""Relative slack on a window's length: step times are sums of floats."""
+
+
+def window_changes(t: np.ndarray, v: np.ndarray, valid: np.ndarray, window_s: float, window: Window) -> tuple[np.ndarray, np.ndarray]:
+    """Change of ``v`` (m,) over each step's window and whether every step in
+    the window has data (a window that reaches past the data is invalid)."""
+    eps = _TOL * window_s
+    if window == "trailing":
+        start, end = np.searchsorted(t, t - window_s - eps, side="left"), np.arange(len(t))
+    else:
+        start = np.searchsorted(t, t - 0.5 * window_s - eps, side="left")
+        end = np.searchsorted(t, t + 0.5 * window_s + eps, side="right") - 1
+    bad = np.concatenate(([0], np.cumsum(~valid)))
+    whole = (bad[end + 1] - bad[start] == 0) & (end > start)
+    # Only a full window counts: at the ends of the data it is truncated.
+    whole &= t[end] - t[start] >= window_s - 2 * eps
+    change = np.where(whole, v[end] - v[start], 0.0)
+    return change, whole
+
+
+def residual_test(rel: RelationConfig, da: np.ndarray, db: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(z, mismatch)``: the normalised residual of each step and whether it
+    exceeds ``k_sigma``."""
+    r = db - rel.gain * da
+    sigma = np.sqrt(rel.sigma_floor**2 + (rel.sigma_rel * da) ** 2)
+    z = r / sigma
+    return z, np.abs(z) > rel.k_sigma
+
+
+class WindowChange:
+    """The change of one stream over a trailing window, one step at a time;
+    an ``angular`` stream's change is wrapped to (-pi, pi]."""
+
+    def __init__(self, window_s: float, angular: bool = False) -> None:
+        self.window_s = window_s
+        self.angular = angular
+        self._buf: deque[tuple[float, float]] = deque()
+
+    def update(self, t: float, v: float | None) -> float | None:
+        """Add the step ``(t, v)``; None where ``v`` is missing or the window
+        does not yet hold ``window_s`` of unbroken data."""
+        if v is None or not np.isfinite(v):
+            self._buf.clear()
+            return None
+        self._buf.append((t, v))
+        eps = _TOL * self.window_s
+        while self._buf[0][0] < t - self.window_s - eps:
+            self._buf.popleft()
+        t0, v0 = self._buf[0]
+        if t - t0 < self.window_s - 2 * eps:
+            return None
+        return float(np.angle(np.exp(1j * (v - v0)))) if self.angular else v - v0
