@@ -156,7 +156,8 @@ class GraphBuilder:
         """Factors of step ``k``; step 0 holds only what is measured at k = 0."""
         m, out = self.meas, []
         if k > 0:
-            for factor, w in self._relative_weights(k).items():
+            relative = self._relative_weights(k)
+            for factor, w in relative.items():
                 if not np.any(np.isfinite(w)):
                     continue
                 meas = m.get(factor)
@@ -165,7 +166,7 @@ class GraphBuilder:
                     out.append(yaw_increment_factor(k, meas.value[k], noise))
                 else:
                     noise = gaussian(meas.sigma[k] * w, self.robust[factor])
-                    out.append(between_factor(k, meas.delta[k], noise))
+                    out.append(between_factor(k, self._patched(factor, k, w, relative), noise))
                 self.counts[factor] += 1
         if self._available("compass", k) and np.isfinite(w := self._weight("compass", k)[0]):
             out.append(yaw_prior_factor(k, m.compass.value[k], gaussian([m.compass.sigma[k] * w], self.robust["compass"])))
@@ -178,6 +179,30 @@ class GraphBuilder:
             out.append(gtsam.BetweenFactorPose2(pose_key(c.i), pose_key(c.j), gtsam.Pose2(*c.delta), noise))
             self.counts[c.label] = self.counts.get(c.label, 0) + 1
         return out
+
+    def _patched(self, factor: str, k: int, w: np.ndarray, relative: dict[str, np.ndarray]) -> np.ndarray:
+        """The step's relative pose with each excluded degree of freedom taken
+        from another relative measurement that keeps it.
+
+        A Pose2 between factor's residual is formed in the measured pose's
+        frame, so a grossly wrong value in a zero-precision degree of freedom
+        still leaks into the others (a scan matcher that turned 40 deg the
+        wrong way rotates its own translation residual by 40 deg). The
+        excluded value says nothing; the kept ones must be read in a frame
+        that is right."""
+        delta = np.array(self.meas.get(factor).delta[k], dtype=float)
+        for d, dof in enumerate(("x", "y", "yaw")):
+            if np.isfinite(w[d]):
+                continue
+            for other, ow in relative.items():
+                if other == factor or dof not in FACTOR_DOFS[other]:
+                    continue
+                i = FACTOR_DOFS[other].index(dof)
+                if np.isfinite(ow[i]):
+                    om = self.meas.get(other)
+                    delta[d] = om.value[k] if other == "gyro" else om.delta[k][d]
+                    break
+        return delta
 
     def anchor(self, pose0: np.ndarray) -> gtsam.NonlinearFactor:
         """Prior that fixes the graph's frame at the first keyframe."""

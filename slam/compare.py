@@ -18,6 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from slam.config import PipelineConfig, load_config, load_yaml
 from slam.errors import GslamError
 from slam.io.atomic import write_text
@@ -75,9 +77,10 @@ def load_variants(path: str | Path, only: list[str] | None = None) -> dict[str, 
 
 
 def _yaml_scalar(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return str(value)
+    """``value`` as YAML text that parses back to it (for a ``--set``)."""
+    if isinstance(value, str):
+        return value
+    return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
 
 
 def _markdown(rows: list[dict[str, Any]], title: str) -> str:

@@ -119,19 +119,27 @@ def recheck(
     residuals = measurement_residuals(meas, first.trajectory)
     sigmas = measurement_sigmas(meas)
 
-    # 1. Absolute measurements, one by one.
+    # 1. Absolute measurements, one by one, and the mean of their
+    #    neighbours: a disturbance ramps up and down, and its shoulders are
+    #    biased well inside one measurement's noise.
     kept: dict[str, dict[str, int]] = {}
+    half = 0.5 * gating.recheck_window_s
     for factor, mask in gated.items():
         if factor not in gating.recheck_factors:
             continue
         rows = np.flatnonzero(mask.any(axis=1) & np.isfinite(residuals[factor]).any(axis=1))
         counts = dict.fromkeys(FACTOR_DOFS[factor], 0)
+        res, sig = residuals[factor], sigmas[factor]
         for k in rows:
             if k == 0 and factor in (*BETWEEN, "gyro"):
                 continue
             est = _estimate_sigmas(factor, k, first.marginals, values)
-            z = residuals[factor][k] / np.sqrt(sigmas[factor][k] ** 2 + est**2)
-            agree = mask[k] & (np.abs(z) <= k_sigma)
+            z = res[k] / np.sqrt(sig[k] ** 2 + est**2)
+            near = (np.abs(meas.t - meas.t[k]) <= half) & np.isfinite(res).all(axis=1)
+            n = int(near.sum())
+            mean = res[near].mean(axis=0)
+            z_mean = mean / np.sqrt((sig[near] ** 2).mean(axis=0) / n + est**2)
+            agree = mask[k] & (np.abs(z) <= k_sigma) & (np.abs(z_mean) <= k_sigma)
             weights[factor][k, agree] = 1.0
             for d in np.flatnonzero(agree):
                 counts[FACTOR_DOFS[factor][d]] += 1
@@ -147,15 +155,19 @@ def recheck(
             for c in _baselines(meas, factor, d, weights[factor], gating.baseline_m):
                 tried += 1
                 est = _relative_cov(first.marginals, values, c.i, c.j)
+                traj = first.trajectory
                 ref = relative_poses(
-                    np.array([[first.trajectory.x[c.i], first.trajectory.y[c.i], first.trajectory.yaw[c.i]]]),
-                    np.array([[first.trajectory.x[c.j], first.trajectory.y[c.j], first.trajectory.yaw[c.j]]]),
+                    np.array([[traj.x[c.i], traj.y[c.i], traj.yaw[c.i]]]),
+                    np.array([[traj.x[c.j], traj.y[c.j], traj.yaw[c.j]]]),
                 )[0]
-                err = relative_poses(ref[None], c.delta[None])[0]
-                err[2] = wrap_angle(err[2])
+                # The baseline measures one degree of freedom; the others are
+                # the estimate's, so its residual is read in a frame that is right.
+                delta = ref.copy()
+                delta[d] = c.delta[d]
+                err = relative_poses(ref[None], delta[None])[0]
                 z = err[d] / np.sqrt(c.sigma[d] ** 2 + max(est[d, d], 0.0))
                 if abs(z) <= k_sigma:
-                    constraints.append(c)
+                    constraints.append(RelativeConstraint(c.i, c.j, delta, c.sigma, c.kind, c.label))
     metrics = {
         "second_pass": {
             "kept_after_recheck": kept,

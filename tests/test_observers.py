@@ -121,8 +121,8 @@ def test_validation_streams_from_recording():
     sm = Trajectory(rec.odometry.t[::2], rec.odometry.x[::2] * 2, rec.odometry.y[::2], rec.odometry.yaw[::2])
     s = validation_streams(rec, sm)
     assert set(s) == {
-        "gyro_yaw", "odo_yaw", "odo_distance", "odo_lateral", "odo_speed",
-        "sm_yaw", "sm_distance", "sm_lateral", "gps_speed", "gps_sigma",
+        "gyro_yaw", "odo_yaw", "odo_distance", "odo_forward", "odo_lateral", "odo_speed",
+        "sm_yaw", "sm_distance", "sm_forward", "sm_lateral", "gps_speed", "gps_sigma",
     }
     np.testing.assert_allclose(s["gyro_yaw"].values, 0.1 * rec.gyro.t, atol=1e-12)
     np.testing.assert_allclose(s["odo_distance"].values, 0.5 * rec.odometry.t, atol=1e-12)
@@ -133,6 +133,7 @@ def test_validation_streams_from_recording():
     np.testing.assert_allclose(s["gps_speed"].t, np.arange(0.0, 10.001, 1.0))
     # Heading 0.2 rad while moving along +x: each step is partly sideways.
     np.testing.assert_allclose(s["odo_lateral"].values[-1], -np.sin(0.2) * 5.0, atol=1e-9)
+    np.testing.assert_allclose(s["odo_forward"].values[-1], np.cos(0.2) * 5.0, atol=1e-9)
     assert s["odo_yaw"].angular and not s["odo_distance"].angular
 
 
@@ -273,6 +274,8 @@ def test_batch_and_online_agree(rule):
         DEFAULT_RELATIONS[0].model_copy(update={"name": "capped", "max_counter": 12, "boundary_b": 0.03}),
         RelationConfig(name="res", kind="residual", stream_a="gyro_yaw", stream_b="compass_yaw",
                        window_s=2.0, sigma_floor=0.03, threshold=3, max_counter=10),
+        RelationConfig(name="off", kind="offset", stream_a="gyro_yaw", stream_b="compass_yaw",
+                       window_s=2.0, sigma_floor=0.02, level_window_s=20.0, threshold=3, max_counter=10),
     ]
     checks = [MagnetometerCheck("mag", "IMU_YAW", ref.strength_T, ref.dip_rad, 5e-6, 0.1, 1.0)]
 
@@ -288,7 +291,7 @@ def test_batch_and_online_agree(rule):
             assert out.observations[r.name] == tr.observation(k)
         assert out.observations["mag"] == log.unary["mag"].plausibility(k)
     assert log.relations["capped"].no_match.any() and log.unary["mag"].implausible.any()
-    assert log.relations["res"].no_match.any()
+    assert log.relations["res"].no_match.any() and log.relations["off"].no_match.any()
     cols = log.columns()
     assert cols["capped.counter"] is log.relations["capped"].counter and len(cols["t"]) == len(steps.t)
 
@@ -369,3 +372,21 @@ def test_residual_config_needs_its_noise():
                        window_s=2.0, threshold=1)
     with pytest.raises(ValueError, match="boundary"):
         RelationConfig(name="r", stream_a="odo_distance", stream_b="sm_distance", window_s=2.0, threshold=1)
+
+
+def test_offset_observer_sees_a_standing_offset_that_changes_miss():
+    """A compass that steps 0.1 rad off for 30 s and back: its changes agree
+    with the gyro's but at the two steps; its offset does not, throughout."""
+    t = np.arange(0.0, 120.0, 0.1)
+    gyro = 0.002 * t  # a slow bias drift
+    compass = gyro + np.where((t >= 50) & (t < 80), 0.1, 0.0)
+    streams = {"gyro_yaw": Stream(t, gyro), "compass_yaw": Stream(t, compass, angular=True)}
+    res = RelationConfig(name="res", kind="residual", stream_a="gyro_yaw", stream_b="compass_yaw",
+                         window_s=2.0, sigma_floor=0.03, threshold=5)
+    off = RelationConfig(name="off", kind="offset", stream_a="gyro_yaw", stream_b="compass_yaw",
+                         window_s=2.0, sigma_floor=0.01, level_window_s=90.0, threshold=5)
+    log = run_observers(streams, [res, off], t, window="centred", offline=True)
+    inside = (t > 51) & (t < 79)
+    assert log.relations["res"].no_match[inside].mean() < 0.2  # only around the steps
+    assert log.relations["off"].no_match[inside].all()
+    assert not log.relations["off"].no_match[(t < 49) | (t > 81)].any()

@@ -128,6 +128,7 @@ class GatingConfig(BaseModel):
     lookback_s: float = Field(0.0, ge=0.0)
     keep_k_sigma: float | None = Field(3.0, gt=0.0)
     recheck_factors: tuple[str, ...] = ("compass", "gps")
+    recheck_window_s: float = Field(5.0, ge=0.0)
     baseline_factors: tuple[str, ...] = ("scan_matching",)
     baseline_m: float = Field(5.0, gt=0.0)
     factors: dict[str, dict[str, list[str]]] = Field(default_factory=_default_factors)

@@ -50,7 +50,12 @@ class RelationConfig(_Strict):
     cannot: a scan matcher reporting 20 m/s while the odometry says 0.4 m/s
     has the same ``+`` trend.
 
-    Both feed Algorithm 3: ``threshold`` is th, in steps. Components default
+    ``kind: offset`` compares the streams themselves: ``b - gain * a`` must
+    stay within ``k_sigma * sigma_floor`` of its median over
+    ``level_window_s`` (an absolute heading against an integrated one,
+    whose offset drifts slowly; :mod:`validation.quantitative`).
+
+    All feed Algorithm 3: ``threshold`` is th, in steps. Components default
     to the streams' own.
     ``warmup_s`` (default ``2 * window_s``): a stream's trend takes part only
     once the stream has had data on every step for that long, since the
@@ -62,7 +67,7 @@ class RelationConfig(_Strict):
     """
 
     name: str
-    kind: Literal["trend", "residual"] = "trend"
+    kind: Literal["trend", "residual", "offset"] = "trend"
     stream_a: StreamName
     stream_b: StreamName
     boundary: float | None = Field(None, gt=0.0)
@@ -71,6 +76,7 @@ class RelationConfig(_Strict):
     sigma_floor: float | None = Field(None, gt=0.0)
     sigma_rel: float = Field(0.0, ge=0.0)
     k_sigma: float = Field(3.0, gt=0.0)
+    level_window_s: float = Field(60.0, gt=0.0)
     threshold: int = Field(ge=0)
     max_counter: int | None = Field(None, ge=1)
     warmup_s: float | None = Field(None, ge=0.0)
@@ -87,8 +93,8 @@ class RelationConfig(_Strict):
             raise ValueError(f"relation {self.name!r}: max_counter must exceed threshold")
         if self.kind == "trend" and self.boundary is None:
             raise ValueError(f"relation {self.name!r}: a trend relation needs a boundary")
-        if self.kind == "residual" and self.sigma_floor is None:
-            raise ValueError(f"relation {self.name!r}: a residual relation needs sigma_floor")
+        if self.kind != "trend" and self.sigma_floor is None:
+            raise ValueError(f"relation {self.name!r}: a {self.kind} relation needs sigma_floor")
         return self
 
     @property

@@ -62,7 +62,14 @@ from validation.observer_config import (
     observers_config,
 )
 from validation.observer_log import ObserverLog, RelationTrace, UnaryTrace
-from validation.quantitative import WindowChange, residual_test, window_changes
+from validation.quantitative import (
+    RunningLevel,
+    WindowChange,
+    offset_test,
+    residual_test,
+    running_level,
+    window_changes,
+)
 from validation.streams import ANGULAR_STREAMS, STREAM_NAMES, StepStreams, Stream, resample_streams
 from validation.trends import Rule, Trend, TrendEstimator, Window, abstract_stream
 
@@ -220,10 +227,20 @@ def observe_steps(
         z, mismatch = residual_test(rel, da, db)
         return z, mismatch, ok_a & ok_b
 
+    def offset(rel: RelationConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        a, b = rel.streams
+        if a not in steps.values or b not in steps.values:
+            return np.zeros(m), np.zeros(m, dtype=bool), missing
+        valid = steps.valid[a] & steps.valid[b]
+        d = np.where(valid, steps.values[b] - rel.gain * steps.values[a], 0.0)
+        level = running_level(steps.t, d, valid, rel.level_window_s, window)
+        z, mismatch = offset_test(rel, d, np.where(valid, level, d))
+        return np.where(valid, z, 0.0), mismatch & valid, valid
+
     rel_traces: dict[str, RelationTrace] = {}
     for rel in relations:
-        if rel.kind == "residual":
-            z, mismatch, valid = residual(rel)
+        if rel.kind != "trend":
+            z, mismatch, valid = residual(rel) if rel.kind == "residual" else offset(rel)
             sym_a, sym_b = mismatch.astype(np.int8), np.zeros(m, dtype=np.int8)
         else:
             z = None
@@ -317,6 +334,16 @@ class ObserverBank:
         self._run_start: dict[str, float | None] = {c.name: None for c in self.unary}
         self._present_since: dict[str, float | None] = {s: None for r in self.relations for s in r.streams}
         self._changes: dict[tuple[str, float], WindowChange] = {}
+        self._levels: dict[str, RunningLevel] = {}
+        self._last_offset: dict[str, float] = {}
+
+    def _unwrap_offset(self, name: str, d: float) -> float:
+        """An angular difference made continuous from step to step."""
+        last = self._last_offset.get(name)
+        if last is not None:
+            d = last + float(np.angle(np.exp(1j * (d - last))))
+        self._last_offset[name] = d
+        return d
 
     def update(self, t: float, values: Mapping[str, float | None]) -> StepObservations:
         """Process step ``t`` (s). ``values`` maps a stream to its value at the
@@ -331,6 +358,8 @@ class ObserverBank:
         current: dict[tuple[str, float, float], Trend] = {}
         changes: dict[tuple[str, float], float | None] = {}
         for rel in self.relations:
+            if rel.kind == "offset":
+                continue
             if rel.kind == "residual":
                 for name in rel.streams:
                     key = (name, rel.window_s)
@@ -365,6 +394,15 @@ class ObserverBank:
                 da, db = (changes[(name, rel.window_s)] for name in rel.streams)
                 valid = da is not None and db is not None
                 mismatch = bool(residual_test(rel, np.array(da), np.array(db))[1]) if valid else False
+                sym = (Trend.PLUS if mismatch else Trend.ZERO, Trend.ZERO)
+            elif rel.kind == "offset":
+                a, b = rel.streams
+                valid = present(a) and present(b)
+                d = float(values[b]) - rel.gain * float(values[a]) if valid else None
+                if d is not None and (self.angular.get(a, False) or self.angular.get(b, False)):
+                    d = self._unwrap_offset(rel.name, d)
+                level = self._levels.setdefault(rel.name, RunningLevel(rel.level_window_s)).update(t, d)
+                mismatch = bool(offset_test(rel, np.array(d), np.array(level))[1]) if valid else False
                 sym = (Trend.PLUS if mismatch else Trend.ZERO, Trend.ZERO)
             else:
                 ka, kb = _trend_key(rel, 0), _trend_key(rel, 1)

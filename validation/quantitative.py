@@ -1,4 +1,5 @@
-"""Quantitative relation observers: the residual of two streams' changes.
+"""Quantitative relation observers: the residual of two streams' changes,
+and the standing offset between two streams.
 
 Trend symbols compare the direction of two streams' changes, not their size:
 a scan matcher that reports 20 m/s while the odometry says 0.4 m/s has the
@@ -16,6 +17,20 @@ feed Algorithm 3 like differing trend symbols do, so a residual observer's
 stream b's units, ``sigma_rel`` the relative error of a scale (an odometry
 a few percent off), so the defaults come from the sensors' noise, or from
 ``gslam calibrate``.
+
+An *offset* relation (``kind: offset``) compares the streams themselves: an
+absolute heading against an integrated one, which agree up to an offset
+that changes slowly (the gyro's bias). The difference ``d = b - gain * a``
+is compared with its own level, robust to the disturbances it is there to
+find: offline, the median of ``d`` over a window of ``level_window_s``
+centred on the step (a steady drift has no lag there); causal, over the
+trailing window, the median of its recent half extrapolated to the step
+with the slope between the medians of its two halves (a steady drift would
+lag by half a window otherwise). Windows do not reach across a gap in
+either stream. A step is a mismatch where ``|d - level|`` exceeds
+``k_sigma * sigma_floor``. It sees what changes cannot: a compass
+that sits a few degrees off for minutes near steel, or comes back from a
+disturbance slowly.
 """
 
 from __future__ import annotations
@@ -81,3 +96,61 @@ class WindowChange:
         if t - t0 < self.window_s - 2 * eps:
             return None
         return float(np.angle(np.exp(1j * (v - v0)))) if self.angular else v - v0
+
+
+def _trailing_level(t: np.ndarray, d: np.ndarray, now: float, window_s: float) -> float:
+    """Median of the recent half of a trailing window, extrapolated to ``now``
+    with the slope between the medians of the two halves."""
+    mid = now - 0.5 * window_s
+    recent, older = d[t >= mid], d[t < mid]
+    level = float(np.median(recent))
+    if len(older):
+        slope = (level - float(np.median(older))) / (0.5 * window_s)
+        level += slope * 0.25 * window_s
+    return level
+
+
+def running_level(t: np.ndarray, d: np.ndarray, valid: np.ndarray, window_s: float, window: Window) -> np.ndarray:
+    """Level of ``d`` at each step (module docstring); NaN at steps without
+    data. Each step's window holds only the unbroken run of valid steps it
+    lies in."""
+    out = np.full(len(t), np.nan)
+    run = np.cumsum(np.concatenate(([True], valid[1:] != valid[:-1])))
+    eps = _TOL * window_s
+    for k in np.flatnonzero(valid):
+        same = run == run[k]
+        if window == "trailing":
+            sel = same & (t >= t[k] - window_s - eps) & (t <= t[k])
+            out[k] = _trailing_level(t[sel], d[sel], t[k], window_s)
+        else:
+            sel = same & (np.abs(t - t[k]) <= 0.5 * window_s + eps)
+            out[k] = float(np.median(d[sel]))
+    return out
+
+
+def offset_test(rel: RelationConfig, d: np.ndarray, level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(z, mismatch)`` of an offset relation at each step."""
+    z = (d - level) / rel.sigma_floor
+    return z, np.abs(z) > rel.k_sigma
+
+
+class RunningLevel:
+    """The trailing level of a difference, one step at a time; gives the same
+    values as :func:`running_level` with a trailing window on unbroken data."""
+
+    def __init__(self, window_s: float) -> None:
+        self.window_s = window_s
+        self._t: deque[float] = deque()
+        self._d: deque[float] = deque()
+
+    def update(self, t: float, d: float | None) -> float | None:
+        if d is None or not np.isfinite(d):
+            self._t.clear()
+            self._d.clear()
+            return None
+        self._t.append(t)
+        self._d.append(d)
+        while self._t and self._t[0] < t - self.window_s - _TOL * self.window_s:
+            self._t.popleft()
+            self._d.popleft()
+        return _trailing_level(np.fromiter(self._t, float), np.fromiter(self._d, float), t, self.window_s)

@@ -12,6 +12,8 @@ sm_yaw         SM_YAW    scan-matching (KISS-ICP) yaw, rad (angular)
 odo_yaw        ODO_YAW   odometry yaw, rad (angular)
 odo_distance   ODO_DIST  path length of the odometry x/y, m
 sm_distance    SM_DIST   path length of the scan-matching x/y, m
+odo_forward    ODO_DIST  forward travel: sum of the steps along the heading, m
+sm_forward     SM_DIST   the same from scan matching (its own heading), m
 odo_lateral    ODO_DIST  sideways travel: sum of the body-frame lateral steps, m
 sm_lateral     SM_LAT    the same from scan matching, m
 odo_speed      ODO_DIST  derivative of odo_distance, m/s
@@ -49,7 +51,7 @@ logger = logging.getLogger(__name__)
 
 StreamName = Literal[
     "compass_yaw", "gyro_yaw", "sm_yaw", "odo_yaw", "odo_distance", "sm_distance",
-    "odo_lateral", "sm_lateral", "odo_speed", "gps_speed",
+    "odo_forward", "sm_forward", "odo_lateral", "sm_lateral", "odo_speed", "gps_speed",
 ]
 QualityStreamName = Literal["mag_strength", "mag_dip", "gps_sigma"]
 
@@ -60,6 +62,8 @@ STREAM_COMPONENT: dict[str, str] = {
     "odo_yaw": "ODO_YAW",
     "odo_distance": "ODO_DIST",
     "sm_distance": "SM_DIST",
+    "odo_forward": "ODO_DIST",
+    "sm_forward": "SM_DIST",
     "odo_lateral": "ODO_DIST",
     "sm_lateral": "SM_LAT",
     "odo_speed": "ODO_DIST",
@@ -161,9 +165,20 @@ def lateral_travel(x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     return np.concatenate(([0.0], np.cumsum(step)))
 
 
+def forward_travel(x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """Cumulative forward travel (m): each step's displacement projected on
+    the body's forward axis at its start, as a between factor's x. Unlike the
+    path length it shrinks when a source moves the right distance the wrong
+    way."""
+    dx, dy = np.diff(x), np.diff(y)
+    step = np.cos(yaw[:-1]) * dx + np.sin(yaw[:-1]) * dy
+    return np.concatenate(([0.0], np.cumsum(step)))
+
+
 def _trajectory_streams(prefix: str, traj: PoseSeries, streams: dict[str, Stream]) -> None:
     streams[f"{prefix}_yaw"] = _clean(f"{prefix}_yaw", traj.t, traj.yaw, angular=True)
     streams[f"{prefix}_distance"] = _clean(f"{prefix}_distance", traj.t, path_length(traj.x, traj.y))
+    streams[f"{prefix}_forward"] = _clean(f"{prefix}_forward", traj.t, forward_travel(traj.x, traj.y, traj.yaw))
     streams[f"{prefix}_lateral"] = _clean(f"{prefix}_lateral", traj.t, lateral_travel(traj.x, traj.y, traj.yaw))
 
 
