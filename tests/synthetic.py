@@ -50,6 +50,13 @@ def ramp_error(t: np.ndarray, interval: Interval, rate: float) -> np.ndarray:
     return rate * (np.clip(t, *interval) - interval[0])
 
 
+def bump_error(t: np.ndarray, interval: Interval, rate: float) -> np.ndarray:
+    """An error growing at ``rate`` per s over the first half of ``interval``
+    and shrinking back to 0 over the second: a disturbance passed by."""
+    a, b = interval
+    return rate * np.clip(0.5 * (b - a) - np.abs(t - 0.5 * (a + b)), 0.0, None)
+
+
 @dataclass
 class YawScenario:
     """Raw streams (``compass_yaw``, ``gyro_yaw``, ``sm_yaw``) and their truth."""

@@ -15,7 +15,7 @@ from slam.config import load_config, validation_sections
 from slam.geometry import wrap_angle
 from slam.measurements import FACTOR_DOFS
 from slam.recording import Compass, Gyro, MagneticReference, Recording, Trajectory
-from tests.synthetic import DEFAULT_TURNS, field_body, ramp_error, sample_times, true_yaw, yaw_rate
+from tests.synthetic import DEFAULT_TURNS, bump_error, field_body, sample_times, true_yaw, yaw_rate
 from validation.gating import GatingAction, GatingConfig
 from validation.streams import fixed_rate_steps
 from validation.validator import keyframe_weights, run_validation, step_scales
@@ -147,7 +147,7 @@ def test_keyframe_without_a_step_since_the_previous_keeps_the_last_step():
 # --- run_validation on a drifting compass ----------------------------------
 
 
-DRIFT = (55.0, 80.0)  # s; the compass heading runs away at 0.1 rad/s
+DRIFT = (55.0, 80.0)  # s; the compass heading runs away at 0.1 rad/s and comes back
 DURATION = 100.0
 KEYFRAMES = np.arange(0.0, 99.0 + 1e-9, 0.5)
 
@@ -171,7 +171,7 @@ def drift_recording(seed: int = 0) -> tuple[Recording, Trajectory]:
     ref = MagneticReference(48.5e-6, np.radians(64.5))
     tc = sample_times(DURATION, 20.0, rng)
     true_c = np.interp(tc, tf, yaw)
-    heading = true_c + rng.normal(0.0, 0.01, len(tc)) + ramp_error(tc, DRIFT, 0.1)
+    heading = true_c + rng.normal(0.0, 0.01, len(tc)) + bump_error(tc, DRIFT, 0.1)
     compass = Compass(tc, wrap_angle(heading), field_body(true_c, ref.strength_T, ref.dip_rad))
     tg = sample_times(DURATION, 100.0, rng)
     gyro = Gyro(tg, yaw_rate(tg, DEFAULT_TURNS) + rng.normal(0.0, 0.002, len(tg)))
@@ -270,7 +270,7 @@ def test_validation_csv_columns_and_rows(drift):
     header = text.splitlines()[0].split(",")
     expected = ["t"]
     for rel in vcfg.observers.relations:
-        first = ("z",) if rel.kind == "residual" else ("trend_a", "trend_b")
+        first = ("trend_a", "trend_b") if rel.kind == "trend" else ("z",)
         expected += [f"{rel.name}.{c}" for c in (*first, "valid", "counter", "no_match")]
     for check in ("mag_plausible", "gps_plausible"):
         expected += [f"{check}.valid", f"{check}.implausible"]

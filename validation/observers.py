@@ -233,7 +233,7 @@ def observe_steps(
             return np.zeros(m), np.zeros(m, dtype=bool), missing
         valid = steps.valid[a] & steps.valid[b]
         d = np.where(valid, steps.values[b] - rel.gain * steps.values[a], 0.0)
-        level = running_level(steps.t, d, valid, rel.level_window_s, window)
+        level = running_level(steps.t, d, valid, rel.level_window_s, window, rel.k_sigma * rel.sigma_floor)
         z, mismatch = offset_test(rel, d, np.where(valid, level, d))
         return np.where(valid, z, 0.0), mismatch & valid, valid
 
@@ -398,11 +398,18 @@ class ObserverBank:
             elif rel.kind == "offset":
                 a, b = rel.streams
                 valid = present(a) and present(b)
-                d = float(values[b]) - rel.gain * float(values[a]) if valid else None
-                if d is not None and (self.angular.get(a, False) or self.angular.get(b, False)):
-                    d = self._unwrap_offset(rel.name, d)
-                level = self._levels.setdefault(rel.name, RunningLevel(rel.level_window_s)).update(t, d)
-                mismatch = bool(offset_test(rel, np.array(d), np.array(level))[1]) if valid else False
+                tracker = self._levels.setdefault(
+                    rel.name, RunningLevel(rel.level_window_s, rel.k_sigma * rel.sigma_floor)
+                )
+                if valid:
+                    d = float(values[b]) - rel.gain * float(values[a])
+                    if self.angular.get(a, False) or self.angular.get(b, False):
+                        d = self._unwrap_offset(rel.name, d)
+                    mismatch = bool(offset_test(rel, np.array(d), np.array(tracker.update(t, d)))[1])
+                else:
+                    tracker.reset()
+                    self._last_offset.pop(rel.name, None)
+                    mismatch = False
                 sym = (Trend.PLUS if mismatch else Trend.ZERO, Trend.ZERO)
             else:
                 ka, kb = _trend_key(rel, 0), _trend_key(rel, 1)

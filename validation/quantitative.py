@@ -21,14 +21,17 @@ a few percent off), so the defaults come from the sensors' noise, or from
 An *offset* relation (``kind: offset``) compares the streams themselves: an
 absolute heading against an integrated one, which agree up to an offset
 that changes slowly (the gyro's bias). The difference ``d = b - gain * a``
-is compared with its own level, robust to the disturbances it is there to
-find: offline, the median of ``d`` over a window of ``level_window_s``
-centred on the step (a steady drift has no lag there); causal, over the
+is compared with its own level, learnt from the steps that agree with it
+(a disturbance does not drag the level along): offline, the median of
+``d`` over a window of ``level_window_s`` centred on the step (a steady
+drift has no lag there; near the ends of the data the window is shifted
+inwards, not cut), taken again over the steps within ``k_sigma *
+sigma_floor`` of the first median; causal, over the agreeing steps of the
 trailing window, the median of its recent half extrapolated to the step
 with the slope between the medians of its two halves (a steady drift would
-lag by half a window otherwise). Windows do not reach across a gap in
-either stream. A step is a mismatch where ``|d - level|`` exceeds
-``k_sigma * sigma_floor``. It sees what changes cannot: a compass
+lag by half a window otherwise), held while no step agrees. Windows do not
+reach across a gap in either stream. A step is a mismatch where
+``|d - level|`` exceeds ``k_sigma * sigma_floor``. It sees what changes cannot: a compass
 that sits a few degrees off for minutes near steel, or comes back from a
 disturbance slowly.
 """
@@ -103,6 +106,8 @@ def _trailing_level(t: np.ndarray, d: np.ndarray, now: float, window_s: float) -
     with the slope between the medians of the two halves."""
     mid = now - 0.5 * window_s
     recent, older = d[t >= mid], d[t < mid]
+    if not len(recent):
+        return float(np.median(older))
     level = float(np.median(recent))
     if len(older):
         slope = (level - float(np.median(older))) / (0.5 * window_s)
@@ -110,21 +115,33 @@ def _trailing_level(t: np.ndarray, d: np.ndarray, now: float, window_s: float) -
     return level
 
 
-def running_level(t: np.ndarray, d: np.ndarray, valid: np.ndarray, window_s: float, window: Window) -> np.ndarray:
-    """Level of ``d`` at each step (module docstring); NaN at steps without
-    data. Each step's window holds only the unbroken run of valid steps it
-    lies in."""
+def running_level(
+    t: np.ndarray, d: np.ndarray, valid: np.ndarray, window_s: float, window: Window, tolerance: float
+) -> np.ndarray:
+    """Level of ``d`` at each step (module docstring); ``tolerance`` is the
+    largest distance from the level at which a step still agrees. NaN at
+    steps without data."""
     out = np.full(len(t), np.nan)
     run = np.cumsum(np.concatenate(([True], valid[1:] != valid[:-1])))
+    if window == "trailing":
+        level = None
+        for k in range(len(t)):
+            if k == 0 or run[k] != run[k - 1]:
+                level = RunningLevel(window_s, tolerance)
+            if valid[k]:
+                out[k] = level.update(t[k], d[k])
+        return out
     eps = _TOL * window_s
     for k in np.flatnonzero(valid):
         same = run == run[k]
-        if window == "trailing":
-            sel = same & (t >= t[k] - window_s - eps) & (t <= t[k])
-            out[k] = _trailing_level(t[sel], d[sel], t[k], window_s)
-        else:
-            sel = same & (np.abs(t - t[k]) <= 0.5 * window_s + eps)
-            out[k] = float(np.median(d[sel]))
+        # A full-length window also near the ends of the data: shifted
+        # inwards, not truncated, so a disturbance never fills half of it.
+        lo, hi = t[same][0], t[same][-1]
+        start = min(max(t[k] - 0.5 * window_s, lo), max(hi - window_s, lo))
+        sel = same & (t >= start - eps) & (t <= start + window_s + eps)
+        first = float(np.median(d[sel]))
+        agree = sel & (np.abs(d - first) <= tolerance)
+        out[k] = float(np.median(d[agree])) if agree.any() else first
     return out
 
 
@@ -135,22 +152,30 @@ def offset_test(rel: RelationConfig, d: np.ndarray, level: np.ndarray) -> tuple[
 
 
 class RunningLevel:
-    """The trailing level of a difference, one step at a time; gives the same
-    values as :func:`running_level` with a trailing window on unbroken data."""
+    """The trailing level of a difference, one step at a time (module
+    docstring): the steps within ``tolerance`` of the level are learnt, the
+    others are not. A gap in the data starts it afresh."""
 
-    def __init__(self, window_s: float) -> None:
+    def __init__(self, window_s: float, tolerance: float) -> None:
         self.window_s = window_s
+        self.tolerance = tolerance
         self._t: deque[float] = deque()
         self._d: deque[float] = deque()
+        self._level: float | None = None
 
-    def update(self, t: float, d: float | None) -> float | None:
-        if d is None or not np.isfinite(d):
-            self._t.clear()
-            self._d.clear()
-            return None
-        self._t.append(t)
-        self._d.append(d)
+    def reset(self) -> None:
+        self._t.clear()
+        self._d.clear()
+        self._level = None
+
+    def update(self, t: float, d: float) -> float:
+        """The level at step ``t`` given its difference ``d``."""
+        if self._level is None or abs(d - self._level) <= self.tolerance:
+            self._t.append(t)
+            self._d.append(d)
         while self._t and self._t[0] < t - self.window_s - _TOL * self.window_s:
             self._t.popleft()
             self._d.popleft()
-        return _trailing_level(np.fromiter(self._t, float), np.fromiter(self._d, float), t, self.window_s)
+        if self._t:
+            self._level = _trailing_level(np.fromiter(self._t, float), np.fromiter(self._d, float), t, self.window_s)
+        return self._level
