@@ -137,10 +137,10 @@ def test_simulate(capsys, short_scenario_yaml, short_run, tmp_path):
     truth = json.loads((out / "truth.json").read_text())
     # The same scenario and seed as the session's run: the same faults.
     assert {c: [tuple(iv) for iv in v] for c, v in truth["faults"].items()} == short_run.faults
-    # A second run into the same, now full, folder is refused.
-    code, stdout, stderr = run_cli(capsys, "simulate", short_scenario_yaml, "--out", out)
-    assert code == 1 and stdout == ""
-    assert stderr.startswith("gslam: error: ") and "not empty" in stderr
+    # A second run into the same folder replaces the earlier simulate result.
+    code, stdout, stderr = run_cli(capsys, "simulate", short_scenario_yaml, "--out", out, "--seed", short_run.seed)
+    assert code == 0, stderr
+    assert json.loads((out / "truth.json").read_text()) == truth
 
 
 def test_demo_simulates_and_maps(capsys, short_scenario_yaml, tmp_path, monkeypatch):
@@ -173,7 +173,7 @@ def test_demo_missing_scenario(capsys, tmp_path):
         (["--set", "validation.observers.typo=1"], "unknown key 'typo'"),
         (["--set", "input.topics.scan=/nope"], "'/nope'"),
         (["--set", "keyframes.period_s=1000"], "fewer than 2 keyframes"),  # fails after reading
-        (["--set", "backend.optimizer"], "expected dotted.key=value"),
+        (["--set", "backend.optimizer"], "--set backend.optimizer: expected KEY=VALUE"),
     ],
     ids=["unknown-key", "unknown-observer-key", "missing-topic", "too-short", "bad-override"],
 )
@@ -221,5 +221,5 @@ def test_entry_point_maps_and_fails_cleanly(short_run, tmp_path):
 
     bad = gslam("map", short_run.run_dir, "--config", TELEMAX_CONFIG, "--out", tmp_path / "x", "--set", "backend.foo=1")
     assert bad.returncode == 1 and bad.stdout == ""
-    assert bad.stderr == f"gslam: error: {TELEMAX_CONFIG}: unknown config key 'backend.foo'\n"
+    assert bad.stderr == "gslam: error: --set backend.foo=1: unknown config key 'backend.foo'\n"
     assert not (tmp_path / "x").exists()

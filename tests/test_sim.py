@@ -294,8 +294,16 @@ def test_short_run_writes_a_valid_bag_and_truth(tmp_path):
         assert seen == set(counts)
     first = min(ts for _, ts, _ in read_bag(run / "bag"))
     assert first == 1_700_000_000 * 10**9
-    with pytest.raises(GslamError, match="not empty"):
-        simulate(tmp_path / "tiny.yaml", run)
+    # Again into the same folder: an earlier simulate result, replaced.
+    again = simulate(tmp_path / "tiny.yaml", run)
+    assert again.message_counts == result.message_counts
+    # Into a folder of something else: refused before any work.
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    with pytest.raises(GslamError, match="not a gslam simulate result"):
+        simulate(tmp_path / "tiny.yaml", other)
+    assert [p.name for p in other.iterdir()] == ["notes.txt"]
 
 
 def test_same_seed_same_messages_different_seed_differs(tmp_path):
