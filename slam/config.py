@@ -293,9 +293,9 @@ def describe_validation_error(source: str, err: ValidationError, what: str = "co
     return f"{source}: {loc}: {msg}" if loc else f"{source}: {msg}"
 
 
-def non_finite(tree: Any, prefix: str = "") -> tuple[str, float] | None:
+def non_finite(tree: Any, prefix: str = "", seen: set[int] | None = None) -> tuple[str, float] | None:
     """The dotted path and value of the first NaN or infinite number in a
-    YAML tree, or None."""
+    YAML tree, or None. A container shared by aliases is looked at once."""
     if isinstance(tree, float) and not math.isfinite(tree):
         return prefix or "value", tree
     if isinstance(tree, dict):
@@ -304,8 +304,12 @@ def non_finite(tree: Any, prefix: str = "") -> tuple[str, float] | None:
         items = enumerate(tree)
     else:
         return None
+    seen = set() if seen is None else seen
+    if id(tree) in seen:
+        return None
+    seen.add(id(tree))
     for key, value in items:
-        found = non_finite(value, f"{prefix}.{key}" if prefix else str(key))
+        found = non_finite(value, f"{prefix}.{key}" if prefix else str(key), seen)
         if found is not None:
             return found
     return None
@@ -387,7 +391,26 @@ def load_yaml(path: str | Path, what: str = "config") -> dict[str, Any]:
         return {}
     if not isinstance(data, dict):
         raise GslamError(f"{path}: expected a YAML mapping of keys at the top level, found a {type(data).__name__}")
+    if _expanded_size(data, {}) > MAX_YAML_VALUES:
+        raise GslamError(f"{path}: expands to more than {MAX_YAML_VALUES:,} values (YAML aliases); expected a config")
     return data
+
+
+MAX_YAML_VALUES = 1_000_000
+"""Most values a YAML file may expand to: aliases can make a few lines
+expand to billions (a "billion laughs" file), which no config needs."""
+
+
+def _expanded_size(node: Any, memo: dict[int, int]) -> int:
+    """Values in ``node`` with every alias expanded, counted once per
+    distinct container (linear time, however often a container is shared)."""
+    if not isinstance(node, (dict, list)):
+        return 1
+    if id(node) not in memo:
+        memo[id(node)] = 0  # a cycle counts as small; PyYAML's safe loader makes none
+        children = node.values() if isinstance(node, dict) else node
+        memo[id(node)] = 1 + sum(_expanded_size(c, memo) for c in children)
+    return memo[id(node)]
 
 
 def _blame(source: str, overrides: list[tuple[str, str]], key: str) -> str:

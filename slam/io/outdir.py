@@ -17,11 +17,12 @@ later run without ``force`` still refuses the folder). The input rules hold
 even with ``force``.
 
 *Atomic* commands (simulate, map, compare) build their result in a
-temporary sibling ``.NAME.gslam-tmp-XXXXXXXX/`` and rename it into place at
-the end, so a killed run leaves a complete result or none. The temporary
-folder holds ``.gslam-tmp.json`` with the host and process id that made it;
-a later run towards the same ``--out`` removes those whose process is gone.
-Folders that do not carry this marker are never removed.
+temporary sibling ``.NAME.gslam-tmp-PID-HOST-XXXXXXXX/`` and rename it into
+place at the end, so a killed run leaves a complete result or none. The
+name carries the process id and a tag of the host that made it (so it is
+recognisable from the moment it exists; ``.gslam-tmp.json`` inside says the
+same for a reader), and a later run towards the same ``--out`` removes those
+of this host whose process is gone. Nothing named otherwise is removed.
 
 *Container* commands (ablate, demo) fill their folder in place, each part
 atomically, so that an interrupted run resumes; :func:`open_container`
@@ -33,9 +34,11 @@ Everything is created with the permissions the umask allows (0644 files,
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
+import re
 import secrets
 import shutil
 import socket
@@ -170,24 +173,29 @@ def _process_alive(pid: int) -> bool:
     return True
 
 
-def _temp_owner(folder: Path) -> tuple[str, int] | None:
-    try:
-        data = json.loads((folder / TEMP_MARKER).read_text())
-        return str(data["host"]), int(data["pid"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
+def host_tag() -> str:
+    """8 hex digits naming this host in temporary names."""
+    return hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]
+
+
+def temp_name(target: Path, kind: str = "") -> Path:
+    """A fresh temporary name beside ``target`` that says who made it."""
+    return target.with_name(f".{target.name}{TEMP_TAG}{os.getpid()}-{host_tag()}-{kind}{secrets.token_hex(4)}")
 
 
 def remove_stale_temps(target: Path) -> list[Path]:
     """Remove the temporary folders that killed runs left beside ``target``:
-    named ``.NAME.gslam-tmp-*``, holding a temp marker of this host whose
-    process is gone. Anything else is left alone. Returns what was removed."""
-    removed = []
+    named ``.NAME.gslam-tmp-PID-HOST-...`` by a process of this host that is
+    gone. Anything else is left alone. Returns what was removed."""
+    removed: list[Path] = []
     if not target.parent.is_dir():
         return removed
+    pattern = re.compile(re.escape(f".{target.name}{TEMP_TAG}") + r"(\d+)-([0-9a-f]{8})-(?:old)?[0-9a-f]{8}")
     for p in target.parent.glob(f".{target.name}{TEMP_TAG}*"):
-        owner = _temp_owner(p) if p.is_dir() and not p.is_symlink() else None
-        if owner is None or owner[0] != socket.gethostname() or _process_alive(owner[1]):
+        owner = pattern.fullmatch(p.name)
+        if owner is None or not p.is_dir() or p.is_symlink():
+            continue
+        if owner.group(2) != host_tag() or _process_alive(int(owner.group(1))):
             continue
         log.info("removing %s, left by a killed run", p)
         shutil.rmtree(p, ignore_errors=True)
@@ -196,9 +204,9 @@ def remove_stale_temps(target: Path) -> list[Path]:
 
 
 def _make_temp(out: Path, target: Path, command: str) -> Path:
-    """A new temporary folder beside ``target``, marked as this process's."""
+    """A new temporary folder beside ``target``, named as this process's."""
     for _ in range(100):
-        tmp = target.with_name(f".{target.name}{TEMP_TAG}{secrets.token_hex(4)}")
+        tmp = temp_name(target)
         try:
             tmp.mkdir()
         except FileExistsError:
@@ -287,11 +295,9 @@ def result_folder(
 
 def _replace(new: Path, target: Path) -> None:
     """Swap ``new`` in for the earlier result ``target``; the old folder is
-    marked as temporary first, so a kill between the renames leaves it
-    recognisable for the next run to remove."""
-    marker = {"host": socket.gethostname(), "pid": os.getpid(), "command": "replaced", "target": str(target)}
-    (target / TEMP_MARKER).write_text(json.dumps(marker) + "\n")
-    old = target.with_name(f".{target.name}{TEMP_TAG}old-{secrets.token_hex(4)}")
+    renamed to a temporary name first, so a kill between the renames leaves
+    it recognisable for the next run to remove."""
+    old = temp_name(target, "old")
     os.rename(target, old)
     os.rename(new, target)
     shutil.rmtree(old, ignore_errors=True)

@@ -43,8 +43,17 @@ def estimate_duration(robot: RobotConfig) -> tuple[float, float]:
     """Mission duration (s) and path length (m) from the waypoints alone:
     the legs at full speed, a stop (accelerate and brake) and a spot turn
     wherever :func:`slam.sim.robot.plan_motion` turns on the spot, and the
-    pauses. Gentle corners are driven on arcs at speed."""
-    path = robot.path()
+    pauses. Gentle corners are driven on arcs at speed. Laps are counted,
+    not unrolled: each lap after the first adds what the second added."""
+    if robot.laps == 1:
+        return _estimate(robot, robot.waypoints)
+    one = _estimate(robot, robot.waypoints)
+    two = _estimate(robot, list(robot.waypoints) + list(robot.waypoints[1:]))
+    more = robot.laps - 1
+    return float(one[0] + more * (two[0] - one[0])), float(one[1] + more * (two[1] - one[1]))
+
+
+def _estimate(robot: RobotConfig, path: list) -> tuple[float, float]:
     pts = np.array([w[:2] for w in path], dtype=float)
     pauses = [w[2] if len(w) > 2 else 0.0 for w in path]
     legs = np.diff(pts, axis=0)
@@ -63,7 +72,7 @@ def estimate_duration(robot: RobotConfig) -> tuple[float, float]:
         if i == 0 or pauses[i] > 0 or turn > spot_limit or robot.corner_radius_m == 0.0:
             seconds += turn / w_max + v / a  # stop, turn on the spot, start again
         yaw = heading
-    return seconds, path_m
+    return float(seconds), path_m
 
 
 def check_bounded(scenario: Scenario, source: str) -> MissionEstimate:

@@ -234,6 +234,9 @@ def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario YAML; bad input raises :class:`GslamError`
     with one line naming the file and the offending key."""
     tree = load_yaml(path, "scenario")
+    if not tree:
+        raise GslamError(f"{path}: empty; a scenario needs at least 'name' and 'robot' "
+                         "(configs/scenarios/telemax_lab.yaml is an example)")
     return validate_scenario(tree, str(path))
 
 
