@@ -4,11 +4,11 @@
   qualitative trend symbol of each under it.
 * :func:`plot_observer_alarms` (its Fig. 3): every observer's no_match /
   implausible over time, the sensors the diagnosis blamed, and the true
-  fault intervals of each sensor, one colour per sensor.
+  fault intervals: shaded grey across the figure, and a row per sensor in
+  its colour (one legend entry each).
 
-True faults are shaded in a pale colour per component (the same in both
-figures, listed once each in the legend) and drawn under everything else,
-so the alarms keep the colours the title names.
+Shading is drawn under everything else, so lines and bars keep the colours
+the titles name.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from matplotlib.figure import Figure
 
 from slam.plots import fault_color, save_figure
 from slam.recording import Recording
+from slam.truth import union_intervals
 
 # The fault colours (slam.plots) are pale and none of them blue or red.
 _ALARM_COLOR, _BLAME_COLOR = "tab:blue", "tab:red"
@@ -124,15 +125,17 @@ def plot_observer_alarms(path: str | Path, recording: Recording, validation) -> 
     for j, (comp, intervals) in enumerate(truth):
         y = n_rows - 1 - len(rows) - j
         ax.broken_barh([(a, b - a) for a, b in intervals], (y - 0.35, 0.7), color=fault_color(comp),
-                       edgecolor="0.3", linewidth=0.5, zorder=3)
+                       edgecolor="0.3", linewidth=0.5, zorder=3, label=f"true {comp} fault")
     names = [n for n, _, _ in rows] + [f"true fault: {c}" for c, _ in truth]
     ax.set_yticks(range(n_rows), list(reversed(names)), fontsize="small")
-    _shade_faults(ax, recording)
+    # Any true fault, shaded once: overlapping colours would make a colour of their own.
+    for k, (a, b) in enumerate(union_intervals(*(iv for _, iv in truth))):
+        ax.axvspan(a, b, color="0.88", lw=0, zorder=0, label="any true fault" if k == 0 else None)
     ax.set_axisbelow(True)
     ax.set_xlabel("time [s]")
     ax.set_xlim(t[0], t[-1] + dt)
     ax.set_ylim(-0.7, n_rows - 0.3)
-    ax.set_title(f"{recording.name}: observer alarms (blue), blamed sensors (red), true faults (shaded, one colour per sensor)",
+    ax.set_title(f"{recording.name}: observer alarms (blue), blamed sensors (red), true faults (grey; a row per sensor)",
                  fontsize="medium")
     ax.grid(True, axis="x", linewidth=0.5, alpha=0.5)
     if truth:
