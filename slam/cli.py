@@ -284,6 +284,9 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{e.filename}: " if e.filename else ""
         print(f"gslam: error: {where}{e.strerror or e}", file=sys.stderr)
         return 1
+    except MemoryError as e:
+        print(f"gslam: error: not enough memory ({_one_line(str(e)) or 'MemoryError'})", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("gslam: interrupted", file=sys.stderr)
         return 130

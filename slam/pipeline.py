@@ -147,7 +147,11 @@ class MappingPipeline:
         candidates, scan_index = self._keyframe_candidates()
         chosen = select_keyframes(candidates, rec.odometry, cfg.keyframes)
         if len(chosen) < 2:
-            raise GslamError(f"{self.input_path}: fewer than 2 keyframes; the run is too short")
+            limits = ", ".join(f"{k} {'null' if v is None else f'{v:g}'}" for k, v in cfg.keyframes.model_dump().items())
+            raise GslamError(
+                f"{self.input_path}: fewer than 2 keyframes: {len(candidates)} {self._candidate_stream()} stamps "
+                f"over {rec.duration:.1f} s with keyframes {limits}; the run is too short or the limits too wide"
+            )
         t = candidates[chosen]
         scan_idx = scan_index[chosen] if scan_index is not None else None
         sm = self.frontend.poses if self.frontend is not None else None
@@ -219,6 +223,13 @@ class MappingPipeline:
             if stream is not None:
                 return stream.t, None
         raise GslamError(f"{self.input_path}: no odometry, gyro, compass or laser stream to map with")
+
+    def _candidate_stream(self) -> str:
+        rec = self.recording
+        if self.frontend is not None:
+            return "laser scan"
+        return next(name for name, s in (("odometry", rec.odometry), ("gyro", rec.gyro), ("compass", rec.compass))
+                    if s is not None)
 
     def _initial_pose(self) -> np.ndarray:
         rec, cfg, t0 = self.recording, self.config.backend, self.measurements.t[:1]

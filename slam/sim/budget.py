@@ -62,6 +62,7 @@ def _estimate(robot: RobotConfig, path: list) -> tuple[float, float]:
     v, a = robot.max_speed_m_s, robot.max_accel_m_s2
     w_max = np.radians(robot.max_turn_rate_deg_s)
     spot_limit = np.radians(robot.spot_turn_above_deg)
+    alpha = np.radians(robot.max_turn_accel_deg_s2)
     seconds = path_m / v + robot.start_pause_s + robot.end_pause_s + sum(pauses)
     yaw = np.radians(robot.start_yaw_deg)
     for i, (leg, length) in enumerate(zip(legs, lengths)):
@@ -70,7 +71,13 @@ def _estimate(robot: RobotConfig, path: list) -> tuple[float, float]:
         heading = float(np.arctan2(leg[1], leg[0]))
         turn = abs(float(wrap_angle(heading - yaw)))
         if i == 0 or pauses[i] > 0 or turn > spot_limit or robot.corner_radius_m == 0.0:
-            seconds += turn / w_max + v / a  # stop, turn on the spot, start again
+            # Stop, turn on the spot (a trapezoidal turn-rate profile), start again.
+            w_peak = min(w_max, np.sqrt(turn * alpha))
+            seconds += (turn / w_peak + w_peak / alpha if turn > 0 else 0.0) + v / a
+        else:
+            # An arc of radius at most corner_radius_m at a turn rate of at most
+            # w_max: slower than the straight line when w_max * R < v.
+            seconds += max(0.0, turn / w_max - robot.corner_radius_m * turn / v)
         yaw = heading
     return float(seconds), path_m
 
@@ -86,8 +93,9 @@ def check_bounded(scenario: Scenario, source: str) -> MissionEstimate:
                          "can be simulated (robot.waypoints, robot.laps)")
     if duration > MAX_DURATION_S:
         raise GslamError(
-            f"{source}: the mission would take about {duration / 3600:.1f} h ({path_m:.1f} m at robot.max_speed_m_s "
-            f"{scenario.robot.max_speed_m_s:g}); at most {MAX_DURATION_S / 3600:.0f} h can be simulated"
+            f"{source}: the mission would take about {duration / 3600:.1f} h ({path_m:.1f} m of path, "
+            f"robot.max_speed_m_s {scenario.robot.max_speed_m_s:g}, robot.max_turn_rate_deg_s "
+            f"{scenario.robot.max_turn_rate_deg_s:g}); at most {MAX_DURATION_S / 3600:.0f} h can be simulated"
         )
     rates = {
         "robot.truth_rate_hz": scenario.robot.truth_rate_hz,
