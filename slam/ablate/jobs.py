@@ -27,7 +27,8 @@ import yaml
 from pydantic import ValidationError
 
 from slam.ablate.spec import SCENARIO_PREFIX, AblationSpec, Distribution, RandomSweep, SweepSpec
-from slam.config import describe_validation_error, dump_config, load_config, load_yaml, non_finite, yaml_number
+from slam.config import describe_validation_error, dump_config, load_config
+from slam.io.yamlfile import load_yaml, non_finite, yaml_number
 from slam.errors import GslamError
 from slam.sim.budget import check_bounded
 from slam.sim.scenario import Scenario

@@ -24,7 +24,8 @@ from typing import Callable, Mapping, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from slam.config import GpsInputConfig, InputConfig, read_text_file
+from slam.config import GpsInputConfig, InputConfig
+from slam.io.yamlfile import read_text_file
 from slam.errors import GslamError
 from slam.io import broad, carmen, librsf
 from slam.io.rosbag import BAG_SUFFIXES, RosbagReader, is_rosbag
@@ -141,7 +142,7 @@ def _no_constant(name: str) -> float:
 def load_sidecar(path: str | Path) -> Sidecar:
     """Read and check a ``truth.json``; one-line :class:`GslamError` if bad."""
     path = Path(path)
-    text = read_text_file(path, "truth.json sidecar (JSON)")
+    text = read_text_file(path, "truth.json sidecar", "JSON")
     try:
         data = json.loads(text, parse_constant=_no_constant)
     except json.JSONDecodeError as e:

@@ -18,7 +18,8 @@ from typing import Annotated
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from slam.config import check_finite, describe_validation_error, load_yaml
+from slam.config import describe_validation_error
+from slam.io.yamlfile import check_finite, load_yaml
 from slam.errors import GslamError
 
 Point = tuple[float, float]
