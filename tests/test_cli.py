@@ -95,6 +95,8 @@ def test_map_with_every_shipped_pipeline_config(capsys, short_run, tmp_path, con
     assert shown["ate_rmse_m"] < 0.06  # measured 0.012-0.024 m on this run
     for name in ("trajectory.tum", "groundtruth.tum", "metrics.json", "config.yaml", "map.ply"):
         assert (out / name).is_file(), name
+    # The written config is the config used: it loads back equal.
+    assert load_config(out / "config.yaml") == load_config(config, [] if gating is None else [f"validation.mode={gating}"])
     used = validation_sections(load_config(out / "config.yaml"))[0].mode
     if gating is None:
         assert used == validation_sections(load_config(config))[0].mode
