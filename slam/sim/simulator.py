@@ -24,7 +24,6 @@ from enum import IntEnum
 from pathlib import Path
 
 import numpy as np
-import yaml
 from tqdm import tqdm
 
 from slam.io.outdir import result_folder
