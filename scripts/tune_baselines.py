@@ -22,6 +22,7 @@ from slam.config import load_config
 from slam.errors import GslamError
 from slam.io.atomic import write_text
 from slam.pipeline import MappingPipeline
+from slam.resources import shipped_config
 from slam.sim import simulate
 
 SCENARIOS = ("telemax_lab", "telemax_lab_clean", "telemax_compass")
@@ -66,8 +67,8 @@ def tune(config: Path, scenarios_dir: Path, out: Path, seed: int) -> TuneResult:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--config", type=Path, default=Path("configs/telemax.yaml"))
-    p.add_argument("--scenarios", type=Path, default=Path("configs/scenarios"))
+    p.add_argument("--config", type=Path, default=shipped_config("telemax.yaml"))
+    p.add_argument("--scenarios", type=Path, default=shipped_config("scenarios"))
     p.add_argument("--out", type=Path, default=Path("runs/tune_baselines"))
     p.add_argument("--seed", type=int, default=1)
     args = p.parse_args(argv)

@@ -6,9 +6,11 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import platform
 import sys
 from pathlib import Path
 
+from slam import __version__
 from slam.errors import GslamError
 from validation.errors import ValidationError
 
@@ -16,26 +18,67 @@ log = logging.getLogger("gslam")
 
 EXAMPLES = """\
 examples:
+  gslam demo
   gslam simulate configs/scenarios/telemax_lab.yaml --out runs/lab --seed 1
+  gslam inspect runs/lab --config-out my_robot.yaml
   gslam map runs/lab --config configs/telemax.yaml --out runs/lab_map
   gslam map runs/lab --config configs/telemax.yaml --out runs/lab_gated --gating on
   gslam map runs/lab --config configs/telemax.yaml --out runs/lab_isam2 --set backend.optimizer=isam2
   gslam map recording.bag --config my_robot.yaml --out runs/real --set input.topics.scan=/base_scan
   gslam compare runs/lab --config configs/telemax.yaml --out runs/lab_compare
-  gslam demo --out runs/demo
   gslam ablate configs/ablations/gating_policy.yaml --out runs/ablate_gating --workers 2
+
+paths starting with configs/ that do not exist in the working folder name
+the configs shipped with gslam, so these examples work from any folder.
 """
+
+INPUTS = """\
+recording to read; its format is recognised from the path: a ROS 1 .bag
+file, a ROS 2 bag (folder with metadata.yaml, or a .db3 or .mcap file), a
+simulated run folder (truth.json + bag/, from gslam simulate), a CARMEN
+.log or .log.gz, a BROAD trial .mat, or a libRSF *_Input.txt"""
+
+OUTPUT_RULE = """\
+--out must be new, or an earlier result of the same command (it holds
+.gslam-result.json), which is replaced; anything else is refused before any
+work. --force writes into another folder: the command's files replace files
+of the same name, nothing else there is touched. --out is never the input,
+a folder holding it, or a folder inside it."""
+
+
+def _config_path(path: str | None) -> Path | None:
+    from slam.resources import resolve_config_path
+
+    return resolve_config_path(path) if path is not None else None
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from slam.sim import simulate
 
-    res = simulate(args.scenario, args.out, seed=args.seed, progress=not args.quiet)
+    res = simulate(_config_path(args.scenario), args.out, seed=args.seed, progress=not args.quiet, force=args.force)
     print(f"wrote {res.run_dir} ({res.duration_s:.1f} s simulated)")
     for comp, intervals in res.faults.items():
         if intervals:
             spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals)
             print(f"  true faults {comp}: {spans}")
+    return 0
+
+
+def _cmd_inspect(args: argparse.Namespace) -> int:
+    from slam.inspection import inspect_recording
+    from slam.io.outdir import check_new_file
+
+    if args.config_out is not None:
+        check_new_file(args.config_out, [args.input], args.force)
+    found = inspect_recording(args.input)
+    print(found.report())
+    if args.config_out is None:
+        print(f"a starter config for gslam map: gslam inspect {args.input} --config-out my_robot.yaml")
+        return 0
+    from slam.io.atomic import write_text
+
+    write_text(args.config_out, found.starter)
+    print(f"wrote {args.config_out}: gslam map {args.input} --config {args.config_out} --out runs/first_map")
     return 0
 
 
@@ -46,8 +89,9 @@ def _cmd_map(args: argparse.Namespace) -> int:
     overrides = list(args.set or [])
     if args.gating is not None:
         overrides.append(f"validation.mode={args.gating}")
-    config = load_config(args.config, overrides)
-    res = run_map(args.input, config, args.out, progress=not args.quiet)
+    config_path = _config_path(args.config)
+    config = load_config(config_path, overrides)
+    res = run_map(args.input, config, args.out, progress=not args.quiet, inputs=[config_path], force=args.force)
     _print_metrics(res.out_dir, res.metrics)
     return 0
 
@@ -56,38 +100,35 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from slam.compare import run_compare
 
     only = args.only.split(",") if args.only else None
-    res = run_compare(args.input, args.config, args.out, args.variants, only, args.set or [], progress=not args.quiet)
-    print((Path(args.out) / "comparison.md").read_text())
+    res = run_compare(args.input, _config_path(args.config), args.out, _config_path(args.variants), only,
+                      args.set or [], progress=not args.quiet, force=args.force)
+    print((res.out_dir / "comparison.md").read_text())
     print(f"wrote {res.out_dir}")
     return 0
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from slam.compare import run_compare
-    from slam.sim import simulate
+    from slam.demo import run_demo
 
-    paths = (Path(args.scenario), Path(args.config), Path(args.variants))
-    for p in paths:
-        if not p.exists():
-            raise GslamError(f"{p}: not found; run the demo from the repository root or pass --scenario/--config/--variants")
-    out = Path(args.out)
-    run_dir = out / Path(args.scenario).stem
-    if not (run_dir / "truth.json").exists():
-        sim = simulate(args.scenario, run_dir, seed=args.seed, progress=not args.quiet)
-        print(f"simulated {sim.run_dir} ({sim.duration_s:.1f} s of the Telemax lab mission)")
     only = args.only.split(",") if args.only else None
-    res = run_compare(run_dir, args.config, out / "compare", args.variants, only, progress=not args.quiet)
-    print((res.out_dir / "comparison.md").read_text())
-    print(f"result folders, tables and figures in {res.out_dir}")
+    res = run_demo(args.out, _config_path(args.scenario), _config_path(args.config), _config_path(args.variants),
+                   only, args.seed, progress=not args.quiet, force=args.force)
+    if res.simulated:
+        print(f"simulated {res.run_dir} ({res.duration_s:.1f} s of the mission)")
+    else:
+        print(f"reused {res.run_dir} (the same scenario and seed)")
+    print((res.compare.out_dir / "comparison.md").read_text())
+    print(f"result folders, tables and figures in {res.compare.out_dir}")
     return 0
 
 
 def _cmd_ablate(args: argparse.Namespace) -> int:
     from slam.ablate import load_spec, run_ablation
 
-    spec = load_spec(args.spec, max_seeds=args.seeds)
+    spec_path = _config_path(args.spec)
+    spec = load_spec(spec_path, max_seeds=args.seeds)
     res = run_ablation(spec, args.out, workers=args.workers, backend=args.backend, address=args.address,
-                       progress=not args.quiet, source=args.spec)
+                       progress=not args.quiet, source=str(spec_path), force=args.force)
     print(res.summary.md_path.read_text())
     print(f"{len(res.jobs)} jobs: {len(res.ran)} ran, {len(res.skipped)} already finished, "
           f"{len(res.failed)} failed ({res.wall_s:.1f} s); wrote {res.out_dir}")
@@ -107,7 +148,44 @@ def _print_metrics(out_dir: Path, metrics: dict) -> None:
     print(json.dumps(shown, indent=2))
 
 
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected 1 or more, got {value}")
+    return value
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected 0 or more, got {value}")
+    return value
+
+
+def _sub(sub, name: str, help: str, examples: str, common: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    return sub.add_parser(name, help=help, description=help, epilog=examples, parents=[common],
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def _add_out(parser: argparse.ArgumentParser, what: str, **kwargs) -> None:
+    parser.add_argument("--out", help=f"{what}; see the --out rule below", **kwargs)
+    parser.add_argument("--force", action="store_true",
+                        help="write into an existing folder that is not a result of this command "
+                             "(only its own files are replaced; the input never)")
+
+
 def build_parser() -> argparse.ArgumentParser:
+    # -v and -q work before and after the command; SUPPRESS keeps a flag
+    # given before it from being reset by the command's parser.
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log progress details")
+    common.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars")
     p = argparse.ArgumentParser(
         prog="gslam",
         description="Offline SLAM (GTSAM) with sensor validation that gates each factor per time step.",
@@ -116,65 +194,77 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--version", action="version",
+                   version=f"gslam {__version__} (gated-slam, Python {platform.python_version()})")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    s = sub.add_parser("simulate", help="simulate a scenario into a ROS 2 bag plus true fault intervals",
-                       epilog="example:\n  gslam simulate configs/scenarios/telemax_lab.yaml --out runs/lab --seed 1",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    s.add_argument("scenario", help="scenario YAML (configs/scenarios/*.yaml)")
-    s.add_argument("--out", required=True, help="run folder to create (bag/ and truth.json)")
-    s.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
+    d = _sub(sub, "demo", "simulate the Telemax lab mission, map it ungated, gated and with the oracle",
+             "examples:\n  gslam demo\n  gslam demo --out runs/demo_all --only "
+             "ungated,gated,oracle,huber,cauchy,dcs,gnc_tls,gnc_gm --seed 2\n\n" + OUTPUT_RULE, common)
+    _add_out(d, "demo folder (default runs/demo): the simulated run and the comparison", default="runs/demo")
+    d.add_argument("--scenario", default=None, help="scenario YAML (default: the shipped configs/scenarios/telemax_lab.yaml)")
+    d.add_argument("--config", default=None, help="pipeline config YAML (default: the shipped configs/telemax.yaml)")
+    d.add_argument("--variants", default=None, help="variants YAML (default: the shipped configs/variants.yaml)")
+    d.add_argument("--only", default="ungated,gated,oracle", help="variants to run (default ungated,gated,oracle)")
+    d.add_argument("--seed", type=_seed, default=None, help="random seed (default: the scenario's)")
+    d.set_defaults(func=_cmd_demo)
+
+    s = _sub(sub, "simulate", "simulate a scenario into a ROS 2 bag plus true fault intervals",
+             "example:\n  gslam simulate configs/scenarios/telemax_lab.yaml --out runs/lab --seed 1\n\n" + OUTPUT_RULE,
+             common)
+    s.add_argument("scenario", help="scenario YAML (e.g. configs/scenarios/telemax_lab.yaml)")
+    _add_out(s, "run folder to create (bag/, truth.json, scenario.yaml)", required=True)
+    s.add_argument("--seed", type=_seed, default=None, help="random seed (default: the scenario's)")
     s.set_defaults(func=_cmd_simulate)
 
-    m = sub.add_parser("map", help="map a recorded or simulated run and evaluate it",
-                       epilog="examples:\n  gslam map runs/lab --config configs/telemax.yaml --out runs/lab_map\n"
-                              "  gslam map runs/lab --config configs/telemax.yaml --out runs/x --set backend.factors.gps.enabled=false",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    m.add_argument("input", help="run folder, ROS 2 bag folder or ROS 1 .bag file")
-    m.add_argument("--config", required=True, help="pipeline config YAML (e.g. configs/telemax.yaml)")
-    m.add_argument("--out", required=True, help="result folder (replaced atomically)")
+    i = _sub(sub, "inspect", "list what a recording holds (topics, types, counts, rates, time span); "
+             "write a starter config for gslam map",
+             "examples:\n  gslam inspect recording.bag\n  gslam inspect recording.bag --config-out my_robot.yaml\n"
+             "  gslam map recording.bag --config my_robot.yaml --out runs/first_map", common)
+    i.add_argument("input", help=INPUTS)
+    i.add_argument("--config-out", default=None, metavar="FILE",
+                   help="write a commented starter config for gslam map with the topics filled in (a new file)")
+    i.add_argument("--force", action="store_true", help="replace FILE of --config-out if it exists")
+    i.set_defaults(func=_cmd_inspect)
+
+    m = _sub(sub, "map", "map a recorded or simulated run and evaluate it",
+             "examples:\n  gslam map runs/lab --config configs/telemax.yaml --out runs/lab_map\n"
+             "  gslam map runs/lab --config configs/telemax.yaml --out runs/x --set backend.factors.gps.enabled=false\n"
+             "  gslam map recording.bag --config my_robot.yaml --out runs/real\n\n" + OUTPUT_RULE, common)
+    m.add_argument("input", help=INPUTS)
+    m.add_argument("--config", required=True, help="pipeline config YAML (e.g. configs/telemax.yaml; "
+                   "gslam inspect INPUT --config-out FILE writes a starter)")
+    _add_out(m, "result folder", required=True)
     m.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (repeatable)")
     m.add_argument("--gating", choices=["off", "on", "oracle", "interval_oracle"], default=None,
                    help="off: every factor in; on: causal sensor validation gates factors; "
                         "oracle: gate with the true fault intervals (default: the config's validation.mode)")
     m.set_defaults(func=_cmd_map)
 
-    c = sub.add_parser("compare", help="run ungated, gated, oracle and robust-kernel variants on the same run",
-                       epilog="examples:\n  gslam compare runs/lab --config configs/telemax.yaml --out runs/lab_compare\n"
-                              "  gslam compare runs/lab --config configs/telemax.yaml --out runs/x --only ungated,gated",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    c.add_argument("input", help="run folder, ROS 2 bag folder or ROS 1 .bag file")
+    c = _sub(sub, "compare", "run ungated, gated, oracle and robust-kernel variants on the same run",
+             "examples:\n  gslam compare runs/lab --config configs/telemax.yaml --out runs/lab_compare\n"
+             "  gslam compare runs/lab --config configs/telemax.yaml --out runs/x --only ungated,gated\n\n"
+             + OUTPUT_RULE, common)
+    c.add_argument("input", help=INPUTS)
     c.add_argument("--config", required=True, help="pipeline config YAML")
-    c.add_argument("--out", required=True, help="comparison folder: one result folder per variant, tables, figures")
-    c.add_argument("--variants", default="configs/variants.yaml", help="variants YAML (default configs/variants.yaml)")
+    _add_out(c, "comparison folder: one result folder per variant, tables, figures", required=True)
+    c.add_argument("--variants", default=None, help="variants YAML (default: the shipped configs/variants.yaml)")
     c.add_argument("--only", default=None, help="comma-separated subset of the variants")
     c.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key for every variant")
     c.set_defaults(func=_cmd_compare)
 
-    d = sub.add_parser("demo", help="simulate the Telemax lab mission, map it ungated, gated and with the oracle",
-                       epilog="examples:\n  gslam demo\n  gslam demo --out runs/demo_all --only "
-                              "ungated,gated,oracle,huber,cauchy,dcs,gnc_tls,gnc_gm --seed 2",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    d.add_argument("--out", default="runs/demo", help="demo folder (default runs/demo)")
-    d.add_argument("--scenario", default="configs/scenarios/telemax_lab.yaml")
-    d.add_argument("--config", default="configs/telemax.yaml")
-    d.add_argument("--variants", default="configs/variants.yaml")
-    d.add_argument("--only", default="ungated,gated,oracle", help="variants to run (default ungated,gated,oracle)")
-    d.add_argument("--seed", type=int, default=None)
-    d.set_defaults(func=_cmd_demo)
-
-    a = sub.add_parser("ablate", help="run a sweep of configs, scenarios and seeds (resumable; local or Ray)",
-                       epilog="examples:\n  gslam ablate configs/ablations/gating_policy.yaml --out runs/ablate_gating\n"
-                              "  gslam ablate configs/ablations/paper_parameters.yaml --out runs/pp --workers 2 --seeds 3\n"
-                              "  gslam ablate SPEC.yaml --out /shared/runs/x --backend ray --address auto",
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    a.add_argument("spec", help="ablation spec YAML (configs/ablations/*.yaml)")
-    a.add_argument("--out", required=True, help="sweep folder; running again skips finished jobs")
-    a.add_argument("--workers", type=int, default=None, help="parallel jobs (default: CPU count)")
+    a = _sub(sub, "ablate", "run a sweep of configs, scenarios and seeds (resumable; local or Ray)",
+             "examples:\n  gslam ablate configs/ablations/gating_policy.yaml --out runs/ablate_gating\n"
+             "  gslam ablate configs/ablations/paper_parameters.yaml --out runs/pp --workers 2 --seeds 3\n"
+             "  gslam ablate SPEC.yaml --out /shared/runs/x --backend ray --address auto\n\n" + OUTPUT_RULE
+             + "\nRunning again into the same sweep folder skips the finished jobs.", common)
+    a.add_argument("spec", help="ablation spec YAML (e.g. configs/ablations/gating_policy.yaml)")
+    _add_out(a, "sweep folder; running again skips finished jobs", required=True)
+    a.add_argument("--workers", type=_positive, default=None, help="parallel jobs (default: CPU count)")
     a.add_argument("--backend", choices=["local", "ray"], default="local",
                    help="local: process pool; ray: one Ray task per job (pip install \".[ray]\")")
     a.add_argument("--address", default=None, help="Ray cluster address (e.g. auto); default: a local Ray instance")
-    a.add_argument("--seeds", type=int, default=None, help="only the first N seeds of each scenario (a quick look)")
+    a.add_argument("--seeds", type=_positive, default=None, help="only the first N seeds of each scenario (a quick look)")
     a.set_defaults(func=_cmd_ablate)
     return p
 
@@ -188,11 +278,22 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except (GslamError, ValidationError) as e:
-        print(f"gslam: error: {e}", file=sys.stderr)
+        print(f"gslam: error: {_one_line(str(e))}", file=sys.stderr)
+        return 1
+    except OSError as e:  # the machine, not the input: a full disk, a vanished folder
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"gslam: error: {where}{e.strerror or e}", file=sys.stderr)
+        return 1
+    except MemoryError as e:
+        print(f"gslam: error: not enough memory ({_one_line(str(e)) or 'MemoryError'})", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("gslam: interrupted", file=sys.stderr)
         return 130
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split("\n"))
 
 
 if __name__ == "__main__":

@@ -2,7 +2,9 @@
 and robust-kernel baselines (``gslam compare``).
 
 The run is read and scan-matched once; each variant is a normal result
-folder ``OUT/<variant>/`` as ``gslam map`` writes it. Beside them:
+folder ``OUT/<variant>/`` as ``gslam map`` writes it. ``OUT`` follows the
+rule of :mod:`slam.io.outdir` and is built whole beside its place. Beside
+the variants:
 ``comparison.csv`` and ``comparison.md`` (one row per variant; the runtime
 counts reading and scan matching for every variant, though they run once) and the
 figures a reader of the paper expects (trajectories over ground truth,
@@ -22,8 +24,9 @@ import yaml
 
 from slam.config import PipelineConfig, load_config, load_yaml
 from slam.errors import GslamError
-from slam.io.atomic import write_text
+from slam.io.outdir import result_folder
 from slam.pipeline import MapResult, MappingPipeline
+from slam.resources import shipped_config
 
 log = logging.getLogger(__name__)
 
@@ -107,24 +110,53 @@ def run_compare(
     input_path: str | Path,
     config_path: str | Path,
     out_dir: str | Path,
-    variants_path: str | Path,
+    variants_path: str | Path | None = None,
     only: list[str] | None = None,
     overrides: list[str] | None = None,
     progress: bool = False,
+    force: bool = False,
 ) -> CompareResult:
-    """Run every variant on ``input_path``; see the module docstring."""
+    """Run every variant on ``input_path``; see the module docstring.
+    ``variants_path``: default the shipped ``configs/variants.yaml``;
+    ``force``: see :mod:`slam.io.outdir`."""
     out_dir = Path(out_dir)
+    variants_path = Path(variants_path) if variants_path is not None else shipped_config("variants.yaml")
     variants = load_variants(variants_path, only)
-    configs: dict[str, PipelineConfig] = {
-        name: load_config(config_path, [*(overrides or []), *ov]) for name, ov in variants.items()
-    }
+    load_config(config_path, overrides or [])  # errors of the config and --set first
+    configs = {name: _variant_config(config_path, overrides or [], variants_path, name, ov) for name, ov in variants.items()}
+    with result_folder(out_dir, "compare", [input_path, config_path, variants_path], force) as tmp:
+        results, recording = _run_variants(input_path, configs, tmp, progress)
+        result = CompareResult(tmp, results)
+        rows = result.table()
+        (tmp / "comparison.csv").write_text(_csv(rows))
+        (tmp / "comparison.md").write_text(_markdown(rows, f"{recording.name}: variants compared"))
+        _figures(tmp, results, recording)
+    for name, res in results.items():
+        res.out_dir = out_dir / name
+    return CompareResult(out_dir, results)
+
+
+def _variant_config(config_path, overrides: list[str], variants_path: Path, name: str, ov: list[str]) -> PipelineConfig:
+    try:
+        return load_config(config_path, [*overrides, *ov])
+    except GslamError as e:
+        message = str(e)
+        for text in ov:  # the variant's own keys: blame the variants file
+            message = message.replace(f"--set {text}: ", f"{text}: ")
+        raise GslamError(f"{variants_path}: variant '{name}': {message}") from None
+
+
+def _run_variants(
+    input_path: str | Path, configs: dict[str, PipelineConfig], folder: Path, progress: bool
+) -> tuple[dict[str, MapResult], object]:
+    """Each variant into ``folder/<name>``, sharing reading and scan matching."""
     recording, frontend, frontend_cfg = None, None, None
     shared_s = 0.0
     results: dict[str, MapResult] = {}
     for name, cfg in configs.items():
         if frontend_cfg is not None and cfg.frontend != frontend_cfg:
             frontend = None  # this variant changes the front-end: match again
-        pipe = MappingPipeline(input_path, cfg, out_dir / name, progress=progress, recording=recording, frontend=frontend)
+        pipe = MappingPipeline(input_path, cfg, folder / name, progress=progress, recording=recording, frontend=frontend)
         results[name] = res = pipe.run()
         timings = res.metrics.get("timings_s", {})
         if recording is None or frontend is None:
@@ -133,27 +165,24 @@ def run_compare(
         else:  # reading and scan matching were reused: count them in
             res.metrics["runtime_with_shared_s"] = round(res.metrics["runtime_s"] + shared_s, 4)
         recording, frontend, frontend_cfg = pipe.recording, pipe.frontend, cfg.frontend
-        log.info("%s: ATE %.3f m", name, results[name].metrics.get("ate_rmse_m", float("nan")))
-    result = CompareResult(out_dir, results)
-    rows = result.table()
-    write_text(out_dir / "comparison.csv", _csv(rows))
-    write_text(out_dir / "comparison.md", _markdown(rows, f"{recording.name}: variants compared"))
-    _figures(result, recording)
-    return result
+        log.info("%s: ATE %s m", name, results[name].metrics.get("ate_rmse_m"))
+    return results, recording
 
 
-def _figures(result: CompareResult, recording) -> None:
-    from slam.plots import plot_trajectories
+def _figures(out: Path, results: dict[str, MapResult], recording) -> None:
+    from slam.plots import fault_shading, plot_trajectories
     from validation.figures import plot_observer_alarms, plot_yaw_trends
 
-    out = result.out_dir
-    shaded = [(f"true {c} fault", iv) for c, iv in recording.faults.items() if iv]
-    trajectories = {name: r.trajectory for name, r in result.results.items()}
+    shaded = fault_shading(recording.faults)
+    trajectories = {name: r.trajectory for name, r in results.items()}
     title = f"{recording.name}: variants over the reference"
-    plot_trajectories(out / "trajectories.png", trajectories, recording.groundtruth, title, shaded, zoom_margin=0.25)
-    plot_trajectories(out / "trajectories_full.png", trajectories, recording.groundtruth, title, shaded)
-    gated = next((r for name, r in result.results.items() if name == "gated"), None)
-    validation = getattr(gated, "validation", None) if gated is not None else None
+    on_top = [name for name in ("oracle", "gated") if name in trajectories]
+    plot_trajectories(out / "trajectories.png", trajectories, recording.groundtruth, title, shaded,
+                      zoom_margin=0.25, highlight=on_top)
+    plot_trajectories(out / "trajectories_full.png", trajectories, recording.groundtruth, title, shaded,
+                      highlight=on_top)
+    gated = results.get("gated")
+    validation = gated.validation if gated is not None else None
     if validation is not None and validation.observer_log is not None:
         plot_yaw_trends(out / "compass_trends.png", recording, validation)
         plot_observer_alarms(out / "observer_alarms.png", recording, validation)

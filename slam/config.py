@@ -2,12 +2,21 @@
 
 One model per component, nested under :class:`PipelineConfig`; every model
 forbids unknown keys, so a typo in a config or an override is an error and
-never silently runs the default. Angles are in degrees only where a key says
-``_deg``; the code converts them at the edge.
+never silently runs the default, and every number must be finite. Angles
+are in degrees only where a key says ``_deg``; the code converts them at the
+edge.
+
+Loading checks the whole config before anything runs and reports the first
+problem in one line, naming the file (or the ``--set KEY=VALUE`` that caused
+it) and the key. The loaded config holds the ``validation`` and ``gating``
+sections in their checked, fully defaulted form, so :func:`dump_config`
+writes a YAML that loads back to an equal config.
 """
 
 from __future__ import annotations
 
+import logging
+import re
 from pathlib import Path
 from typing import Any, Literal
 
@@ -15,10 +24,18 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from slam.errors import GslamError
+from slam.io.yamlfile import check_finite, load_yaml, non_finite, read_text_file, yaml_number
+
+__all__ = [  # the YAML helpers are used through this module too
+    "PipelineConfig", "check_finite", "describe_validation_error", "dump_config", "load_config", "load_yaml",
+    "non_finite", "parse_override", "read_text_file", "validation_sections", "yaml_number",
+]
+
+log = logging.getLogger(__name__)
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
 
 # --- input ---------------------------------------------------------------
@@ -237,8 +254,10 @@ class OutputConfig(Strict):
 class PipelineConfig(Strict):
     """Root of a pipeline config (e.g. ``configs/telemax.yaml``).
 
-    ``validation`` and ``gating`` are handled by the ``validation`` package;
-    they are kept as plain mappings here and checked by its own models.
+    ``validation`` and ``gating`` are handled by the ``validation`` package
+    and checked by its own models; they are kept here as the mappings of
+    those models' dumps (every default spelled out), as
+    :func:`load_config` leaves them.
     """
 
     input: InputConfig = InputConfig()
@@ -247,11 +266,23 @@ class PipelineConfig(Strict):
     backend: BackendConfig = BackendConfig()
     evaluation: EvaluationConfig = EvaluationConfig()
     output: OutputConfig = OutputConfig()
-    validation: dict[str, Any] = Field(default_factory=dict)
-    gating: dict[str, Any] = Field(default_factory=dict)
+    validation: dict[str, Any] = Field(default_factory=lambda: _section_defaults()[0])
+    gating: dict[str, Any] = Field(default_factory=lambda: _section_defaults()[1])
+
+
+def _section_defaults() -> tuple[dict[str, Any], dict[str, Any]]:
+    """The ``validation`` and ``gating`` sections with every default."""
+    vcfg, gcfg = _parse_sections({}, {})
+    return vcfg.model_dump(mode="json", by_alias=True), gcfg.model_dump(mode="json", by_alias=True)
 
 
 # --- loading -------------------------------------------------------------
+
+
+def _loc_text(loc: tuple) -> str:
+    # pydantic names the member of a union it tried ("tuple[float, float]"):
+    # not a key the user wrote.
+    return ".".join(str(p) for p in loc if not (isinstance(p, str) and "[" in p))
 
 
 def describe_validation_error(source: str, err: ValidationError, what: str = "config", prefix: str = "") -> str:
@@ -260,22 +291,24 @@ def describe_validation_error(source: str, err: ValidationError, what: str = "co
     must see."""
     errors = err.errors()
     first = next((e for e in errors if e["type"] == "extra_forbidden"), errors[0])
-    loc = prefix + ".".join(str(p) for p in first["loc"])
+    loc = prefix + _loc_text(first["loc"])
     if first["type"] == "extra_forbidden":
         return f"{source}: unknown {what} key '{loc}'"
-    return f"{source}: {loc}: {first['msg']}"
+    msg = first["msg"].removeprefix("Value error, ")
+    return f"{source}: {loc}: {msg}" if loc else f"{source}: {msg}"
 
 
 def set_dotted(tree: dict[str, Any], dotted: str, value: Any) -> None:
     """Set ``tree['a']['b']['c'] = value`` for ``dotted = 'a.b.c'``."""
     keys = dotted.split(".")
     node = tree
-    for k in keys[:-1]:
+    for n, k in enumerate(keys[:-1]):
         nxt = node.get(k)
         if nxt is None:
             nxt = node[k] = {}
         if not isinstance(nxt, dict):
-            raise GslamError(f"override '{dotted}': '{k}' is not a section")
+            section = ".".join(keys[: n + 1])
+            raise GslamError(f"'{section}' is a value, not a section")
         node = nxt
     node[keys[-1]] = value
 
@@ -283,11 +316,11 @@ def set_dotted(tree: dict[str, Any], dotted: str, value: Any) -> None:
 def parse_override(text: str) -> tuple[str, Any]:
     """``'a.b=3'`` -> ``('a.b', 3)``; the value is parsed as YAML."""
     if "=" not in text:
-        raise GslamError(f"override '{text}': expected dotted.key=value")
+        raise GslamError(f"--set {text}: expected KEY=VALUE, e.g. backend.optimizer=isam2")
     key, raw = text.split("=", 1)
     key = key.strip()
-    if not key:
-        raise GslamError(f"override '{text}': empty key")
+    if not key or any(not part for part in key.split(".")):
+        raise GslamError(f"--set {text}: expected KEY=VALUE with a dotted key, e.g. backend.optimizer=isam2")
     try:
         value = yaml.safe_load(raw) if raw.strip() else None
     except yaml.YAMLError:
@@ -295,67 +328,89 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key, value
 
 
-def load_yaml(path: str | Path) -> dict[str, Any]:
-    """Read a YAML mapping, with a one-line error for anything else."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as e:
-        raise GslamError(f"{path}: cannot read config ({e.strerror})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f" line {mark.line + 1}" if mark else ""
-        raise GslamError(f"{path}:{where} invalid YAML") from None
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise GslamError(f"{path}: expected a mapping at the top level")
-    return data
+def _blame(source: str, overrides: list[tuple[str, str]], key: str) -> str:
+    """Who set ``key``: the last ``--set`` that touched it or a section
+    holding it, else the config file."""
+    for text, okey in reversed(overrides):
+        if key == okey or key.startswith(okey + ".") or okey.startswith(key + "."):
+            return f"--set {text}"
+    return source
 
 
 def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] = ()) -> PipelineConfig:
-    """Load a pipeline config and apply ``dotted.key=value`` overrides."""
+    """Load a pipeline config and apply ``dotted.key=value`` overrides.
+
+    An empty config file is allowed (every key takes its default) with a
+    warning, since it is more often a mistake than a choice."""
     from validation.config import inline_model
     from validation.errors import ValidationError as SectionError
 
     tree = load_yaml(path) if path is not None else {}
     source = str(path) if path is not None else "config"
+    if path is not None and not tree:
+        log.warning("%s is empty: every key takes its built-in default (configs/telemax.yaml is a commented example)", path)
+    parsed = [(text, parse_override(text)) for text in overrides]
+    applied = [(text, key) for text, (key, _) in parsed]
     # A model path in the file is relative to the file; one given as an
     # override is relative to the working directory.
     try:
         if isinstance(tree.get("validation"), dict) and path is not None:
             inline_model(tree["validation"], Path(path).parent)
-        for text in overrides:
-            key, value = parse_override(text)
+    except (SectionError, GslamError) as e:
+        raise GslamError(f"{source}: {e}") from None
+    for text, (key, value) in parsed:
+        try:
             set_dotted(tree, key, value)
+        except GslamError as e:
+            raise GslamError(f"--set {text}: {e}") from None
+    try:
         if isinstance(tree.get("validation"), dict):
             inline_model(tree["validation"], Path.cwd())
-    except SectionError as e:
-        raise GslamError(f"{source}: {e}") from None
+    except (SectionError, GslamError) as e:
+        raise GslamError(f"{_blame(source, applied, 'validation.model')}: {e}") from None
+    found = non_finite(tree)
+    if found is not None:
+        key, value = found
+        raise GslamError(f"{_blame(source, applied, key)}: {key}: expected a finite number, got {yaml_number(value)}")
     try:
         config = PipelineConfig.model_validate(tree)
     except ValidationError as e:
-        raise GslamError(describe_validation_error(source, e)) from None
-    # The validation package checks its own sections (imported here, not at
-    # module level: it builds on this module).
+        first = next((x for x in e.errors() if x["type"] == "extra_forbidden"), e.errors()[0])
+        who = _blame(source, applied, _loc_text(first["loc"]))
+        raise GslamError(describe_validation_error(who, e)) from None
+    try:
+        vcfg, gcfg = _parse_sections(config.validation, config.gating)
+    except SectionError as e:
+        raise GslamError(f"{_blame(source, applied, _section_error_key(str(e)))}: {e}") from None
+    # The checked sections, every default spelled out (validate_assignment
+    # checks them as mappings).
+    config.validation = vcfg.model_dump(mode="json", by_alias=True)
+    config.gating = gcfg.model_dump(mode="json", by_alias=True)
+    return config
+
+
+def _section_error_key(message: str) -> str:
+    """The dotted key a validation-package error is about: its leading
+    ``section.key:``, plus the name of an unknown key."""
+    key = message.split(":", 1)[0].split(" ", 1)[0]
+    unknown = re.search(r"unknown key '([^']+)'", message)
+    return f"{key}.{unknown.group(1)}" if unknown else key
+
+
+def _parse_sections(validation: dict[str, Any], gating: dict[str, Any]):
+    # The validation package builds on this module: imported here.
     from validation.config import parse_sections
 
-    try:
-        parse_sections(config.validation, config.gating)
-    except SectionError as e:
-        raise GslamError(f"{source}: {e}") from None
-    return config
+    return parse_sections(validation, gating)
 
 
 def validation_sections(config: PipelineConfig):
     """The typed ``validation`` and ``gating`` sections of a loaded config."""
-    from validation.config import parse_sections
-
-    return parse_sections(config.validation, config.gating)
+    return _parse_sections(config.validation, config.gating)
 
 
 def dump_config(config: PipelineConfig) -> str:
-    """The config as YAML, every default spelled out."""
-    return yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False)
+    """The config as YAML, every default spelled out; :func:`load_config`
+    reads it back to an equal config. Strings YAML 1.1 would read as
+    booleans (``off``, ``on``) are quoted."""
+    return yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False, allow_unicode=True)

@@ -2,18 +2,18 @@
 measurements, validation, graph optimisation, evaluation, results.
 
 :class:`MappingPipeline.run` reads like the table of contents; every step is
-a method. The result folder is written into a temporary sibling and renamed
-into place at the end, so a killed run leaves a complete folder or none.
+a method. The result folder follows :mod:`slam.io.outdir`: ``--out`` is
+checked before any work, the result is built in a temporary sibling and
+renamed into place at the end, so a killed run leaves a complete folder or
+none.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import os
-import shutil
-import tempfile
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,6 +24,7 @@ from slam.backend import BackendResult, FactorWeights, optimise, unit_weights
 from slam.config import PipelineConfig, dump_config
 from slam.errors import GslamError
 from slam.frontend import FrontendResult, ScanProjector, run_frontend
+from slam.io.outdir import result_folder
 from slam.measurements import Measurements, build_measurements, interpolate_poses, select_keyframes
 from slam.recording import Recording, Trajectory
 
@@ -57,6 +58,9 @@ class MappingPipeline:
 
     ``recording`` and ``frontend`` may be given to reuse what another
     variant of the same run already computed (``gslam compare``).
+    ``inputs``: other files the run reads (the config), which ``out_dir``
+    must not be or hold; ``force``: write into a folder that is not a map
+    result (see :mod:`slam.io.outdir`).
     """
 
     def __init__(
@@ -67,8 +71,12 @@ class MappingPipeline:
         progress: bool = False,
         recording: Recording | None = None,
         frontend: FrontendResult | None = None,
+        inputs: Sequence[str | Path] = (),
+        force: bool = False,
     ):
         self.input_path = Path(input_path)
+        self.inputs = [self.input_path, *map(Path, inputs)]
+        self.force = force
         self.config = config
         self.out_dir = Path(out_dir)
         self.progress = progress
@@ -89,13 +97,14 @@ class MappingPipeline:
 
     def run(self) -> MapResult:
         self._start = time.perf_counter()
-        self.read()
-        self.match_scans()
-        self.build_measurements()
-        self.validate()
-        self.optimise()
-        self.evaluate()
-        self.write()
+        with result_folder(self.out_dir, "map", self.inputs, self.force) as tmp:
+            self.read()
+            self.match_scans()
+            self.build_measurements()
+            self.validate()
+            self.optimise()
+            self.evaluate()
+            self.write(tmp)
         return MapResult(self.out_dir, self.metrics, self.backend.trajectory, self.recording, self.validation)
 
     # -- steps ----------------------------------------------------------------
@@ -141,7 +150,11 @@ class MappingPipeline:
         candidates, scan_index = self._keyframe_candidates()
         chosen = select_keyframes(candidates, rec.odometry, cfg.keyframes)
         if len(chosen) < 2:
-            raise GslamError(f"{self.input_path}: fewer than 2 keyframes; the run is too short")
+            limits = ", ".join(f"{k} {'null' if v is None else f'{v:g}'}" for k, v in cfg.keyframes.model_dump().items())
+            raise GslamError(
+                f"{self.input_path}: fewer than 2 keyframes: {len(candidates)} {self._candidate_stream()} stamps "
+                f"over {rec.duration:.1f} s with keyframes {limits}; the run is too short or the limits too wide"
+            )
         t = candidates[chosen]
         scan_idx = scan_index[chosen] if scan_index is not None else None
         sm = self.frontend.poses if self.frontend is not None else None
@@ -203,8 +216,11 @@ class MappingPipeline:
 
     def optimise(self) -> None:
         pose0 = self._initial_pose()
+        # Building the batch graph takes milliseconds: a bar would only ever
+        # show 0 %. iSAM2 updates per keyframe take long enough to show one.
+        progress = self.progress and self.config.backend.optimizer == "isam2"
         self.backend = optimise(
-            self.measurements, pose0, self.config.backend, self.weights, progress=self.progress,
+            self.measurements, pose0, self.config.backend, self.weights, progress=progress,
             constraints=self.constraints,
         )
         self.timings.graph_build_s = self.backend.build_time_s
@@ -223,23 +239,16 @@ class MappingPipeline:
         m.update(self.extra_metrics)
         self.metrics = m
 
-    def write(self) -> None:
-        """Write the result folder atomically (temp sibling, then rename)."""
+    def write(self, folder: Path) -> None:
+        """Write the results into ``folder`` (the temporary folder that is
+        renamed into place afterwards)."""
         t = time.perf_counter()
-        out = self.out_dir
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-        try:
-            self._write_into(tmp)
-            self.timings.write_s = time.perf_counter() - t
-            # Everything but renaming the folder into place and writing this file.
-            self.metrics["runtime_s"] = round(time.perf_counter() - self._start, 4)
-            self._add_timings()
-            (tmp / "metrics.json").write_text(json.dumps(self.metrics, indent=2) + "\n")
-            _replace_dir(tmp, out)
-        finally:
-            if tmp.exists():
-                shutil.rmtree(tmp, ignore_errors=True)
+        self._write_into(folder)
+        self.timings.write_s = time.perf_counter() - t
+        # Everything but renaming the folder into place and writing this file.
+        self.metrics["runtime_s"] = round(time.perf_counter() - self._start, 4)
+        self._add_timings()
+        (folder / "metrics.json").write_text(json.dumps(self.metrics, indent=2) + "\n")
 
     # -- details --------------------------------------------------------------
 
@@ -253,6 +262,13 @@ class MappingPipeline:
             if stream is not None:
                 return stream.t, None
         raise GslamError(f"{self.input_path}: no odometry, gyro, compass or laser stream to map with")
+
+    def _candidate_stream(self) -> str:
+        rec = self.recording
+        if self.frontend is not None:
+            return "laser scan"
+        return next(name for name, s in (("odometry", rec.odometry), ("gyro", rec.gyro), ("compass", rec.compass))
+                    if s is not None)
 
     def _initial_pose(self) -> np.ndarray:
         rec, cfg, t0 = self.recording, self.config.backend, self.measurements.t[:1]
@@ -296,10 +312,10 @@ class MappingPipeline:
 
             write_ply(d / "map.ply", points)
         if out.plots:
-            from slam.plots import plot_map, plot_trajectories
+            from slam.plots import fault_shading, plot_map, plot_trajectories
 
             ref = rec.groundtruth
-            shaded = [(f"true {c} fault", iv) for c, iv in rec.faults.items() if iv]
+            shaded = fault_shading(rec.faults)
             plot_trajectories(d / "trajectory.png", {"estimate": est}, ref, title=rec.name, shaded=shaded)
             if points is not None:
                 plot_map(d / "map.png", points, est, title=f"{rec.name}: laser map")
@@ -330,17 +346,14 @@ class MappingPipeline:
         return voxel_downsample(points, voxel)
 
 
-def _replace_dir(new: Path, target: Path) -> None:
-    """Put folder ``new`` at ``target``; an old ``target`` is replaced whole."""
-    if target.exists():
-        old = target.with_name(f".{target.name}.old-{os.getpid()}")
-        os.replace(target, old)
-        os.replace(new, target)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        os.replace(new, target)
-
-
-def run_map(input_path: str | Path, config: PipelineConfig, out_dir: str | Path, progress: bool = False) -> MapResult:
-    """Map one run (the library form of ``gslam map``)."""
-    return MappingPipeline(input_path, config, out_dir, progress=progress).run()
+def run_map(
+    input_path: str | Path,
+    config: PipelineConfig,
+    out_dir: str | Path,
+    progress: bool = False,
+    inputs: Sequence[str | Path] = (),
+    force: bool = False,
+) -> MapResult:
+    """Map one run (the library form of ``gslam map``); ``inputs`` and
+    ``force`` as for :class:`MappingPipeline`."""
+    return MappingPipeline(input_path, config, out_dir, progress=progress, inputs=inputs, force=force).run()

@@ -7,6 +7,7 @@ written atomically by :func:`save_figure`.
 
 from __future__ import annotations
 
+import itertools
 import logging
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -21,8 +22,27 @@ from slam.recording import Interval, Trajectory
 logger = logging.getLogger(__name__)
 
 DPI = 120
-# Pale colours, apart from the default line cycle, so bands never look like a path.
-_SHADE_COLORS = ("gold", "violet", "lightgreen", "lightskyblue", "wheat")
+# Pale colours, apart from the default line cycle, so bands never look like a
+# path; one per component, the same in every figure.
+FAULT_COLORS = {"SM": "gold", "GPS": "violet", "IMU_YAW": "lightgreen", "ODO": "wheat", "IMU_GYRO": "lightskyblue"}
+_SHADE_COLORS = tuple(FAULT_COLORS.values())
+# Drawn on top of the other variants, in colours the default cycle then skips.
+HIGHLIGHT_STYLES = (
+    {"color": "tab:green", "linewidth": 4.0, "alpha": 0.55},  # under the next one: a band around it
+    {"color": "tab:red", "linewidth": 1.8},
+)
+
+Shade = tuple[str, Sequence[Interval]] | tuple[str, Sequence[Interval], str]
+
+
+def fault_color(component: str) -> str:
+    """The pale colour of a component's true faults."""
+    return FAULT_COLORS.get(component, "lightgrey")
+
+
+def fault_shading(faults: Mapping[str, Sequence[Interval]]) -> list[Shade]:
+    """``(label, intervals, colour)`` of each component with true faults."""
+    return [(f"true {c} fault", iv, fault_color(c)) for c, iv in faults.items() if iv]
 
 
 def save_figure(fig: Figure, path: str | Path) -> None:
@@ -52,17 +72,15 @@ def _interval_mask(t: np.ndarray, intervals: Sequence[Interval]) -> np.ndarray:
     return mask
 
 
-def _draw_shaded(
-    ax: Axes, base: Trajectory, shaded: Sequence[tuple[str, Sequence[Interval]]]
-) -> None:
+def _draw_shaded(ax: Axes, base: Trajectory, shaded: Sequence[Shade]) -> None:
     """Overlay the parts of ``base`` inside each labelled set of intervals
     as a broad translucent band, broken where the mask is False."""
-    for n, (label, intervals) in enumerate(shaded):
+    for n, (label, intervals, *color) in enumerate(shaded):
         mask = _interval_mask(base.t, intervals)
         ax.plot(
             np.where(mask, base.x, np.nan),
             np.where(mask, base.y, np.nan),
-            color=_SHADE_COLORS[n % len(_SHADE_COLORS)],
+            color=color[0] if color else _SHADE_COLORS[n % len(_SHADE_COLORS)],
             linewidth=9,
             alpha=0.45,
             solid_capstyle="round",
@@ -76,8 +94,9 @@ def plot_trajectories(
     trajectories: Mapping[str, Trajectory],
     reference: Trajectory | None = None,
     title: str = "",
-    shaded: Sequence[tuple[str, Sequence[Interval]]] = (),
+    shaded: Sequence[Shade] = (),
     zoom_margin: float | None = None,
+    highlight: Sequence[str] = (),
 ) -> None:
     """Top-down plot of labelled trajectories (m, world frame) over an
     optional reference, written as a PNG to ``path``.
@@ -89,22 +108,34 @@ def plot_trajectories(
     each ``(label, intervals)`` marks the poses of the reference (else of
     the first trajectory) whose time (s, recording time) lies in one of the
     intervals. Start (circle) and end (cross) of every path are marked.
+
+    ``highlight``: up to two labels drawn last, on top of everything, in
+    :data:`HIGHLIGHT_STYLES` (a broad green band, then a red line), the
+    others thinner in the default colours.
     """
     fig, ax = _new_axes(title)
     base = reference if reference is not None else next(iter(trajectories.values()), None)
     if base is not None and shaded:
         _draw_shaded(ax, base, shaded)
+    on_top = [h for h in highlight if h in trajectories][: len(HIGHLIGHT_STYLES)]
+    taken = {style["color"] for style in HIGHLIGHT_STYLES[: len(on_top)]}
+    cycle = itertools.cycle([c for c in (f"C{i}" for i in range(10)) if _named(c) not in taken])
     curves: list[tuple[str, Trajectory, dict]] = []
     if reference is not None:
-        curves.append(("reference", reference, {"color": "black", "linestyle": "--", "linewidth": 1.2}))
-    curves += [(label, traj, {"linewidth": 1.2}) for label, traj in trajectories.items()]
+        # Thin and dashed, so it can lie on top of everything.
+        curves.append(("reference", reference, {"color": "black", "linestyle": "--", "linewidth": 1.0, "zorder": 7}))
+    thin = 1.0 if on_top else 1.2
+    curves += [(label, traj, {"linewidth": thin, "color": next(cycle), "zorder": 2})
+               for label, traj in trajectories.items() if label not in on_top]
+    curves += [(label, trajectories[label], {**style, "zorder": 4 + k})
+               for k, (label, style) in enumerate(zip(on_top, HIGHLIGHT_STYLES))]
     for label, traj, style in curves:
         if len(traj) == 0:
             continue
-        (line,) = ax.plot(traj.x, traj.y, label=label, zorder=2, **style)
-        color = line.get_color()
-        ax.plot(traj.x[0], traj.y[0], "o", color=color, markersize=6, zorder=3)
-        ax.plot(traj.x[-1], traj.y[-1], "x", color=color, markersize=8, mew=2, zorder=3)
+        (line,) = ax.plot(traj.x, traj.y, label=label, **style)
+        color, z = line.get_color(), style["zorder"] + 0.5
+        ax.plot(traj.x[0], traj.y[0], "o", color=color, markersize=6, zorder=z)
+        ax.plot(traj.x[-1], traj.y[-1], "x", color=color, markersize=8, mew=2, zorder=z)
     if zoom_margin is not None and reference is not None and len(reference):
         lo, hi = reference.xy().min(axis=0), reference.xy().max(axis=0)
         pad = zoom_margin * max(hi - lo) + 1.0
@@ -113,6 +144,14 @@ def plot_trajectories(
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.legend(loc="best", fontsize="small")
     save_figure(fig, path)
+
+
+def _named(color: str) -> str:
+    """``C3`` -> ``tab:red``: the default cycle's colour by its tableau name."""
+    from matplotlib.colors import TABLEAU_COLORS, to_hex
+
+    hex_color = to_hex(color)
+    return next((name for name, value in TABLEAU_COLORS.items() if value == hex_color), hex_color)
 
 
 def plot_map(

@@ -196,12 +196,16 @@ def test_killed_sweep_resumes_only_missing_jobs(finished, tmp_path):
     for job_id in gone:
         shutil.rmtree(out / "jobs" / job_id)
     # what kill -9 leaves: a half-written temp folder beside a job's place
-    (out / "jobs" / f".{gone[0]}.abc123").mkdir()
-    (out / "jobs" / f".{gone[0]}.abc123" / "trajectory.tum").write_text("1 2 3")
+    leftover = out / "jobs" / f".{gone[0]}.gslam-tmp-abc12345"
+    leftover.mkdir()
+    (leftover / ".gslam-tmp.json").write_text('{"host": "elsewhere", "pid": 1}')
+    (leftover / "trajectory.tum").write_text("1 2 3")
+    # and a hidden file that is not ours
+    (out / "jobs" / ".notes").write_text("mine")
     again = run_ablation(load_spec(spec_path), out, workers=2, progress=False)
     assert sorted(again.ran) == sorted(gone)
     assert len(again.skipped) == 2
-    assert not any(p.name.startswith(".") for p in (out / "jobs").iterdir())
+    assert [p.name for p in (out / "jobs").iterdir() if p.name.startswith(".")] == [".notes"]
     assert len(read_csv(out / "summary.csv")) == 4
     third = run_ablation(load_spec(spec_path), out, workers=1, progress=False)
     assert third.ran == [] and len(third.skipped) == 4

@@ -21,7 +21,7 @@ from tests.conftest import TELEMAX_CONFIG, short_scenario
 
 MAP_FILES = {
     "trajectory.tum", "groundtruth.tum", "metrics.json", "config.yaml",
-    "trajectory.png", "map.ply", "map.png",
+    "trajectory.png", "map.ply", "map.png", ".gslam-result.json",
 }
 METRICS = ("ate_rmse_m", "rpe_trans_pct", "rpe_rot_deg_per_m", "final_error_m", "n_poses", "runtime_s")
 VALIDATION_METRICS = (
@@ -261,8 +261,9 @@ def test_failed_rerun_keeps_the_old_folder_and_a_rerun_replaces_it(short_run, tm
     import slam.io.pointcloud
 
     out = tmp_path / "map"
-    out.mkdir()
+    run_map(short_run.run_dir, quick_config(), out)
     (out / "stale.txt").write_text("from an older run\n")
+    before = listing(out)
 
     real = slam.io.pointcloud.write_ply
 
@@ -272,8 +273,8 @@ def test_failed_rerun_keeps_the_old_folder_and_a_rerun_replaces_it(short_run, tm
     monkeypatch.setattr(slam.io.pointcloud, "write_ply", die)
     with pytest.raises(RuntimeError):
         run_map(short_run.run_dir, quick_config(), out)
-    assert listing(out) == {"stale.txt"}
-    assert listing(tmp_path) == {"map"}
+    assert listing(out) == before  # the earlier result, untouched
+    assert listing(tmp_path) == {"map"}  # and no temporary folder left
 
     monkeypatch.setattr(slam.io.pointcloud, "write_ply", real)
     run_map(short_run.run_dir, quick_config(), out)

@@ -12,7 +12,7 @@ import yaml
 
 from slam.errors import GslamError
 from slam.geometry import enu_from_geodetic
-from slam.sim import load_scenario, simulate
+from slam.sim import load_scenario, simulate, simulate_scenario
 from slam.sim.faults import compass_heading_error, intervals_from_mask, scan_constraint
 from slam.sim.magnetics import MU0_OVER_4PI, body_field, dip_angle, dipole_field, reference
 from slam.sim.robot import Motion, plan_motion
@@ -28,6 +28,7 @@ from slam.sim.scenario import (
 )
 from slam.sim.sensors import simulate_gps, simulate_gyro, simulate_laser, simulate_odometry
 from slam.sim.world import World
+from tests.conftest import CONFIGS
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "configs" / "scenarios"
 ENV = EnvironmentConfig()
@@ -294,8 +295,16 @@ def test_short_run_writes_a_valid_bag_and_truth(tmp_path):
         assert seen == set(counts)
     first = min(ts for _, ts, _ in read_bag(run / "bag"))
     assert first == 1_700_000_000 * 10**9
-    with pytest.raises(GslamError, match="not empty"):
-        simulate(tmp_path / "tiny.yaml", run)
+    # Again into the same folder: an earlier simulate result, replaced.
+    again = simulate(tmp_path / "tiny.yaml", run)
+    assert again.message_counts == result.message_counts
+    # Into a folder of something else: refused before any work.
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    with pytest.raises(GslamError, match="not a gslam simulate result"):
+        simulate(tmp_path / "tiny.yaml", other)
+    assert [p.name for p in other.iterdir()] == ["notes.txt"]
 
 
 def test_same_seed_same_messages_different_seed_differs(tmp_path):
@@ -314,7 +323,6 @@ def test_same_seed_same_messages_different_seed_differs(tmp_path):
 def test_laps_repeat_a_closed_path_and_refuse_an_open_one():
     from pydantic import ValidationError
 
-    from slam.sim.robot import plan_motion
     from slam.sim.scenario import RobotConfig
 
     square = [(0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0), (0.0, 0.0)]
@@ -327,3 +335,30 @@ def test_laps_repeat_a_closed_path_and_refuse_an_open_one():
     assert np.hypot(three.x[-1], three.y[-1]) < 0.01  # integrated at 100 Hz
     with pytest.raises(ValidationError, match="closed path"):
         RobotConfig(waypoints=square[:-1], laps=2)
+
+
+# --- the mission budget ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("name, laps", [("telemax_lab", 1), ("telemax_loop", 1), ("telemax_loop", 3)])
+def test_duration_estimate_is_close_to_the_planned_motion(name, laps):
+    from slam.sim.budget import estimate_duration
+
+    robot = load_scenario(CONFIGS / "scenarios" / f"{name}.yaml").robot.model_copy(update={"laps": laps})
+    estimate, path_m = estimate_duration(robot)
+    motion = plan_motion(robot)
+    assert estimate == pytest.approx(motion.duration, rel=0.03)  # measured 1.4-1.6 % over
+    assert path_m == pytest.approx(motion.s[-1], rel=0.05)  # corners are cut on arcs
+
+
+def test_unbounded_missions_are_refused_before_simulating(tmp_path):
+    from slam.sim.budget import MAX_DURATION_S, check_bounded
+
+    base = load_scenario(CONFIGS / "scenarios" / "telemax_lab.yaml")
+    assert check_bounded(base, "lab").duration_s < MAX_DURATION_S
+    slow = base.model_copy(update={"robot": base.robot.model_copy(update={"max_speed_m_s": 0.001})})
+    with pytest.raises(GslamError, match=r"lab: the mission would take about 2\d\.\d h .*at most 4 h"):
+        check_bounded(slow, "lab")
+    with pytest.raises(GslamError, match="at most 4 h"):
+        simulate_scenario(slow, tmp_path / "run")
+    assert not (tmp_path / "run").exists() and list(tmp_path.iterdir()) == []

@@ -35,11 +35,14 @@ RESULTS = [
     CLEAN,                          # 8
     consistent({"GPS"}, {"SM"}),    # 9  GPS most probable, SM also minimal
 ]
-FAULTS = {
+FAULTS = {  # the truth of every component is known, as in a simulated run
     "SM": [(2.0, 5.0), (5.2, 5.8), (8.5, 9.5)],  # the middle one holds no step
     "IMU_YAW": [(7.0, 8.0)],
     "GPS": [],
+    "ODO": [],
+    "IMU_GYRO": [],
 }
+ALL_FINE = {c: [] for c in FAULTS}  # known to be fault-free
 DECISIONS = [{} for _ in STEP_T]  # not used with results
 
 
@@ -57,8 +60,8 @@ def test_metrics_from_diagnoses():
     assert m["isolation_recall"] == round(2 / 7, 4) == 0.2857
     # SM: interval 1 first in a minimal diagnosis at 3 s (delay 1.0), interval
     # 3 at 9 s (second diagnosis, delay 0.5), interval 2 has no step and
-    # does not count -> mean 0.75. IMU_YAW never -> None and one miss. GPS
-    # has no fault intervals -> no entry.
+    # does not count -> mean 0.75. IMU_YAW never -> None and one miss. GPS,
+    # ODO and IMU_GYRO have no fault intervals -> no entry.
     assert m["detection_delay_s"] == {"SM": 0.75, "IMU_YAW": None}
     assert m["faults_missed"] == 1 and m["faults_detected"] == 2
     assert m["blamed_steps"] == {"GPS": 1, "ODO": 1, "SM": 2}
@@ -86,18 +89,44 @@ def test_interval_bounds_are_closed():
 
 
 def test_no_faults_and_no_alarms():
-    m = validation_metrics(STEP_T, [CLEAN] * 10, DECISIONS, {})
-    assert m["alarm_fraction"] == 0.0
+    m = validation_metrics(STEP_T, [CLEAN] * 10, DECISIONS, ALL_FINE)
+    assert m["alarm_fraction"] == 0.0 and m["false_alarm_fraction"] == 0.0
     assert m["isolation_precision"] is None and m["isolation_recall"] is None
     assert m["detection_delay_s"] == {} and m["faults_missed"] == 0 and m["blamed_steps"] == {}
 
 
 def test_no_faults_false_alarms_give_zero_precision_and_no_recall():
     results = [CLEAN] * 8 + [consistent({"ODO"}), consistent({"ODO", "GPS"})]
-    m = validation_metrics(STEP_T, results, DECISIONS, {})
+    m = validation_metrics(STEP_T, results, DECISIONS, ALL_FINE)
     assert m["alarm_fraction"] == m["false_alarm_fraction"] == 0.2
     assert m["isolation_precision"] == 0.0  # 0 of 3 blamed component-steps
     assert m["isolation_recall"] is None  # nothing was faulty
+
+
+def test_without_truth_every_truth_metric_is_null():
+    # A recording nobody labelled (a plain bag): alarms are counted, but
+    # whether they were right is unknown, not 0.
+    results = [CLEAN] * 8 + [consistent({"ODO"}), consistent({"ODO", "GPS"})]
+    m = validation_metrics(STEP_T, results, DECISIONS, {})
+    assert m["alarm_fraction"] == 0.2
+    for key in ("false_alarm_fraction", "isolation_precision", "isolation_recall", "detection_delay_s",
+                "faults_missed", "faults_detected"):
+        assert m[key] is None, key
+    assert m["truth_components"] == [] and m["blamed_steps"] == {"GPS": 1, "ODO": 2}
+
+
+def test_partial_truth_judges_only_the_labelled_components():
+    # Only the compass is labelled (as on a BROAD trial): blaming ODO is
+    # neither right nor wrong; blaming IMU_YAW is judged.
+    results = [CLEAN] * 6 + [consistent({"ODO"}), consistent({"IMU_YAW"}), consistent({"IMU_YAW"}), CLEAN]
+    m = validation_metrics(STEP_T, results, DECISIONS, {"IMU_YAW": [(8.0, 9.0)]})
+    assert m["isolation_precision"] == 0.5  # IMU_YAW blamed at 7 (wrong) and 8 (right); ODO not counted
+    assert m["isolation_recall"] == 0.5  # IMU_YAW faulty at 8 and 9, blamed at 8
+    assert m["false_alarm_fraction"] is None  # step 6 blames ODO, whose truth is unknown
+    assert m["truth_components"] == ["IMU_YAW"]
+    only_labelled = [CLEAN] * 7 + [consistent({"IMU_YAW"})] * 2 + [CLEAN]
+    m = validation_metrics(STEP_T, only_labelled, DECISIONS, {"IMU_YAW": [(8.0, 9.0)]})
+    assert m["false_alarm_fraction"] == 0.1  # step 7
 
 
 # --- oracle mode (results None): the gated components are the blamed set ---
@@ -135,7 +164,8 @@ def test_oracle_metrics_from_decisions():
 def test_a_blamed_sensor_counts_as_all_its_modalities():
     results = [CLEAN] * 5 + [consistent({"SM"})] * 5
     expand = {"SM": ("SM_DIST", "SM_LAT", "SM_YAW")}
-    m = validation_metrics(STEP_T, results, DECISIONS, {"SM_DIST": [(5.0, 9.0)]}, expand)
+    faults = {"SM_DIST": [(5.0, 9.0)], "SM_LAT": [], "SM_YAW": []}
+    m = validation_metrics(STEP_T, results, DECISIONS, faults, expand)
     # Steps 5-9 blame SM_DIST, SM_LAT and SM_YAW: 15 blamed, 5 true -> precision 1/3.
     assert m["isolation_precision"] == round(1 / 3, 4) and m["isolation_recall"] == 1.0
     assert m["blamed_steps"] == {"SM_DIST": 5, "SM_LAT": 5, "SM_YAW": 5}

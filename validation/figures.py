@@ -4,7 +4,11 @@
   qualitative trend symbol of each under it.
 * :func:`plot_observer_alarms` (its Fig. 3): every observer's no_match /
   implausible over time, the sensors the diagnosis blamed, and the true
-  fault intervals shaded.
+  fault intervals: shaded grey across the figure, and a row per sensor in
+  its colour (one legend entry each).
+
+Shading is drawn under everything else, so lines and bars keep the colours
+the titles name.
 """
 
 from __future__ import annotations
@@ -14,20 +18,23 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from slam.plots import save_figure
+from slam.plots import fault_color, save_figure
 from slam.recording import Recording
+from slam.truth import union_intervals
 
-_FAULT_COLOR = "gold"
+# The fault colours (slam.plots) are pale and none of them blue or red.
+_ALARM_COLOR, _BLAME_COLOR = "tab:blue", "tab:red"
 
 
-def _shade_faults(ax, recording: Recording, components=None) -> None:
-    labelled = False
+def _shade_faults(ax, recording: Recording, components=None, label: bool = True) -> None:
+    """Each component's true fault intervals as a full-height band in its
+    colour, below every line and bar; one legend entry per component."""
     for comp, intervals in recording.faults.items():
         if components is not None and comp not in components:
             continue
-        for a, b in intervals:
-            ax.axvspan(a, b, color=_FAULT_COLOR, alpha=0.35, label=None if labelled else "true fault", lw=0)
-            labelled = True
+        for k, (a, b) in enumerate(intervals):
+            ax.axvspan(a, b, color=fault_color(comp), alpha=0.45, lw=0, zorder=0,
+                       label=f"true {comp} fault" if label and k == 0 else None)
 
 
 def plot_yaw_trends(path: str | Path, recording: Recording, validation) -> None:
@@ -60,6 +67,7 @@ def plot_yaw_trends(path: str | Path, recording: Recording, validation) -> None:
         pad = 0.2 * (hi - lo) + 10.0
         top.set_ylim(lo - pad, hi + pad)
     _shade_faults(top, recording, {"IMU_YAW", "SM_YAW", "IMU_GYRO", "ODO_YAW"})
+    top.set_axisbelow(True)
     top.set_ylabel("yaw change [deg]")
     top.set_title(f"{recording.name}: yaw streams and their qualitative trends")
     top.legend(loc="best", fontsize="small")
@@ -70,7 +78,7 @@ def plot_yaw_trends(path: str | Path, recording: Recording, validation) -> None:
         ax.set_ylim(-1.4, 1.4)
         ax.set_ylabel(name, rotation=0, ha="right", fontsize="small")
         ax.grid(True, linewidth=0.5, alpha=0.5)
-        _shade_faults(ax, recording, {"IMU_YAW", "SM_YAW", "IMU_GYRO", "ODO_YAW"})
+        _shade_faults(ax, recording, {"IMU_YAW", "SM_YAW", "IMU_GYRO", "ODO_YAW"}, label=False)
     axes[-1].set_xlabel("time [s]")
     save_figure(fig, path)
 
@@ -87,37 +95,49 @@ def _yaw_streams(recording: Recording, validation) -> dict[str, tuple[np.ndarray
 
 
 def plot_observer_alarms(path: str | Path, recording: Recording, validation) -> None:
-    """One row per observer (no_match or implausible as bars), one row per
-    component blamed by the most probable diagnosis, true faults shaded."""
+    """One row per observer (no_match or implausible, blue bars), one row
+    per component blamed by the most probable diagnosis (red bars), and one
+    row per component with true faults (bars in its colour, which also
+    shades those times across the figure)."""
     log = validation.observer_log
-    rows: list[tuple[str, np.ndarray]] = []
+    rows: list[tuple[str, np.ndarray, str]] = []
     for name, trace in log.relations.items():
-        rows.append((name, trace.no_match & trace.valid))
+        rows.append((name, trace.no_match & trace.valid, _ALARM_COLOR))
     for name, trace in log.unary.items():
-        rows.append((name, trace.implausible & trace.valid))
-    blamed_rows = []
+        rows.append((name, trace.implausible & trace.valid, _ALARM_COLOR))
+    t = log.t
     if validation.results is not None:
         comps = sorted({c for r in validation.results if r.consistent for c in r.diagnoses[0]})
         for c in comps:
             blamed = np.array([r.consistent and c in r.diagnoses[0] for r in validation.results])
-            blamed_rows.append((f"blamed: {c}", blamed))
-    all_rows = rows + blamed_rows
-    fig = Figure(figsize=(10, 1.0 + 0.45 * len(all_rows)))
+            rows.append((f"blamed: {c}", blamed, _BLAME_COLOR))
+    truth = [(c, iv) for c, iv in recording.faults.items() if iv]
+    fig = Figure(figsize=(10, 1.2 + 0.45 * (len(rows) + len(truth))))
     ax = fig.add_subplot()
-    t = log.t
     dt = np.median(np.diff(t)) if len(t) > 1 else 0.1
-    for i, (name, on) in enumerate(all_rows):
-        y = len(all_rows) - 1 - i
-        color = "tab:red" if name.startswith("blamed") else "tab:blue"
+    n_rows = len(rows) + len(truth)
+    for i, (name, on, color) in enumerate(rows):
+        y = n_rows - 1 - i
         starts = np.flatnonzero(on & ~np.r_[False, on[:-1]])
         ends = np.flatnonzero(on & ~np.r_[on[1:], False])
-        ax.broken_barh([(t[a], t[b] - t[a] + dt) for a, b in zip(starts, ends)], (y - 0.35, 0.7), color=color)
-    ax.set_yticks(range(len(all_rows)), [n for n, _ in reversed(all_rows)], fontsize="small")
-    _shade_faults(ax, recording)
+        ax.broken_barh([(t[a], t[b] - t[a] + dt) for a, b in zip(starts, ends)], (y - 0.35, 0.7),
+                       color=color, zorder=3)
+    for j, (comp, intervals) in enumerate(truth):
+        y = n_rows - 1 - len(rows) - j
+        ax.broken_barh([(a, b - a) for a, b in intervals], (y - 0.35, 0.7), color=fault_color(comp),
+                       edgecolor="0.3", linewidth=0.5, zorder=3, label=f"true {comp} fault")
+    names = [n for n, _, _ in rows] + [f"true fault: {c}" for c, _ in truth]
+    ax.set_yticks(range(n_rows), list(reversed(names)), fontsize="small")
+    # Any true fault, shaded once: overlapping colours would make a colour of their own.
+    for k, (a, b) in enumerate(union_intervals(*(iv for _, iv in truth))):
+        ax.axvspan(a, b, color="0.88", lw=0, zorder=0, label="any true fault" if k == 0 else None)
+    ax.set_axisbelow(True)
     ax.set_xlabel("time [s]")
     ax.set_xlim(t[0], t[-1] + dt)
-    ax.set_title(f"{recording.name}: observer alarms (blue), blamed sensors (red), true faults (shaded)")
+    ax.set_ylim(-0.7, n_rows - 0.3)
+    ax.set_title(f"{recording.name}: observer alarms (blue), blamed sensors (red), true faults (grey; a row per sensor)",
+                 fontsize="medium")
     ax.grid(True, axis="x", linewidth=0.5, alpha=0.5)
-    if recording.faults and any(recording.faults.values()):
-        ax.legend(loc="upper right", fontsize="small")
+    if truth:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
     save_figure(fig, path)

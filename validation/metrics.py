@@ -1,5 +1,12 @@
 """How well validation did against the true fault intervals.
 
+The truth is ``faults``: for each component whose truth is known, its true
+fault intervals (an empty list: known to be fault-free). A simulated run
+knows every component; a BROAD trial the compass; a recording with ground
+truth scan matching (``slam.truth``); a plain bag none. A metric that needs
+the truth of a component it cannot have is null (JSON ``null``), never 0:
+without any truth, everything below but ``alarm_fraction`` is null.
+
 Definitions (validation steps at ``validation.rate_hz``):
 
 * ``alarm_fraction``: steps whose most probable diagnosis blames at least one
@@ -7,21 +14,25 @@ Definitions (validation steps at ``validation.rate_hz``):
   steps where the gate acts on any factor).
 * ``false_alarm_fraction``: alarm steps at which no component is inside a
   true fault interval, over all steps (equal to ``alarm_fraction`` on a
-  fault-free run).
+  fault-free run). Null unless the truth of every component ever blamed is
+  known: an alarm about a sensor nobody labelled is neither true nor false.
 * ``isolation_precision`` / ``isolation_recall``: per step, the blamed set
   is the most probable diagnosis (oracle: the gated components), the true
-  set the components inside a fault interval at that time; summed over
-  steps, precision = |blamed ∩ true| / |blamed|, recall = |blamed ∩ true| /
-  |true|. Null where the denominator is 0.
+  set the components inside a fault interval at that time, both restricted
+  to the components whose truth is known; summed over steps, precision =
+  |blamed ∩ true| / |blamed|, recall = |blamed ∩ true| / |true|. Null where
+  the denominator is 0 (nothing blamed, no fault).
 * ``detection_delay_s``: per component with true faults, the mean over its
   fault intervals of the time from onset to the first step, within the
-  interval, at which any minimal diagnosis contains the component.
-  ``faults_missed`` counts intervals never detected within their span,
-  ``faults_detected`` those detected.
+  interval, at which any minimal diagnosis contains the component (null for
+  a component whose faults were all missed). ``faults_missed`` counts
+  intervals never detected within their span, ``faults_detected`` those
+  detected.
 * ``blame_end_lag_s``: per component with detected faults, the mean over
   them of the time from the fault's end to the end of the blame (the run of
   steps blaming the component that holds the interval's last blamed step);
   negative when the blame ends before the fault.
+* ``truth_components``: the components whose truth is known.
 """
 
 from __future__ import annotations
@@ -81,7 +92,9 @@ def validation_metrics(
 ) -> dict:
     """The metrics of the module docstring, JSON-ready; ``expand`` gives the
     modalities a blamed sensor stands for (the model's ``sensors``)."""
-    blamed, union, alarm = _blamed(results, actions, expand or {})
+    top, union, alarm = _blamed(results, actions, expand or {})
+    known = set(faults)
+    blamed = [b & known for b in top]
     n = len(step_t)
     true_sets = [set() for _ in range(n)]
     for comp, intervals in faults.items():
@@ -112,19 +125,23 @@ def validation_metrics(
             lags[comp] = round(float(np.mean(ends)), 3) if ends else None
 
     blamed_counts = {}
-    for b in blamed:
+    for b in top:
         for c in b:
             blamed_counts[c] = blamed_counts.get(c, 0) + 1
+    faulty = np.array([bool(s) for s in true_sets], dtype=bool)
+    truth = bool(known) and n > 0
+    judged = truth and set(blamed_counts) <= known
     return {
         "validation_steps": n,
         "alarm_fraction": round(float(alarm.mean()) if n else 0.0, 5),
-        "false_alarm_fraction": round(float((alarm & ~np.array([bool(s) for s in true_sets], dtype=bool)).mean()) if n else 0.0, 5),
-        "isolation_precision": round(tp / n_blamed, 4) if n_blamed else None,
-        "isolation_recall": round(tp / n_true, 4) if n_true else None,
-        "detection_delay_s": delays,
-        "blame_end_lag_s": lags,
-        "faults_missed": missed,
-        "faults_detected": detected,
+        "false_alarm_fraction": round(float((alarm & ~faulty).mean()), 5) if judged else None,
+        "isolation_precision": round(tp / n_blamed, 4) if n_blamed and truth else None,
+        "isolation_recall": round(tp / n_true, 4) if n_true and truth else None,
+        "detection_delay_s": delays if truth else None,
+        "blame_end_lag_s": lags if truth else None,
+        "faults_missed": missed if truth else None,
+        "faults_detected": detected if truth else None,
+        "truth_components": sorted(known),
         "blamed_steps": dict(sorted(blamed_counts.items())),
         "no_diagnosis_steps": int(sum(1 for r in results if not r.consistent)) if results is not None else 0,
     }

@@ -27,8 +27,10 @@ import yaml
 from pydantic import ValidationError
 
 from slam.ablate.spec import SCENARIO_PREFIX, AblationSpec, Distribution, RandomSweep, SweepSpec
-from slam.config import describe_validation_error, dump_config, load_config, load_yaml
+from slam.config import describe_validation_error, dump_config, load_config
+from slam.io.yamlfile import load_yaml, non_finite, yaml_number
 from slam.errors import GslamError
+from slam.sim.budget import check_bounded
 from slam.sim.scenario import Scenario
 
 
@@ -227,13 +229,18 @@ def _split(pairs: list[tuple[str, Any]]) -> tuple[list[tuple[str, Any]], list[tu
 def _scenario_tree(path: Path, pairs: list[tuple[str, Any]], where: str) -> dict[str, Any]:
     """The scenario YAML with overrides applied, validated, every default
     spelled out."""
-    tree = load_yaml(path)
+    tree = load_yaml(path, "scenario")
     for key, value in pairs:
         set_path(tree, key, value)
+    found = non_finite(tree)
+    if found is not None:
+        raise GslamError(f"{where}: scenario.{found[0]}: expected a finite number, got {yaml_number(found[1])}")
     try:
-        return Scenario.model_validate(tree).model_dump(mode="json")
+        scenario = Scenario.model_validate(tree)
     except ValidationError as e:
         raise GslamError(describe_validation_error(where, e, "scenario", prefix="scenario.")) from None
+    check_bounded(scenario, where)
+    return scenario.model_dump(mode="json")
 
 
 def expand_jobs(spec: AblationSpec, source: str = "spec") -> list[Job]:

@@ -7,6 +7,7 @@ Output folder ``OUT``:
 * ``OUT/failed/<id>.json``: the one-line error of a job that failed;
 * ``OUT/spec.yaml``, ``OUT/summary.csv``, ``OUT/summary.md``, ``OUT/plots/``.
 
+``OUT`` must be new or an earlier sweep folder (:func:`slam.io.outdir.open_container`).
 Every folder and file is written beside its place and renamed into it, so a
 job is finished exactly when ``jobs/<id>/metrics.json`` exists, whatever
 moment the sweep was killed at. Running the same spec again skips finished
@@ -22,7 +23,6 @@ import logging
 import multiprocessing
 import os
 import shutil
-import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -40,6 +40,7 @@ from slam.ablate.jobs import Job, SimulatedInput, expand_jobs
 from slam.ablate.spec import AblationSpec
 from slam.errors import GslamError
 from slam.io.atomic import write_text
+from slam.io.outdir import TEMP_TAG, open_container
 
 log = logging.getLogger(__name__)
 
@@ -87,8 +88,8 @@ def is_finished(out_dir: Path, job: Job) -> bool:
 
 def ensure_input(out_dir: Path, sim: SimulatedInput) -> float:
     """Simulate ``sim`` into ``out_dir/inputs/<key>/`` unless it is there;
-    the wall time spent (s). Built in a private folder and renamed; if
-    another worker got there first, its copy stays and this one is dropped."""
+    the wall time spent (s). The simulator builds it beside its place and
+    renames it in."""
     from slam.sim import simulate_scenario
     from slam.sim.scenario import Scenario
 
@@ -98,20 +99,10 @@ def ensure_input(out_dir: Path, sim: SimulatedInput) -> float:
     t = time.perf_counter()
     target.parent.mkdir(parents=True, exist_ok=True)
     # Workers wanting the same input wait for the first rather than
-    # simulating it twice; the rename below is what guarantees correctness.
+    # simulating it twice.
     with _FileLock(target.parent / f".{sim.key}.lock", blocking=True):
-        if (target / "truth.json").exists():
-            return time.perf_counter() - t
-        tmp = Path(tempfile.mkdtemp(prefix=f".{sim.key}.", dir=target.parent))
-        try:
-            simulate_scenario(Scenario.model_validate(sim.scenario), tmp / "run")
-            try:
-                os.rename(tmp / "run", target)
-            except OSError:
-                if not (target / "truth.json").exists():
-                    raise
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
+        if not (target / "truth.json").exists():
+            simulate_scenario(Scenario.model_validate(sim.scenario), target)
     return time.perf_counter() - t
 
 
@@ -256,19 +247,21 @@ def run_ablation(
     progress: bool = True,
     source: str = "spec",
     on_outcome: Callable[[JobOutcome], None] | None = None,
+    force: bool = False,
 ) -> AblationResult:
     """Run every unfinished job of ``spec`` into ``out_dir`` and summarise
     (the library form of ``gslam ablate``). ``workers``: parallel jobs
     (default: CPU count); ``address``: a Ray cluster (``auto``), or None for
-    a local Ray instance."""
+    a local Ray instance; ``force``: see :mod:`slam.io.outdir`."""
     from slam.ablate.summary import write_summary
 
     t0 = time.perf_counter()
     backend = Backend(backend)
     jobs = expand_jobs(spec, source)  # validates everything before any job runs
-    out_dir = Path(out_dir).resolve()
+    inputs = [source, spec.config, *(s.path for s in spec.inputs.scenarios)]
+    inputs += [j.input_path for j in jobs if j.input_path is not None]
+    out_dir = open_container(out_dir, "ablate", inputs, force).resolve()
     workers = max(1, workers or os.cpu_count() or 1)
-    out_dir.mkdir(parents=True, exist_ok=True)
     with _FileLock(out_dir / ".lock"):
         _clean_leftovers(out_dir)
         write_text(out_dir / "spec.yaml", yaml.safe_dump(spec.model_dump(mode="json"), sort_keys=False))
@@ -325,13 +318,15 @@ class _FileLock:
 
 
 def _clean_leftovers(out_dir: Path) -> None:
-    """Remove temporary folders and files of a sweep that was killed (hidden
-    names: every writer builds ``.<name>.*`` beside its target)."""
+    """Remove the temporary folders and files of a sweep that was killed:
+    every writer builds ``.<name>.gslam-tmp-*`` beside its target, and the
+    sweep's lock means no live process still writes them. Other names are
+    left alone."""
     for sub in ("inputs", "jobs", "failed"):
         d = out_dir / sub
         if not d.is_dir():
             continue
         for p in d.iterdir():
-            if p.name.startswith("."):
+            if p.name.startswith(".") and TEMP_TAG in p.name and not p.is_symlink():
                 log.info("removing leftover %s", p)
                 shutil.rmtree(p) if p.is_dir() else p.unlink()

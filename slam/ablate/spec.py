@@ -97,7 +97,7 @@ class ScenarioInput(_Strict):
     (e.g. a scenario parameter only this scenario has)."""
 
     path: Path
-    seeds: Annotated[list[int], Field(min_length=1)] | SeedRange
+    seeds: Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=1)] | SeedRange
     sweep: SweepSpec | None = None
 
     def seed_list(self) -> list[int]:

@@ -83,7 +83,9 @@ def _load(path: Path) -> dict[str, np.ndarray]:
         raise GslamError(f"{path}: no such file")
     try:
         data = loadmat(str(path))
-    except (ValueError, TypeError, OSError, NotImplementedError) as e:
+    except Exception as e:  # scipy raises assorted types (MatReadError, ValueError...) for foreign files
+        if isinstance(e, MemoryError):
+            raise
         reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise GslamError(f"{path}: cannot read as a MATLAB v5 file ({reason})") from None
     for key in REQUIRED:

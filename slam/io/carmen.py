@@ -108,8 +108,11 @@ def _open_lines(path: Path) -> list[str]:
         return path.read_text(encoding="ascii").splitlines()
     except FileNotFoundError:
         raise GslamError(f"{path}: no such file") from None
-    except (gzip.BadGzipFile, EOFError, zlib.error):
-        raise GslamError(f"{path}: cannot read: not a valid gzip file") from None
+    except EOFError:
+        raise GslamError(f"{path}: truncated gzip file: it ends before its end-of-stream marker "
+                         "(an incomplete download or copy?)") from None
+    except (gzip.BadGzipFile, zlib.error) as e:
+        raise GslamError(f"{path}: not a valid gzip file ({e})") from None
     except UnicodeDecodeError:
         raise GslamError(f"{path}: cannot read: not a CARMEN text log (binary content)") from None
     except OSError as e:

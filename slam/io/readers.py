@@ -27,9 +27,10 @@ from typing import Callable, Mapping, Protocol
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from slam.config import GpsInputConfig, InputConfig
+from slam.io.yamlfile import read_text_file
 from slam.errors import GslamError
 from slam.io import broad, carmen, librsf
-from slam.io.rosbag import RosbagReader, is_rosbag
+from slam.io.rosbag import BAG_SUFFIXES, RosbagReader, is_rosbag
 from slam.recording import COMPONENTS, SENSOR_MODALITIES, MagneticReference, Recording, expand_sensor_labels
 
 log = logging.getLogger(__name__)
@@ -85,11 +86,19 @@ def guess_format(path: str | Path) -> str:
         path = path / RUN_BAG
         if path.is_dir() and not is_rosbag(path):
             return "rosbag"  # a folder holding one bag file; the reader resolves it
-    if is_rosbag(path):
+    if is_rosbag(path) or (path.is_dir() and len([p for p in path.iterdir() if p.suffix in BAG_SUFFIXES]) == 1):
         return "rosbag"
     for fmt, looks_like in _GUESSERS:
         if looks_like(path):
             return fmt
+    if path.is_dir():
+        names = sorted(p.name for p in path.iterdir())
+        shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+        raise GslamError(
+            f"{path}: unknown recording format: a folder must be a rosbag2 bag (with metadata.yaml), "
+            "a run folder (truth.json + bag/), or hold one .bag/.db3/.mcap file or one libRSF *_Input.txt; "
+            + (f"it holds {len(names)} entries ({shown})" if names else "it is empty")
+        )
     raise GslamError(
         f"{path}: unknown recording format; expected a .bag file, a rosbag2 directory "
         "(metadata.yaml), a .db3/.mcap file, a run folder (truth.json + bag/), a CARMEN "
@@ -102,7 +111,7 @@ def guess_format(path: str | Path) -> str:
 
 class _Strict(BaseModel):
     # Keys added by newer simulators are ignored: this is data, not a config.
-    model_config = ConfigDict(extra="ignore")
+    model_config = ConfigDict(extra="ignore", allow_inf_nan=False)
 
 
 class _MagneticReference(_Strict):
@@ -128,15 +137,22 @@ class Sidecar(_Strict):
     gps_datum: _Datum | None = None
 
 
+def _no_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a number; expected finite numbers")
+
+
 def load_sidecar(path: str | Path) -> Sidecar:
     """Read and check a ``truth.json``; one-line :class:`GslamError` if bad."""
     path = Path(path)
+    text = read_text_file(path, "truth.json sidecar", "JSON")
     try:
-        data = json.loads(path.read_text())
-    except OSError as e:
-        raise GslamError(f"{path}: cannot read ({e.strerror})") from None
+        data = json.loads(text, parse_constant=_no_constant)
     except json.JSONDecodeError as e:
         raise GslamError(f"{path}: line {e.lineno}: invalid JSON ({e.msg})") from None
+    except ValueError as e:
+        raise GslamError(f"{path}: {e}") from None
+    except RecursionError:
+        raise GslamError(f"{path}: JSON nested too deeply") from None
     try:
         sidecar = Sidecar.model_validate(data)
     except ValidationError as e:

@@ -46,7 +46,7 @@ from slam.recording import Recording
 # stream modules, so one import serves callers and test bag writers.
 __all__ = [
     "BAG_SUFFIXES", "BULK_CHUNK", "IMU", "LASER_SCAN", "MAGNETIC_FIELD", "NAV_SAT_FIX", "ODOMETRY",
-    "POSE_STAMPED", "RosbagReader", "is_rosbag", "read_rosbag", "resolve_bag_path", "world_yaw_rate",
+    "POSE_STAMPED", "RosbagReader", "is_rosbag", "open_bag", "read_rosbag", "resolve_bag_path", "world_yaw_rate",
 ]
 
 log = logging.getLogger(__name__)
@@ -85,6 +85,12 @@ def resolve_bag_path(path: Path) -> Path:
             f".bag/.db3/.mcap file, found {len(inside)}"
         )
     return inside[0]
+
+
+def open_bag(path: Path) -> Any:
+    """An open ``rosbags`` reader of the bag at ``path`` (as for
+    :func:`resolve_bag_path`); the caller closes it."""
+    return _open_reader(resolve_bag_path(path))
 
 
 def _make_streams(path: Path, config: InputConfig) -> list[_Stream]:

@@ -17,7 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from slam.errors import GslamError
 from slam.geometry import wrap_angle
+from slam.sim.budget import MAX_MESSAGES
 from slam.sim.scenario import RobotConfig
 
 _DS = 0.005  # path sampling for the speed profile, m
@@ -188,6 +190,9 @@ def _sample(
         vs.append(v)
         ys.append(yaw)
         offset += float(t[-1]) + 1e-9
+    if offset * rate > MAX_MESSAGES:  # the estimate checked before planning missed it
+        raise GslamError(f"robot: the planned motion takes {offset / 3600:.1f} h, {offset * rate:.3g} samples "
+                         f"of ground truth; at most {MAX_MESSAGES:.0e} (see slam/sim/budget.py)")
     t_all, v_all, y_all = np.concatenate(ts), np.concatenate(vs), np.concatenate(ys)
     dt = 1.0 / rate
     t = np.arange(0.0, offset, dt)

@@ -13,17 +13,22 @@ from __future__ import annotations
 
 from enum import Enum
 from pathlib import Path
+from typing import Annotated
 
+import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from slam.config import describe_validation_error, load_yaml
+from slam.config import describe_validation_error
+from slam.io.yamlfile import check_finite, load_yaml
 from slam.errors import GslamError
 
 Point = tuple[float, float]
+Polyline = Annotated[list[Point], Field(min_length=2)]
+Polygon = Annotated[list[Point], Field(min_length=3)]
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 # --- world ---------------------------------------------------------------
@@ -75,9 +80,9 @@ class WorldConfig(Strict):
     obstacles are closed polygons. Anything outside every region is
     ``default_region``."""
 
-    walls: list[list[Point]] = Field(default_factory=list)
+    walls: list[Polyline] = Field(default_factory=list)
     doors: list[Door] = Field(default_factory=list)
-    obstacles: list[list[Point]] = Field(default_factory=list)
+    obstacles: list[Polygon] = Field(default_factory=list)
     regions: list[Region] = Field(default_factory=list)
     default_region: Region = Region(
         name="open", kind=RegionKind.OUTDOOR, polygon=[(0, 0), (1, 0), (0, 1)], slip=0.03
@@ -235,8 +240,23 @@ class Scenario(Strict):
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario YAML; bad input raises :class:`GslamError`
     with one line naming the file and the offending key."""
-    tree = load_yaml(path)
+    tree = load_yaml(path, "scenario")
+    if not tree:
+        raise GslamError(f"{path}: empty; a scenario needs at least 'name' and 'robot' "
+                         "(configs/scenarios/telemax_lab.yaml is an example)")
+    return validate_scenario(tree, str(path))
+
+
+def validate_scenario(tree: dict, source: str) -> Scenario:
+    """A scenario from a YAML tree; one-line :class:`GslamError` naming
+    ``source`` and the key (NaN and infinite numbers included)."""
+    check_finite(tree, source)
     try:
         return Scenario.model_validate(tree)
     except ValidationError as e:
-        raise GslamError(describe_validation_error(str(path), e, "scenario")) from None
+        raise GslamError(describe_validation_error(source, e, "scenario")) from None
+
+
+def dump_scenario(scenario: Scenario) -> str:
+    """The scenario as YAML, every default spelled out."""
+    return yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False)

@@ -8,33 +8,32 @@ Layout of the run folder ``OUT``:
   to ``t0``), the ``magnetic_reference`` and the ``gps_datum``
 * ``OUT/scenario.yaml`` the scenario actually used, every default spelled out
 
-The folder is built beside ``OUT`` and renamed at the end, so a killed run
-leaves a complete folder or none.
+``OUT`` follows the rule of :mod:`slam.io.outdir`: new, or an earlier
+simulate result (replaced), checked before any work; the folder is built
+beside ``OUT`` and renamed at the end, so a killed run leaves a complete
+folder or none.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import os
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass, field
 from enum import IntEnum
 from pathlib import Path
 
 import numpy as np
-import yaml
 from tqdm import tqdm
 
-from slam.errors import GslamError
+from slam.io.outdir import result_folder
 from slam.recording import Interval
+from slam.sim.budget import check_bounded
 from slam.sim.bagwriter import Streams, write_bag
 from slam.sim.faults import true_faults
 from slam.sim.magnetics import reference
 from slam.sim.robot import plan_motion
-from slam.sim.scenario import Scenario, load_scenario
+from slam.sim.scenario import Scenario, dump_scenario, load_scenario
 from slam.sim.sensors import (
     sample_times,
     simulate_gps,
@@ -80,36 +79,45 @@ def sensor_rng(seed: int, stream: Stream) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(int(stream),)))
 
 
-def _check_out_dir(out: Path) -> None:
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise GslamError(f"{out}: output folder exists and is not empty")
-
-
 def simulate(
-    scenario_path: str | Path, out_dir: str | Path, seed: int | None = None, progress: bool = False
+    scenario_path: str | Path,
+    out_dir: str | Path,
+    seed: int | None = None,
+    progress: bool = False,
+    force: bool = False,
 ) -> SimulationResult:
     """Simulate the scenario YAML ``scenario_path`` into the run folder
-    ``out_dir`` (which must not exist or be empty). ``seed`` overrides the
-    scenario's seed; the same seed gives identical messages and stamps."""
+    ``out_dir`` (new, or an earlier simulate result; ``force``: see
+    :mod:`slam.io.outdir`). ``seed`` overrides the scenario's seed; the same
+    seed gives identical messages and stamps."""
     started = time.perf_counter()
     scenario = load_scenario(scenario_path)
     if seed is not None:
         scenario = scenario.model_copy(update={"seed": seed})
-    out = Path(out_dir)
-    _check_out_dir(out)
-    return _run(scenario, out, progress, started)
+    return _run(scenario, Path(out_dir), progress, started, str(scenario_path), force)
 
 
 def simulate_scenario(
-    scenario: Scenario, out_dir: str | Path, progress: bool = False
+    scenario: Scenario, out_dir: str | Path, progress: bool = False, force: bool = False
 ) -> SimulationResult:
     """As :func:`simulate`, for a scenario already in memory."""
-    out = Path(out_dir)
-    _check_out_dir(out)
-    return _run(scenario, out, progress, time.perf_counter())
+    return _run(scenario, Path(out_dir), progress, time.perf_counter(), None, force)
 
 
-def _run(scenario: Scenario, out: Path, progress: bool, started: float) -> SimulationResult:
+def _run(
+    scenario: Scenario, out: Path, progress: bool, started: float, source: str | None, force: bool
+) -> SimulationResult:
+    estimate = check_bounded(scenario, source or f"scenario '{scenario.name}'")
+    log.info("%s: about %.0f s of mission, %.0f m", scenario.name, estimate.duration_s, estimate.path_m)
+    with result_folder(out, "simulate", [source] if source else [], force) as tmp:
+        result = _simulate_into(scenario, tmp, progress)
+    result.run_dir = out
+    result.wall_time_s = time.perf_counter() - started
+    log.info("%s: wrote %s in %.1f s", scenario.name, out, result.wall_time_s)
+    return result
+
+
+def _simulate_into(scenario: Scenario, tmp: Path, progress: bool) -> SimulationResult:
     # 1. World and ground-truth motion.
     world = World.from_config(scenario.world)
     motion = plan_motion(scenario.robot)
@@ -118,7 +126,8 @@ def _run(scenario: Scenario, out: Path, progress: bool, started: float) -> Simul
     log.info("%s: %.1f s, %.1f m, seed %d", scenario.name, motion.duration, motion.s[-1], seed)
     # 2. Sensors, each from its own random stream.
     n_scans = len(sample_times(motion.duration, sensors.laser.rate_hz))
-    with tqdm(total=n_scans, unit="scan", desc="ray casting", disable=not progress) as bar:
+    desc = f"{scenario.name}, {motion.duration:.0f} s: ray casting"
+    with tqdm(total=n_scans, unit="scan", desc=desc, disable=not progress) as bar:
         laser = simulate_laser(motion, world, sensors.laser, sensor_rng(seed, Stream.LASER), bar)
     gyro = simulate_gyro(motion, sensors.gyro, sensor_rng(seed, Stream.GYRO))
     mag_rng = sensor_rng(seed, Stream.MAGNETOMETER)
@@ -128,36 +137,24 @@ def _run(scenario: Scenario, out: Path, progress: bool, started: float) -> Simul
     # 3. True fault intervals from the physics.
     faults = true_faults(scenario, world, motion, laser, gyro, gps)
     duration = round(motion.duration, 6)
-    # 4. Write everything into a temporary folder beside OUT, then rename.
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
-        streams = Streams(motion, laser, gyro, mag, odom, gps)
-        n_msgs = sum(len(s.t) for s in (motion, laser, gyro, mag, odom, gps))
-        with tqdm(total=n_msgs, unit="msg", desc="writing bag", disable=not progress) as bar:
-            counts = write_bag(tmp / "bag", streams, env.t0_s, bar)
-        truth = {
-            "scenario": scenario.name,
-            "seed": seed,
-            "t0": env.t0_s,
-            "duration_s": duration,
-            "faults": {k: [list(iv) for iv in v] for k, v in faults.items()},
-            "magnetic_reference": {
-                "strength_T": ref.strength_T,
-                "dip_rad": ref.dip_rad,
-                "declination_rad": ref.declination_rad,
-            },
-            "gps_datum": {"lat_deg": env.datum_lat_deg, "lon_deg": env.datum_lon_deg},
-        }
-        (tmp / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
-        used = yaml.safe_dump(scenario.model_dump(mode="json"), sort_keys=False)
-        (tmp / "scenario.yaml").write_text(used)
-        if out.exists():
-            out.rmdir()  # checked empty above
-        os.replace(tmp, out)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp)
-    wall = time.perf_counter() - started
-    log.info("%s: wrote %s in %.1f s", scenario.name, out, wall)
-    return SimulationResult(out, scenario.name, seed, env.t0_s, duration, counts, faults, wall)
+    # 4. Write everything into the temporary folder (renamed by the caller).
+    streams = Streams(motion, laser, gyro, mag, odom, gps)
+    n_msgs = sum(len(s.t) for s in (motion, laser, gyro, mag, odom, gps))
+    with tqdm(total=n_msgs, unit="msg", desc="writing bag", disable=not progress) as bar:
+        counts = write_bag(tmp / "bag", streams, env.t0_s, bar)
+    truth = {
+        "scenario": scenario.name,
+        "seed": seed,
+        "t0": env.t0_s,
+        "duration_s": duration,
+        "faults": {k: [list(iv) for iv in v] for k, v in faults.items()},
+        "magnetic_reference": {
+            "strength_T": ref.strength_T,
+            "dip_rad": ref.dip_rad,
+            "declination_rad": ref.declination_rad,
+        },
+        "gps_datum": {"lat_deg": env.datum_lat_deg, "lon_deg": env.datum_lon_deg},
+    }
+    (tmp / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    (tmp / "scenario.yaml").write_text(dump_scenario(scenario))
+    return SimulationResult(tmp, scenario.name, seed, env.t0_s, duration, counts, faults)

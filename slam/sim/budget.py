@@ -1,0 +1,115 @@
+"""How long a scenario's mission takes, estimated from its waypoints before
+anything is simulated, and the bounds a simulation must stay within.
+
+The estimate drives every leg at ``max_speed_m_s``, turns every corner on
+the spot at ``max_turn_rate_deg_s`` and adds the pauses and the time to
+accelerate and brake at each stop; it is within a few per cent of the
+planned motion for the shipped scenarios (tests/test_sim.py). A mission
+longer than :data:`MAX_DURATION_S`, or one whose streams would hold more
+samples than the limits below, is refused with the estimate in the
+message instead of running for hours.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from slam.errors import GslamError
+from slam.geometry import wrap_angle
+from slam.sim.scenario import RobotConfig, Scenario
+
+MAX_DURATION_S = 4 * 3600.0
+"""Longest mission simulated: 4 h (the 2-hour benchmark run fits twice)."""
+MAX_PATH_M = 100_000.0
+"""Longest path: the motion is planned on 5 mm steps along it."""
+MAX_MESSAGES = 20_000_000
+"""Most messages of one stream (ground truth at 100 Hz for 4 h is 1.44 M)."""
+MAX_LASER_VALUES = 100_000_000
+"""Most laser ranges in all (scans x beams; 400 MB as float32)."""
+
+
+@dataclass(frozen=True)
+class MissionEstimate:
+    """``duration_s`` of the mission, ``path_m`` driven, ``scans`` of the laser."""
+
+    duration_s: float
+    path_m: float
+    scans: int
+
+
+def estimate_duration(robot: RobotConfig) -> tuple[float, float]:
+    """Mission duration (s) and path length (m) from the waypoints alone:
+    the legs at full speed, a stop (accelerate and brake) and a spot turn
+    wherever :func:`slam.sim.robot.plan_motion` turns on the spot, and the
+    pauses. Gentle corners are driven on arcs at speed. Laps are counted,
+    not unrolled: each lap after the first adds what the second added."""
+    if robot.laps == 1:
+        return _estimate(robot, robot.waypoints)
+    one = _estimate(robot, robot.waypoints)
+    two = _estimate(robot, list(robot.waypoints) + list(robot.waypoints[1:]))
+    more = robot.laps - 1
+    return float(one[0] + more * (two[0] - one[0])), float(one[1] + more * (two[1] - one[1]))
+
+
+def _estimate(robot: RobotConfig, path: list) -> tuple[float, float]:
+    pts = np.array([w[:2] for w in path], dtype=float)
+    pauses = [w[2] if len(w) > 2 else 0.0 for w in path]
+    legs = np.diff(pts, axis=0)
+    lengths = np.hypot(legs[:, 0], legs[:, 1])
+    path_m = float(lengths.sum())
+    v, a = robot.max_speed_m_s, robot.max_accel_m_s2
+    w_max = np.radians(robot.max_turn_rate_deg_s)
+    spot_limit = np.radians(robot.spot_turn_above_deg)
+    alpha = np.radians(robot.max_turn_accel_deg_s2)
+    seconds = path_m / v + robot.start_pause_s + robot.end_pause_s + sum(pauses)
+    yaw = np.radians(robot.start_yaw_deg)
+    for i, (leg, length) in enumerate(zip(legs, lengths)):
+        if length == 0.0:
+            continue
+        heading = float(np.arctan2(leg[1], leg[0]))
+        turn = abs(float(wrap_angle(heading - yaw)))
+        if i == 0 or pauses[i] > 0 or turn > spot_limit or robot.corner_radius_m == 0.0:
+            # Stop, turn on the spot (a trapezoidal turn-rate profile), start again.
+            w_peak = min(w_max, np.sqrt(turn * alpha))
+            seconds += (turn / w_peak + w_peak / alpha if turn > 0 else 0.0) + v / a
+        else:
+            # An arc of radius at most corner_radius_m at a turn rate of at most
+            # w_max: slower than the straight line when w_max * R < v.
+            seconds += max(0.0, turn / w_max - robot.corner_radius_m * turn / v)
+        yaw = heading
+    return float(seconds), path_m
+
+
+def check_bounded(scenario: Scenario, source: str) -> MissionEstimate:
+    """The mission estimate, or a one-line :class:`GslamError` naming
+    ``source`` if the mission would exceed a bound."""
+    duration, path_m = estimate_duration(scenario.robot)
+    sensors = scenario.sensors
+    scans = int(duration * sensors.laser.rate_hz)
+    if path_m > MAX_PATH_M:
+        raise GslamError(f"{source}: the path is {path_m / 1000:.1f} km long; at most {MAX_PATH_M / 1000:.0f} km "
+                         "can be simulated (robot.waypoints, robot.laps)")
+    if duration > MAX_DURATION_S:
+        raise GslamError(
+            f"{source}: the mission would take about {duration / 3600:.1f} h ({path_m:.1f} m of path, "
+            f"robot.max_speed_m_s {scenario.robot.max_speed_m_s:g}, robot.max_turn_rate_deg_s "
+            f"{scenario.robot.max_turn_rate_deg_s:g}); at most {MAX_DURATION_S / 3600:.0f} h can be simulated"
+        )
+    rates = {
+        "robot.truth_rate_hz": scenario.robot.truth_rate_hz,
+        "sensors.laser.rate_hz": sensors.laser.rate_hz,
+        "sensors.gyro.rate_hz": sensors.gyro.rate_hz,
+        "sensors.magnetometer.rate_hz": sensors.magnetometer.rate_hz,
+        "sensors.odometry.rate_hz": sensors.odometry.rate_hz,
+        "sensors.gps.rate_hz": sensors.gps.rate_hz,
+    }
+    for key, rate in rates.items():
+        if duration * rate > MAX_MESSAGES:
+            raise GslamError(f"{source}: {key} {rate:g} over about {duration:.0f} s gives {duration * rate:.3g} "
+                             f"messages; at most {MAX_MESSAGES:.0e} per stream")
+    if scans * sensors.laser.beams > MAX_LASER_VALUES:
+        raise GslamError(f"{source}: {scans} scans of {sensors.laser.beams} beams (sensors.laser) over about "
+                         f"{duration:.0f} s; at most {MAX_LASER_VALUES:.0e} ranges in all")
+    return MissionEstimate(duration, path_m, scans)

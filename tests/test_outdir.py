@@ -1,0 +1,271 @@
+"""The --out rule (slam/io/outdir.py): by itself, then for every command."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from slam.cli import main
+from slam.errors import GslamError
+from slam.io.atomic import write_text
+from slam.io.outdir import RESULT_MARKER, TEMP_MARKER, host_tag, open_container, remove_stale_temps, result_folder
+from tests.conftest import REPO, TELEMAX_CONFIG
+
+
+def listing(folder: Path) -> set[str]:
+    return {p.name for p in folder.iterdir()}
+
+
+def build(out: Path, command: str = "map", inputs=(), force: bool = False, files=("a.txt",)) -> None:
+    with result_folder(out, command, inputs, force) as tmp:
+        for name in files:
+            (tmp / name).write_text(f"{name} by {command}\n")
+
+
+# --- the rule ----------------------------------------------------------------------
+
+
+def test_new_result_is_marked_and_leaves_nothing_beside_it(tmp_path):
+    out = tmp_path / "deep" / "er" / "out"
+    build(out)
+    assert listing(out) == {"a.txt", RESULT_MARKER}
+    assert json.loads((out / RESULT_MARKER).read_text())["command"] == "map"
+    assert listing(out.parent) == {"out"}
+
+
+def test_an_earlier_result_of_the_same_command_is_replaced_whole(tmp_path):
+    out = tmp_path / "out"
+    build(out, files=("a.txt", "old.txt"))
+    build(out, files=("a.txt",))
+    assert listing(out) == {"a.txt", RESULT_MARKER}
+    assert listing(tmp_path) == {"out"}
+
+
+def test_an_empty_folder_is_new(tmp_path):
+    (tmp_path / "out").mkdir()
+    build(tmp_path / "out")
+    assert listing(tmp_path / "out") == {"a.txt", RESULT_MARKER}
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_a_file_is_refused_even_with_force(tmp_path, force):
+    (tmp_path / "out").write_text("precious\n")
+    with pytest.raises(GslamError, match="exists and is not a folder"):
+        build(tmp_path / "out", force=force)
+    assert (tmp_path / "out").read_text() == "precious\n" and listing(tmp_path) == {"out"}
+
+
+def test_a_foreign_folder_is_refused_and_force_writes_only_the_commands_files(tmp_path):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine\n")
+    (out / "a.txt").write_text("an older a\n")
+    with pytest.raises(GslamError, match=r"mine: --out is a folder that is not a gslam map result .*--force"):
+        build(out)
+    assert (out / "a.txt").read_text() == "an older a\n"
+    build(out, force=True, files=("a.txt", "b.txt"))
+    assert listing(out) == {"notes.txt", "a.txt", "b.txt"}  # no marker: still not a map result
+    assert (out / "notes.txt").read_text() == "mine\n" and (out / "a.txt").read_text() == "a.txt by map\n"
+    with pytest.raises(GslamError, match="not a gslam map result"):
+        build(out)
+
+
+def test_a_result_of_another_command_is_refused(tmp_path):
+    build(tmp_path / "run", command="simulate")
+    with pytest.raises(GslamError, match="is a folder that is a gslam simulate result, not a map result"):
+        build(tmp_path / "run")
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_the_input_is_never_the_output(tmp_path, force):
+    run = tmp_path / "runs" / "lab"
+    run.mkdir(parents=True)
+    (run / "truth.json").write_text("{}")
+    cases = {run: "is the input", tmp_path / "runs": "holds the input", tmp_path: "holds the input",
+             run / "maps": "is inside the input folder"}
+    for out, message in cases.items():
+        with pytest.raises(GslamError, match=message):
+            build(out, inputs=[run], force=force)
+    assert listing(run) == {"truth.json"} and listing(tmp_path / "runs") == {"lab"}
+
+
+def test_unwritable_places_are_refused_before_any_work(tmp_path):
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(GslamError, match="cannot be written: /proc"):
+        build(Path("/proc/gslam-out"))
+    with pytest.raises(GslamError, match=r"cannot be written: .*/f \(Not a directory\)"):
+        build(tmp_path / "f" / "out")
+    (tmp_path / "target").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "target")
+    with pytest.raises(GslamError, match="symbolic link"):
+        build(tmp_path / "link")
+    assert listing(tmp_path) == {"f", "target", "link"}
+
+
+def test_a_failing_command_leaves_nothing(tmp_path):
+    with pytest.raises(RuntimeError):
+        with result_folder(tmp_path / "new" / "out", "map") as tmp:
+            (tmp / "half.txt").write_text("half")
+            raise RuntimeError("disk full")
+    assert listing(tmp_path) == set()  # the parents it created are gone too
+
+
+def temp_left_by(target: Path, host: str, pid: int) -> Path:
+    folder = target.with_name(f".{target.name}.gslam-tmp-{pid}-{host}-{os.urandom(4).hex()}")
+    folder.mkdir()
+    (folder / TEMP_MARKER).write_text(json.dumps({"pid": pid}))
+    (folder / "trajectory.tum").write_text("half")
+    return folder
+
+
+def dead_pid() -> int:
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()
+    return child.pid
+
+
+def test_only_recognisable_leftovers_of_dead_processes_are_removed(tmp_path):
+    target = tmp_path / "out"
+    dead = temp_left_by(target, host_tag(), dead_pid())
+    alive = temp_left_by(target, host_tag(), os.getpid())
+    elsewhere = temp_left_by(target, "0badc0de" if host_tag() != "0badc0de" else "00000000", dead_pid())
+    unmarked = tmp_path / ".out.gslam-tmp-unmarked"
+    unmarked.mkdir()
+    other_name = temp_left_by(tmp_path / "other", host_tag(), dead_pid())
+    assert remove_stale_temps(target) == [dead]
+    assert {p.name for p in (alive, elsewhere, unmarked, other_name) if p.exists()} == {
+        alive.name, elsewhere.name, unmarked.name, other_name.name}
+
+
+@pytest.mark.parametrize("umask, file_mode, dir_mode", [(0o022, 0o644, 0o755), (0o077, 0o600, 0o700)])
+def test_results_follow_the_umask(tmp_path, umask, file_mode, dir_mode):
+    old = os.umask(umask)
+    try:
+        out = tmp_path / "out"
+        with result_folder(out, "map") as tmp:
+            (tmp / "sub").mkdir()
+            write_text(tmp / "sub" / "atomic.txt", "x")
+            (tmp / "plain.txt").write_text("x")
+    finally:
+        os.umask(old)
+    assert out.stat().st_mode & 0o777 == dir_mode
+    assert (out / "sub").stat().st_mode & 0o777 == dir_mode
+    for f in (out / "sub" / "atomic.txt", out / "plain.txt", out / RESULT_MARKER):
+        assert f.stat().st_mode & 0o777 == file_mode, f
+
+
+def test_containers_are_marked_first_and_reopened(tmp_path):
+    out = open_container(tmp_path / "sweep", "ablate")
+    assert json.loads((out / RESULT_MARKER).read_text())["command"] == "ablate"
+    (out / "jobs").mkdir()
+    assert open_container(out, "ablate") == out  # resumed, nothing touched
+    assert listing(out) == {RESULT_MARKER, "jobs"}
+    with pytest.raises(GslamError, match="a gslam ablate result, not a demo result"):
+        open_container(out, "demo")
+
+
+# --- a killed run --------------------------------------------------------------------
+
+
+def test_a_killed_map_leaves_a_temp_folder_the_next_run_removes(short_run, tmp_path, capsys):
+    out = tmp_path / "map"
+    argv = ["map", str(short_run.run_dir), "--config", str(TELEMAX_CONFIG), "--out", str(out)]
+    proc = subprocess.Popen([sys.executable, "-m", "slam.cli", "-q", *argv], cwd=REPO,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob(".map.gslam-tmp-*")) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    left = list(tmp_path.glob(".map.gslam-tmp-*"))
+    assert left and not out.exists()  # killed mid-run: no result, a marked temporary folder
+    assert main(["-q", *argv]) == 0
+    capsys.readouterr()
+    assert listing(tmp_path) == {"map"}
+
+
+# --- every command -------------------------------------------------------------------
+
+
+def run(capsys, *argv) -> tuple[int, str]:
+    code = main(["-q", *map(str, argv)])
+    _, err = capsys.readouterr()
+    return code, err
+
+
+@pytest.fixture
+def commands(short_run, short_scenario_yaml, tmp_path):
+    """Each command with a quick valid invocation, given ``--out`` last."""
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(yaml.safe_dump({
+        "name": "one", "config": str(TELEMAX_CONFIG),
+        "inputs": {"scenarios": [{"path": str(short_scenario_yaml), "seeds": [1]}]},
+        "variants": {"ungated": {"validation.mode": "off"}},
+    }))
+    quick = ["--set", "output.plots=false"]
+    return {
+        "simulate": ["simulate", short_scenario_yaml, "--out"],
+        "map": ["map", short_run.run_dir, "--config", TELEMAX_CONFIG, *quick, "--out"],
+        "compare": ["compare", short_run.run_dir, "--config", TELEMAX_CONFIG, "--only", "ungated", *quick, "--out"],
+        "demo": ["demo", "--scenario", short_scenario_yaml, "--only", "ungated", "--out"],
+        "ablate": ["ablate", spec, "--workers", "1", "--out"],
+    }
+
+
+@pytest.mark.parametrize("command", ["simulate", "map", "compare", "demo", "ablate"])
+def test_out_rule_for_every_command(command, commands, tmp_path, capsys):
+    argv = commands[command]
+    out = tmp_path / "out"
+    # 1. new: written and marked
+    code, err = run(capsys, *argv, out)
+    assert code == 0, err
+    assert json.loads((out / RESULT_MARKER).read_text())["command"] == command
+    first = listing(out)
+    # 2. again into its own result: replaced (simulate, map, compare) or resumed (demo, ablate)
+    code, err = run(capsys, *argv, out)
+    assert code == 0, err
+    assert listing(out) == first
+    # 3. a file, a foreign folder, another command's result: refused, untouched
+    (tmp_path / "file").write_text("precious\n")
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine\n")
+    other = "map" if command != "map" else "simulate"
+    for target, says in ((tmp_path / "file", "not a folder"), (mine, f"not a gslam {command} result"),
+                         (out, None)):
+        if target == out:  # make it another command's result
+            (out / RESULT_MARKER).write_text(json.dumps({"command": other}))
+            says = f"a gslam {other} result, not a {command} result"
+        before = {p.name: p.read_bytes() for p in target.iterdir() if p.is_file()} if target.is_dir() else None
+        code, err = run(capsys, *argv, target)
+        assert code == 1 and err.count("\n") == 1 and says in err, err
+        if before is not None:
+            assert {p.name: p.read_bytes() for p in target.iterdir() if p.is_file()} == before
+    assert (tmp_path / "file").read_text() == "precious\n"
+    # 4. --force into the foreign folder: the command's files join the user's
+    code, err = run(capsys, *argv[:-1], "--force", "--out", mine)
+    assert code == 0, err
+    assert (mine / "notes.txt").read_text() == "mine\n"
+    assert not (mine / RESULT_MARKER).exists() and len(listing(mine)) > 1
+    # 5. nothing temporary left anywhere
+    assert not [p for p in tmp_path.rglob("*") if ".gslam-tmp-" in p.name]
+
+
+def test_inspect_config_out(short_run, tmp_path, capsys):
+    target = tmp_path / "starter.yaml"
+    code, err = run(capsys, "inspect", short_run.run_dir, "--config-out", target)
+    assert code == 0, err
+    target.write_text("mine\n")
+    code, err = run(capsys, "inspect", short_run.run_dir, "--config-out", target)
+    assert code == 1 and "exists; give a new file name, or --force" in err
+    assert target.read_text() == "mine\n"
+    code, err = run(capsys, "inspect", short_run.run_dir, "--config-out", target, "--force")
+    assert code == 0 and target.read_text().startswith("# Starter config")
