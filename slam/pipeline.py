@@ -102,6 +102,8 @@ class MappingPipeline:
             self.match_scans()
             self.build_measurements()
             self.validate()
+            self.learn_odometry_scale()
+            self.second_pass()
             self.optimise()
             self.evaluate()
             self.write(tmp)
@@ -162,8 +164,7 @@ class MappingPipeline:
 
     def validate(self) -> None:
         """Gate the factors per keyframe and degree of freedom
-        (``validation.mode``: on, oracle or interval_oracle); offline, also
-        the second pass (:mod:`slam.recheck`)."""
+        (``validation.mode``: on, oracle or interval_oracle)."""
         from slam.config import validation_sections
         from slam.measurements import FACTOR_DOFS
 
@@ -188,13 +189,35 @@ class MappingPipeline:
         self.timings.validation_s = self.validation.time_s
         self.extra_metrics.update(self.validation.metrics)
         self.extra_outputs["validation.csv"] = self.validation.csv_text()
-        if vcfg.mode == "on" and vcfg.offline:
-            self.second_pass(gcfg)
 
-    def second_pass(self, gating) -> None:
-        """Keep the blamed measurements that agree with the other sensors."""
+    def learn_odometry_scale(self) -> None:
+        """With ``backend.factors.odometry.learn_scale`` and validation on
+        (or an oracle), correct the odometry's distance by its scale against
+        scan matching, learnt where validation keeps both
+        (:mod:`slam.selfcal`). Without validation nothing says where the scan
+        matcher can be trusted, and nothing is learnt."""
+        from slam.config import validation_sections
+        from slam.selfcal import odometry_scale
+
+        if not self.config.backend.factors.odometry.learn_scale or self.measurements.odometry is None:
+            return
+        if validation_sections(self.config)[0].mode == "off":
+            return
+        est = odometry_scale(self.measurements, self.weights)
+        self.measurements.odometry.delta[:, :2] *= est.scale
+        self.extra_metrics["odometry_scale"] = {
+            "scale": round(est.scale, 5), "windows": est.windows, "spread": round(est.spread, 5)
+        }
+
+    def second_pass(self) -> None:
+        """Offline validation's second pass: keep the blamed measurements
+        that agree with the other sensors (:mod:`slam.recheck`)."""
+        from slam.config import validation_sections
         from slam.recheck import recheck
 
+        vcfg, gating = validation_sections(self.config)
+        if vcfg.mode != "on" or not vcfg.offline:
+            return
         t = time.perf_counter()
         result = recheck(self.measurements, self.weights, self._initial_pose(), self.config.backend, gating)
         self.weights = result.weights
