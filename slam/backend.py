@@ -8,6 +8,10 @@ solves once; iSAM2 adds one step at a time as it would run on the robot.
 Each factor's noise is scaled per step by a *weight* (a sigma multiplier)
 that sensor validation decides: 1 keeps the configured noise, k > 1
 inflates it, ``inf`` excludes the factor.
+
+Loop closures (slam.loops) join the step of their later keyframe as
+between factors to the earlier one. With loops, GNC can serve as the
+optimiser-level fallback: every factor but the loops is a known inlier.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from slam.factors import (
     yaw_only_noise,
     yaw_prior_factor,
 )
+from slam.loops.factors import LoopFactors, loop_factor
 from slam.measurements import FACTOR_TYPES, Measurements
 from slam.recording import Trajectory
 
@@ -88,13 +93,19 @@ class GraphBuilder:
 
     BETWEEN = ("odometry", "scan_matching")
 
-    def __init__(self, meas: Measurements, weights: FactorWeights, config: BackendConfig):
+    def __init__(
+        self, meas: Measurements, weights: FactorWeights, config: BackendConfig, loops: LoopFactors | None = None
+    ):
         self.meas = meas
         self.weights = weights
         self.config = config
         self.robust = _kernels(config)
         self.counts = {f: 0 for f in FACTOR_TYPES}
         self.fallback_steps = 0
+        self.loops = loops
+        self._loops_at = loops.by_keyframe() if loops is not None else {}
+        if loops is not None:
+            self.counts["loop"] = 0
 
     def _weight(self, factor: str, k: int) -> float:
         w = self.weights.get(factor)
@@ -134,6 +145,19 @@ class GraphBuilder:
             s = m.gps.sigma[k] * w
             out.append(position_prior_factor(k, m.gps.xy[k], gaussian([s, s], self.robust["gps"])))
             self.counts["gps"] += 1
+        return out + self.loop_factors(k)
+
+    def loops_at(self, k: int) -> list:
+        """The loop constraints whose later keyframe is ``k``."""
+        return self._loops_at.get(k, [])
+
+    def loop_factors(self, k: int) -> list[gtsam.NonlinearFactor]:
+        """The loop factors that end at keyframe ``k``."""
+        lf = self.loops
+        out = []
+        for lp in self.loops_at(k):
+            out.append(loop_factor(lp, lf.robust, lf.inflation.get(lp.id, 1.0)))
+            self.counts["loop"] += 1
         return out
 
     def anchor(self, pose0: np.ndarray) -> gtsam.NonlinearFactor:
@@ -175,6 +199,17 @@ def _optimise_batch(graph, initial, config: BackendConfig, anchor_index: int):
     return result, optimizer.iterations()
 
 
+def _optimise_gnc_loops(graph, initial, loop_indices: list[int]):
+    """GNC (truncated least squares) where only loop factors may be outliers:
+    every other factor, the anchor included, is a known inlier."""
+    params = gtsam.GncLMParams()
+    params.setLossType(gtsam.GncLossType.TLS)
+    loops = set(loop_indices)
+    params.setKnownInliers([k for k in range(graph.size()) if k not in loops])
+    optimizer = gtsam.GncLMOptimizer(graph, initial, params)
+    return optimizer.optimize(), 0
+
+
 def optimise(
     meas: Measurements,
     initial_pose: np.ndarray,
@@ -182,15 +217,22 @@ def optimise(
     weights: FactorWeights | None = None,
     progress: bool = False,
     isam2_params: gtsam.ISAM2Params | None = None,
+    loops: LoopFactors | None = None,
+    initial_estimate: np.ndarray | None = None,
 ) -> BackendResult:
     """Build the keyframe graph and optimise it (batch, GNC or iSAM2).
 
     ``initial_pose`` (x, y, yaw) anchors keyframe 0 in the world frame.
     ``isam2_params``: iSAM2 settings (relinearisation threshold and skip)
     instead of GTSAM's defaults; used only by the iSAM2 optimiser.
+    ``loops``: loop closures to add; ``initial_estimate`` (K, 3): where each
+    keyframe starts in batch optimisation instead of the prediction from the
+    previous one (loop detection's re-anchored estimate: with loops, the
+    dead-reckoning start can be too far off for Levenberg-Marquardt). iSAM2
+    starts a keyframe that closes a loop where the loop puts it.
     """
     n = len(meas)
-    builder = GraphBuilder(meas, weights if weights is not None else unit_weights(n), config)
+    builder = GraphBuilder(meas, weights if weights is not None else unit_weights(n), config, loops)
     steps = range(n)
     if progress:
         from tqdm import tqdm
@@ -205,14 +247,22 @@ def optimise(
     graph, initial = gtsam.NonlinearFactorGraph(), gtsam.Values()
     graph.add(builder.anchor(initial_pose))
     pose = gtsam.Pose2(*initial_pose)
+    loop_indices = []
     for k in steps:
         if k > 0:
-            pose = builder.predict(k, pose)
+            pose = builder.predict(k, pose) if initial_estimate is None else gtsam.Pose2(*initial_estimate[k])
         initial.insert(pose_key(k), pose)
-        for factor in builder.step(k):
+        n_loops = len(builder.loops_at(k))
+        factors = builder.step(k)
+        for factor in factors:
             graph.add(factor)
+        # The loop factors are the last ones of their step.
+        loop_indices.extend(range(graph.size() - n_loops, graph.size()))
     built = time.perf_counter()
-    result, iterations = _optimise_batch(graph, initial, config, anchor_index=0)
+    if loops is not None and loops.gnc and loop_indices and config.optimizer == "batch":
+        result, iterations = _optimise_gnc_loops(graph, initial, loop_indices)
+    else:
+        result, iterations = _optimise_batch(graph, initial, config, anchor_index=0)
     done = time.perf_counter()
     if builder.fallback_steps:
         log.warning("%d steps had every translational factor excluded; kept one inflated", builder.fallback_steps)
@@ -238,6 +288,11 @@ def _optimise_isam2(
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         if k == 0:
             graph.add(builder.anchor(initial_pose))
+        elif loops_here := builder.loops_at(k):
+            # A loop says where k is: start it there, from the current
+            # estimate of the keyframe it closes on.
+            first = loops_here[0]
+            latest = isam.calculateEstimatePose2(pose_key(first.i)).compose(gtsam.Pose2(*first.delta))
         else:
             latest = builder.predict(k, latest)
         values.insert(pose_key(k), latest)

@@ -15,6 +15,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from slam.errors import GslamError
+from slam.loops.config import LoopsConfig
 
 
 class Strict(BaseModel):
@@ -247,6 +248,7 @@ class PipelineConfig(Strict):
     backend: BackendConfig = BackendConfig()
     evaluation: EvaluationConfig = EvaluationConfig()
     output: OutputConfig = OutputConfig()
+    loops: LoopsConfig = LoopsConfig()
     validation: dict[str, Any] = Field(default_factory=dict)
     gating: dict[str, Any] = Field(default_factory=dict)
 

@@ -14,7 +14,7 @@ import csv
 import io
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -32,7 +32,9 @@ log = logging.getLogger(__name__)
 @dataclass
 class ValidationOutcome:
     """Everything validation decided, per validation step, and the weights
-    per keyframe and factor type (sigma multipliers; ``inf`` excludes)."""
+    per keyframe and factor type (sigma multipliers; ``inf`` excludes).
+    ``extra_columns``: more per-step columns for the log (the loop
+    observer's, validation.loops)."""
 
     step_t: np.ndarray
     observer_log: ObserverLog | None
@@ -42,6 +44,7 @@ class ValidationOutcome:
     metrics: dict
     time_s: float
     sm_poses: Trajectory | None = None
+    extra_columns: dict[str, list] = field(default_factory=dict)
 
     def csv_text(self) -> str:
         """The per-step log: trends, counters, observations, diagnoses, decisions."""
@@ -56,6 +59,7 @@ class ValidationOutcome:
         factors = sorted(self.decisions[0]) if self.decisions else []
         for f in factors:
             cols[f"gate.{f}"] = [d[f].action.value for d in self.decisions]
+        cols.update(self.extra_columns)
         out = io.StringIO()
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(cols)

@@ -1,0 +1,109 @@
+"""The laser points of each keyframe, and local maps around a keyframe.
+
+A local map is the union of the scans of the keyframes within a stretch of
+path around a keyframe, each placed by the current estimate and expressed
+in the frame of the centre keyframe, thinned to one point per voxel. Its
+point map (points, normals, k-d tree) and score grid are cached: a keyframe
+far enough back to be a loop candidate has all its neighbours' estimates
+fixed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from slam.io.pointcloud import voxel_downsample
+from slam.loops.chain import between
+from slam.loops.config import RegistrationConfig
+from slam.loops.correlative import ScoreGrid, score_grid
+from slam.loops.registration import PointMap, build_point_map
+from slam.recording import Scans
+
+
+class KeyframePoints:
+    """Planar points (in the laser frame) of every keyframe's scan.
+
+    ``scan_index`` (K,): the scan of each keyframe; beams outside
+    [``min_range``, ``max_range``) are dropped and each scan is thinned to
+    ``voxel_m``.
+    """
+
+    def __init__(self, scans: Scans, scan_index: np.ndarray, min_range: float, max_range: float, voxel_m: float):
+        from slam.frontend import ScanProjector
+
+        project = ScanProjector(scans.angles, min_range, min(max_range, scans.range_max))
+        pts, row = project.planar_points(scans.ranges[scan_index])
+        bounds = np.searchsorted(row, np.arange(len(scan_index) + 1))
+        self.points = [voxel_downsample(pts[a:b], voxel_m) for a, b in zip(bounds[:-1], bounds[1:])]
+        self.voxel_m = voxel_m
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def gather(self, centre: int, keyframes: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """Points of ``keyframes`` in the frame of keyframe ``centre``,
+        placed by ``poses`` (K, 3); thinned."""
+        ks = np.asarray(keyframes)
+        rel = between(np.repeat(poses[centre][None], len(ks), axis=0), poses[ks])
+        chunks = []
+        for k, (x, y, yaw) in zip(ks, rel):
+            p = self.points[k]
+            if len(p):
+                c, s = np.cos(yaw), np.sin(yaw)
+                chunks.append(np.column_stack([x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1]]))
+        if not chunks:
+            return np.zeros((0, 2))
+        return voxel_downsample(np.concatenate(chunks), self.voxel_m)
+
+
+def window(path_m: np.ndarray, k: int, before_m: float, after_m: float, max_scans: int) -> np.ndarray:
+    """Keyframes within ``before_m`` of path before keyframe ``k`` and
+    ``after_m`` after it, ``k`` included, evenly thinned to ``max_scans``."""
+    lo = int(np.searchsorted(path_m, path_m[k] - before_m, side="left"))
+    hi = int(np.searchsorted(path_m, path_m[k] + after_m, side="right"))
+    ks = np.arange(min(lo, k), max(hi, k + 1))
+    if len(ks) > max_scans:
+        ks = np.unique(np.concatenate([ks[np.linspace(0, len(ks) - 1, max_scans).round().astype(int)], [k]]))
+    return ks
+
+
+class LocalMaps:
+    """Cached local maps of places: points, point map and score grid, each
+    built once, when first needed."""
+
+    def __init__(self, points: KeyframePoints, path_m: np.ndarray, half_m: float, max_scans: int,
+                 registration: RegistrationConfig, grid_margin_m: float):
+        self.points = points
+        self.path_m = path_m
+        self.half_m = half_m
+        self.max_scans = max_scans
+        self.registration = registration
+        self.grid_margin_m = grid_margin_m
+        self._maps: dict[int, PointMap] = {}
+        self._grids: dict[tuple[int, float], ScoreGrid] = {}
+        self._points: dict[int, np.ndarray] = {}
+
+    def local_points(self, k: int, poses: np.ndarray) -> np.ndarray:
+        pts = self._points.get(k)
+        if pts is None:
+            ks = window(self.path_m, k, self.half_m, self.half_m, self.max_scans)
+            pts = self._points[k] = self.points.gather(k, ks, poses)
+        return pts
+
+    def point_map(self, k: int, poses: np.ndarray) -> PointMap:
+        """The point map around keyframe ``k``, in its frame."""
+        pm = self._maps.get(k)
+        if pm is None:
+            reg = self.registration
+            pts = self.local_points(k, poses)
+            pm = self._maps[k] = build_point_map(pts, self.points.voxel_m, reg.normal_neighbours, reg.min_linearity)
+        return pm
+
+    def score_grid(self, k: int, poses: np.ndarray, resolution_m: float) -> ScoreGrid:
+        """The correlative score grid around keyframe ``k``, in its frame,
+        with cells of ``resolution_m`` (one grid per keyframe and resolution)."""
+        key = (k, round(resolution_m, 6))
+        grid = self._grids.get(key)
+        if grid is None:
+            grid = self._grids[key] = score_grid(self.local_points(k, poses), resolution_m, self.grid_margin_m)
+        return grid
