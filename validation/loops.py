@@ -36,8 +36,9 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import math
+
 import numpy as np
-from scipy.stats import chi2
 
 from slam.loops.chain import Chain, J, world_covariance, world_discrepancy
 from slam.loops.config import ObserverConfig
@@ -80,6 +81,31 @@ class LoopObservation:
     @property
     def accepted(self) -> list[LoopConstraint]:
         return [v.loop for v in self.verdicts if v.accepted]
+
+
+def chi2_quantile(probability: float, dof: int) -> float:
+    """Quantile of the chi-square distribution with ``dof`` (1..8) degrees
+    of freedom, by bisection on its CDF (the regularised lower incomplete
+    gamma function P(dof/2, x/2), by its recurrence from P(1/2) or P(1))."""
+
+    def cdf(x: float) -> float:
+        y = 0.5 * x
+        if dof % 2:
+            a, p = 0.5, math.erf(math.sqrt(y))
+        else:
+            a, p = 1.0, 1.0 - math.exp(-y)
+        while a < 0.5 * dof:
+            p -= math.exp(a * math.log(y) - y - math.lgamma(a + 1.0)) if y > 0 else 0.0
+            a += 1.0
+        return p
+
+    lo, hi = 0.0, 1.0
+    while cdf(hi) < probability:
+        hi *= 2.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if cdf(mid) < probability else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 def _position_only(loop: LoopConstraint) -> bool:
@@ -154,7 +180,7 @@ def pairwise_consistency(chain: Chain, loops: list[LoopConstraint], probability:
         m = both_pose
         r = w[a[m]] - w[b[m]]
         cov = s_a[m] + s_b[m] - 2.0 * s_ab[m] + n[a[m]] + n[b[m]]
-        ok[m] = _chi2_of(r, cov, np.full(m.sum(), 3)) <= chi2.ppf(probability, 3)
+        ok[m] = _chi2_of(r, cov, np.full(m.sum(), 3)) <= chi2_quantile(probability, 3)
     other = ~both_pose
     if other.any():
         # Joint test of what each loop measures, correlated through shared steps.
@@ -172,7 +198,7 @@ def pairwise_consistency(chain: Chain, loops: list[LoopConstraint], probability:
             x, y = da[idx], db[idx]
             r = np.concatenate([ma[idx, :x], mb[idx, :y]])
             c = np.block([[caa[idx, :x, :x], cab[idx, :x, :y]], [cab[idx, :x, :y].T, cbb[idx, :y, :y]]])
-            values[idx] = r @ np.linalg.solve(c, r) - chi2.ppf(probability, x + y)
+            values[idx] = r @ np.linalg.solve(c, r) - chi2_quantile(probability, int(x + y))
         ok[m] = values <= 0.0
     out = np.eye(k, dtype=bool)
     out[a, b] = ok
@@ -187,7 +213,7 @@ def observe_loops(chain: Chain, loops: list[LoopConstraint], config: ObserverCon
     dof = np.array([2 if _position_only(lp) else 3 for lp in loops])
     passed = np.ones(len(loops), dtype=bool)
     if config.chain_check and len(loops):
-        passed = chi <= chi2.ppf(config.chain_probability, dof)
+        passed = chi <= np.array([chi2_quantile(config.chain_probability, int(d)) for d in dof])
     kept = passed.copy()
     clique_size, proven = int(passed.sum()), True
     if config.pcm and passed.sum() > 1:

@@ -42,12 +42,12 @@ J = np.array([[0.0, -1.0], [1.0, 0.0]])
 
 def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Planar poses ``a * b`` row by row ((n, 3) or (3,))."""
-    a, b = np.atleast_2d(a), np.atleast_2d(b)
-    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    a2, b2 = np.atleast_2d(a), np.atleast_2d(b)
+    c, s = np.cos(a2[:, 2]), np.sin(a2[:, 2])
     out = np.column_stack(
-        [a[:, 0] + c * b[:, 0] - s * b[:, 1], a[:, 1] + s * b[:, 0] + c * b[:, 1], wrap_angle(a[:, 2] + b[:, 2])]
+        [a2[:, 0] + c * b2[:, 0] - s * b2[:, 1], a2[:, 1] + s * b2[:, 0] + c * b2[:, 1], wrap_angle(a2[:, 2] + b2[:, 2])]
     )
-    return out[0] if out.shape[0] == 1 and max(np.ndim(a), np.ndim(b)) == 1 else out
+    return out[0] if np.ndim(a) == 1 and np.ndim(b) == 1 else out
 
 
 def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -39,18 +39,21 @@ class RegistrationConfig(_Strict):
     """Point-to-line ICP (slam.loops.registration).
 
     ``max_distance_m``: correspondences farther than this are dropped at
-    the first iteration; the distance shrinks by a third per iteration to
+    the first iteration; the distance halves each iteration down to
     ``inlier_distance_m``, at which the overlap and residual are judged.
-    ``kernel_m``: Cauchy scale of the residuals; ``normal_neighbours``: points
-    a normal is fitted to; ``min_linearity``: map points whose neighbourhood
-    is less line-like are dropped (corners, clutter).
+    ``kernel_m``: Cauchy scale of the residuals. A point's normal is fitted
+    to the ``normal_half_window`` beams on each side of it in its scan, if
+    none of them is more than ``normal_max_gap_m`` from the next;
+    ``min_linearity``: map points whose stretch is less straight are not
+    matched against (corners, clutter).
     """
 
     max_distance_m: float = Field(0.5, gt=0.0)
     inlier_distance_m: float = Field(0.2, gt=0.0)
     kernel_m: float = Field(0.1, gt=0.0)
     max_iterations: int = Field(30, ge=1)
-    normal_neighbours: int = Field(7, ge=3)
+    normal_half_window: int = Field(2, ge=1)
+    normal_max_gap_m: float = Field(0.3, gt=0.0)
     min_linearity: float = Field(0.8, ge=0.0, le=1.0)
 
 
@@ -72,17 +75,19 @@ class AcceptanceConfig(_Strict):
     """When a registration verifies a candidate.
 
     ``min_overlap``: fraction of query points with a correspondence at the
-    end; ``max_rms_m``: RMS point-to-line residual; ``max_weak_sigma_m``: a
-    direction whose standard deviation (from the registration's information,
-    yaw scaled by the local map's radius) exceeds this is not pinned by the
-    loop (a corridor's axis); a loop with no direction left is rejected.
+    end; ``max_rms_m``: RMS point-to-line residual. A direction whose
+    information (yaw scaled by the query's median range) is below
+    ``min_relative_information`` of the strongest direction's is not pinned
+    by the loop (a corridor's axis); a loop with fewer than ``min_pinned``
+    directions left (of x, y, yaw) is rejected.
     ``max_correction_m``: the registration may move the query at most this
     far from its guess.
     """
 
     min_overlap: float = Field(0.6, gt=0.0, le=1.0)
     max_rms_m: float = Field(0.05, gt=0.0)
-    max_weak_sigma_m: float = Field(0.2, gt=0.0)
+    min_relative_information: float = Field(0.05, ge=0.0, le=1.0)
+    min_pinned: int = Field(1, ge=1, le=3)
     max_correction_m: float = Field(3.0, gt=0.0)
 
 
@@ -132,10 +137,11 @@ class LoopsConfig(_Strict):
     loop)`` (the drift grows with the path; at most ``max_search_radius_m``)
     and the yaw within ``search_yaw_deg + search_yaw_per_m_deg * (the same
     path)``, at most ``max_search_yaw_deg``. Up to ``max_candidates`` are
-    verified by registering the query's local map against theirs; a local
-    map is the scans within ``local_map_m`` of path on each side of its
-    keyframe (the query: before it), at most ``local_map_scans`` of them,
-    thinned to ``voxel_m``. An accepted loop re-anchors the estimate.
+    verified by registering the query's local map against theirs; a place's
+    local map is the scans within ``local_map_m`` of path on each side of
+    its keyframe, the query's those within ``query_map_m`` before it (0: its
+    own scan only), at most ``local_map_scans`` of them, thinned to
+    ``voxel_m``. An accepted loop re-anchors the estimate.
 
     The registration's information is multiplied by ``information_scale``:
     it treats every point as an independent measurement, which they are not
@@ -148,6 +154,7 @@ class LoopsConfig(_Strict):
     enabled: bool = False
     source: Literal["auto", "scans", "file"] = "auto"
     local_map_m: float = Field(3.0, ge=0.0)
+    query_map_m: float = Field(3.0, ge=0.0)
     local_map_scans: int = Field(10, ge=1)
     voxel_m: float = Field(0.1, gt=0.0)
     query_spacing_m: float = Field(1.0, ge=0.0)

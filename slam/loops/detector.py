@@ -21,9 +21,9 @@ accepted geometric loop re-anchors the estimate; a recognised place does not
 correlative search over the uncertainty window (slam.loops.correlative),
 then point-to-line ICP of the query's local map against the candidate's
 (slam.loops.registration); accepted with enough overlap and a low residual.
-Directions the registration does not constrain (a corridor's axis) are taken
-out of the loop's information, so it does not pin them; a loop with nothing
-left is rejected.
+Directions the registration barely constrains (a corridor's axis) are taken
+out of the loop's information, so it does not pin them; a loop with fewer
+than ``acceptance.min_pinned`` directions left is rejected.
 """
 
 from __future__ import annotations
@@ -69,19 +69,25 @@ class _Candidate:
     geometric: bool  # guess from the estimate (else from the descriptor)
 
 
-def pinned_information(reg: Registration, length_m: float, max_weak_sigma_m: float) -> tuple[np.ndarray | None, int]:
+def pinned_information(reg: Registration, length_m: float, min_relative: float) -> tuple[np.ndarray | None, int]:
     """The registration's information in the loop's convention (frame of the
-    query), with directions whose sigma exceeds ``max_weak_sigma_m`` removed,
-    and the number of directions kept (None and 0 if none is left). Yaw is
-    compared at ``length_m``."""
+    query), without the directions it barely constrains, and how many
+    directions are kept.
+
+    Yaw is compared with translation at ``length_m`` (a rotation by dyaw
+    moves points at that range by ``length_m * dyaw``). A direction whose
+    information is below ``min_relative`` of the strongest direction's is
+    removed: the point-to-line information treats every point as
+    independent, so its absolute size says little, but its shape does (a
+    corridor's axis gets only the noise of the wall normals)."""
     c, s = np.cos(reg.pose[2]), np.sin(reg.pose[2])
     a = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     info = a.T @ reg.information @ a  # d_map = A d_query
     scale = np.array([1.0, 1.0, 1.0 / length_m])
     values, vectors = np.linalg.eigh(info * np.outer(scale, scale))
-    keep = values > 1.0 / max_weak_sigma_m**2
-    if not keep.any():
+    if values[-1] <= 0.0:
         return None, 0
+    keep = values >= min_relative * values[-1]
     scaled = (vectors[:, keep] * values[keep]) @ vectors[:, keep].T
     inv = 1.0 / scale
     return scaled * np.outer(inv, inv), int(keep.sum())
@@ -115,7 +121,7 @@ class LoopDetector:
             if s_j - last_query_m < cfg.query_spacing_m:
                 continue
             last_query_m = s_j
-            query = self.points.gather(j, window(chain.path_m, j, cfg.local_map_m, 0.0, cfg.local_map_scans), est)
+            query = self.points.gather(j, window(chain.path_m, j, cfg.query_map_m, 0.0, cfg.local_map_scans), est)[0]
             d = cfg.descriptor
             context = scan_context(query, d.rings, d.sectors, d.max_radius_m)
             key = ring_key(context)
@@ -153,7 +159,7 @@ class LoopDetector:
             return []
         idx = np.asarray(places)
         path = self.chain.path_m
-        far = (path[j] - path[idx] >= cfg.min_separation_m) & (path[idx] + cfg.local_map_m < path[j] - cfg.local_map_m)
+        far = (path[j] - path[idx] >= cfg.min_separation_m) & (path[idx] + cfg.local_map_m < path[j] - cfg.query_map_m)
         if not far.any():
             return []
         idx_far = np.flatnonzero(far)
@@ -209,8 +215,8 @@ class LoopDetector:
             reject("correction")
             return None
         extent = float(np.median(np.hypot(query[:, 0], query[:, 1])))
-        info, dims = pinned_information(reg, max(extent, 1.0), acc.max_weak_sigma_m)
-        if info is None:
+        info, dims = pinned_information(reg, max(extent, 1.0), acc.min_relative_information)
+        if info is None or dims < acc.min_pinned:
             reject("degenerate")
             return None
         quality = {

@@ -12,48 +12,74 @@ from __future__ import annotations
 
 import numpy as np
 
-from slam.io.pointcloud import voxel_downsample
 from slam.loops.chain import between
 from slam.loops.config import RegistrationConfig
 from slam.loops.correlative import ScoreGrid, score_grid
-from slam.loops.registration import PointMap, build_point_map
+from slam.loops.registration import PointMap, build_point_map, scan_normals
 from slam.recording import Scans
 
 
+def voxel_first(points: np.ndarray, voxel_m: float) -> np.ndarray:
+    """Indices (sorted) of the first point in each occupied voxel."""
+    if len(points) == 0:
+        return np.zeros(0, dtype=np.int64)
+    cells = np.floor(points / voxel_m).astype(np.int64)
+    cells -= cells.min(axis=0)
+    key = cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1]
+    _, first = np.unique(key, return_index=True)
+    return np.sort(first)
+
+
 class KeyframePoints:
-    """Planar points (in the laser frame) of every keyframe's scan.
+    """Planar points (in the laser frame) of every keyframe's scan, with a
+    normal and a linearity each (slam.loops.registration.scan_normals).
 
     ``scan_index`` (K,): the scan of each keyframe; beams outside
-    [``min_range``, ``max_range``) are dropped and each scan is thinned to
-    ``voxel_m``.
+    [``min_range``, ``max_range``) are dropped; normals come from the
+    beams' neighbours before each scan is thinned to ``voxel_m``.
     """
 
-    def __init__(self, scans: Scans, scan_index: np.ndarray, min_range: float, max_range: float, voxel_m: float):
+    def __init__(self, scans: Scans, scan_index: np.ndarray, min_range: float, max_range: float, voxel_m: float,
+                 registration: RegistrationConfig):
         from slam.frontend import ScanProjector
 
         project = ScanProjector(scans.angles, min_range, min(max_range, scans.range_max))
         pts, row = project.planar_points(scans.ranges[scan_index])
         bounds = np.searchsorted(row, np.arange(len(scan_index) + 1))
-        self.points = [voxel_downsample(pts[a:b], voxel_m) for a, b in zip(bounds[:-1], bounds[1:])]
+        self.points, self.normals, self.linear = [], [], []
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            p = pts[a:b]
+            n, lin = scan_normals(p, registration.normal_half_window, registration.normal_max_gap_m)
+            keep = voxel_first(p, voxel_m)
+            self.points.append(p[keep])
+            self.normals.append(n[keep])
+            self.linear.append(lin[keep] >= registration.min_linearity)
         self.voxel_m = voxel_m
 
     def __len__(self) -> int:
         return len(self.points)
 
-    def gather(self, centre: int, keyframes: np.ndarray, poses: np.ndarray) -> np.ndarray:
-        """Points of ``keyframes`` in the frame of keyframe ``centre``,
-        placed by ``poses`` (K, 3); thinned."""
+    def gather(self, centre: int, keyframes: np.ndarray, poses: np.ndarray, lines_only: bool = False):
+        """Points and normals of ``keyframes`` in the frame of keyframe
+        ``centre``, placed by ``poses`` (K, 3), thinned to one per voxel;
+        ``lines_only``: only points on a straight stretch."""
         ks = np.asarray(keyframes)
         rel = between(np.repeat(poses[centre][None], len(ks), axis=0), poses[ks])
-        chunks = []
+        pts, nrm = [], []
         for k, (x, y, yaw) in zip(ks, rel):
-            p = self.points[k]
+            p, n = self.points[k], self.normals[k]
+            if lines_only:
+                p, n = p[self.linear[k]], n[self.linear[k]]
             if len(p):
                 c, s = np.cos(yaw), np.sin(yaw)
-                chunks.append(np.column_stack([x + c * p[:, 0] - s * p[:, 1], y + s * p[:, 0] + c * p[:, 1]]))
-        if not chunks:
-            return np.zeros((0, 2))
-        return voxel_downsample(np.concatenate(chunks), self.voxel_m)
+                rot = np.array([[c, -s], [s, c]])
+                pts.append(p @ rot.T + (x, y))
+                nrm.append(n @ rot.T)
+        if not pts:
+            return np.zeros((0, 2)), np.zeros((0, 2))
+        p, n = np.concatenate(pts), np.concatenate(nrm)
+        keep = voxel_first(p, self.voxel_m)
+        return p[keep], n[keep]
 
 
 def window(path_m: np.ndarray, k: int, before_m: float, after_m: float, max_scans: int) -> np.ndarray:
@@ -83,20 +109,24 @@ class LocalMaps:
         self._grids: dict[tuple[int, float], ScoreGrid] = {}
         self._points: dict[int, np.ndarray] = {}
 
+    def _window(self, k: int) -> np.ndarray:
+        return window(self.path_m, k, self.half_m, self.half_m, self.max_scans)
+
     def local_points(self, k: int, poses: np.ndarray) -> np.ndarray:
+        """All points of the local map around keyframe ``k``, in its frame."""
         pts = self._points.get(k)
         if pts is None:
-            ks = window(self.path_m, k, self.half_m, self.half_m, self.max_scans)
-            pts = self._points[k] = self.points.gather(k, ks, poses)
+            pts = self._points[k] = self.points.gather(k, self._window(k), poses)[0]
         return pts
 
     def point_map(self, k: int, poses: np.ndarray) -> PointMap:
-        """The point map around keyframe ``k``, in its frame."""
+        """The point map (points on straight stretches, with normals) around
+        keyframe ``k``, in its frame."""
         pm = self._maps.get(k)
         if pm is None:
+            pts, nrm = self.points.gather(k, self._window(k), poses, lines_only=True)
             reg = self.registration
-            pts = self.local_points(k, poses)
-            pm = self._maps[k] = build_point_map(pts, self.points.voxel_m, reg.normal_neighbours, reg.min_linearity)
+            pm = self._maps[k] = build_point_map(pts, nrm, self.points.voxel_m, reg.max_distance_m)
         return pm
 
     def score_grid(self, k: int, poses: np.ndarray, resolution_m: float) -> ScoreGrid:

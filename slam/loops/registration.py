@@ -1,22 +1,21 @@
-"""Point-to-line ICP of a 2D scan against a point map, with its information
-matrix.
+"""Point-to-line ICP of planar points against a point map, with its
+information matrix.
 
-A *point map* holds planar points with a unit normal each, estimated from
-their ``normal_neighbours`` nearest neighbours (the direction of least
-spread), and a k-d tree. :func:`register` minimises the point-to-line
-residuals ``n_m . (R q + t - m)`` of the query points ``q`` against their
-nearest map points ``m`` (Gauss-Newton, Cauchy weights, correspondences
-farther than ``max_distance_m`` dropped), starting from a guessed pose.
+A *point map* holds planar points with a unit normal each (from the scan
+they came from, see :func:`scan_normals`) and a nearest-point lookup grid.
+:func:`register` minimises the point-to-line residuals ``n_m . (R q + t - m)``
+of the query points ``q`` against their nearest map points ``m`` (Gauss-Newton,
+Cauchy weights), starting from a guessed pose; the correspondence distance
+halves from ``max_distance_m`` down to ``inlier_distance_m`` (coarse to fine).
 
 The result carries what verification needs: the fraction of query points
 with a correspondence within the final, tight distance (overlap), the RMS
-residual of those, and the
-information matrix ``J^T W J / sigma^2`` of the pose, with sigma^2 the
-weighted residual variance. A corridor shows up there: walls that are all
-parallel give no information along them, and the smallest eigenvalue of the
-information (in metres, see :func:`weakest_direction`) says how well the
-worst direction is pinned. Frames: the query points are in the query frame,
-the map points and the returned pose (x, y, yaw; m, rad) in the map frame.
+residual of those, and the information matrix ``J^T W J / sigma^2`` of the
+pose, with sigma^2 the weighted residual variance. A corridor shows up there:
+walls that are all parallel give no information along them.
+
+Frames: the query points are in the query frame, the map points and the
+returned pose (x, y, yaw; m, rad) in the map frame.
 """
 
 from __future__ import annotations
@@ -24,57 +23,97 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
+from numpy.lib.stride_tricks import sliding_window_view
 
-from slam.io.pointcloud import voxel_downsample
+_NO_POINT = np.iinfo(np.int64).max
+_INDEX_BITS = 24
+
+
+def scan_normals(points: np.ndarray, half_window: int, max_gap_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals (m, 2) of a scan's points (m, 2) in beam order, from the
+    ``2 * half_window + 1`` consecutive points around each, and the
+    linearity (m,) of that stretch in [0, 1]: 1 - minor / major spread, 1
+    on a straight wall; 0 where the stretch is cut (ends of the scan, or two
+    neighbours more than ``max_gap_m`` apart)."""
+    m = len(points)
+    w = 2 * half_window + 1
+    normals = np.zeros((m, 2))
+    linearity = np.zeros(m)
+    if m < w:
+        return normals, linearity
+    win = sliding_window_view(points, (w, 2))[:, 0]  # (m - w + 1, w, 2)
+    gaps = np.hypot(*np.diff(win, axis=1).transpose(2, 0, 1)).max(axis=1)
+    d = win - win.mean(axis=1, keepdims=True)
+    cxx = (d[..., 0] ** 2).sum(axis=1)
+    cyy = (d[..., 1] ** 2).sum(axis=1)
+    cxy = (d[..., 0] * d[..., 1]).sum(axis=1)
+    major = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)  # direction of the line
+    half_trace = 0.5 * (cxx + cyy)
+    root = np.sqrt(np.maximum(0.25 * (cxx - cyy) ** 2 + cxy**2, 0.0))
+    lam_major, lam_minor = half_trace + root, np.maximum(half_trace - root, 0.0)
+    lin = np.where(lam_major > 0, 1.0 - lam_minor / np.maximum(lam_major, 1e-12), 0.0)
+    lin = np.where(gaps <= max_gap_m, lin, 0.0)
+    centre = slice(half_window, m - half_window)
+    normals[centre] = np.column_stack([-np.sin(major), np.cos(major)])
+    linearity[centre] = lin
+    return normals, linearity
+
+
+class NearestGrid:
+    """Nearest map point of every cell of a grid within ``radius_m`` of
+    the points (cells of ``resolution_m``; nearest to the cell's centre), so
+    a query is one lookup. The association is approximate (within half a
+    cell diagonal); the residual uses the exact point and normal."""
+
+    def __init__(self, points: np.ndarray, resolution_m: float, radius_m: float):
+        self.resolution_m = resolution_m
+        reach = int(np.ceil(radius_m / resolution_m))
+        n = len(points)
+        if n == 0:
+            self.origin, self.shape = np.zeros(2), (1, 1)
+            self.table = np.full(1, -1, dtype=np.int64)
+            return
+        self.origin = points.min(axis=0) - (reach + 1) * resolution_m
+        pos = (points - self.origin) / resolution_m
+        cells = np.floor(pos).astype(np.int64)
+        self.shape = (int(cells[:, 0].max()) + reach + 2, int(cells[:, 1].max()) + reach + 2)
+        r = np.arange(-reach, reach + 1)
+        off = np.stack(np.meshgrid(r, r, indexing="ij"), axis=-1).reshape(-1, 2)
+        off = off[(off**2).sum(axis=1) <= (reach + 1) ** 2]
+        target = cells[:, None, :] + off[None]  # (n, offsets, 2)
+        d2 = ((target + 0.5 - pos[:, None, :]) ** 2).sum(axis=2)  # in cells^2
+        # Pack (distance, index) in one integer: the minimum is the nearest point.
+        key = (np.round(d2 * 1e4).astype(np.int64) << _INDEX_BITS) | np.arange(n)[:, None]
+        flat = target[..., 0] * self.shape[1] + target[..., 1]
+        table = np.full(self.shape[0] * self.shape[1], _NO_POINT, dtype=np.int64)
+        np.minimum.at(table, flat.ravel(), key.ravel())
+        self.table = np.where(table == _NO_POINT, -1, table & ((1 << _INDEX_BITS) - 1))
+
+    def lookup(self, queries: np.ndarray) -> np.ndarray:
+        """Index of the nearest point for each query (m,), -1 if none near."""
+        cells = np.floor((queries - self.origin) / self.resolution_m).astype(np.int64)
+        inside = (cells[:, 0] >= 0) & (cells[:, 0] < self.shape[0]) & (cells[:, 1] >= 0) & (cells[:, 1] < self.shape[1])
+        flat = np.where(inside, cells[:, 0] * self.shape[1] + cells[:, 1], 0)
+        return np.where(inside, self.table[flat], -1)
 
 
 @dataclass
 class PointMap:
-    """Planar points (m, 2), unit normals (m, 2), and a k-d tree over the points."""
+    """Planar points (m, 2), their unit normals (m, 2), and a nearest-point grid."""
 
     points: np.ndarray
     normals: np.ndarray
-    tree: cKDTree
+    grid: NearestGrid
 
     def __len__(self) -> int:
         return len(self.points)
 
 
-def estimate_normals(points: np.ndarray, neighbours: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals (m, 2) of planar points from their ``neighbours``
-    nearest points, and the linearity (m,) of each neighbourhood in [0, 1]:
-    1 - (minor / major spread), 1 on a straight wall, 0 on a blob."""
-    k = min(neighbours, len(points))
-    tree = cKDTree(points)
-    _, idx = tree.query(points, k=k)
-    nb = points[idx.reshape(len(points), k)]
-    d = nb - nb.mean(axis=1, keepdims=True)
-    cxx = np.einsum("ij,ij->i", d[..., 0], d[..., 0])
-    cyy = np.einsum("ij,ij->i", d[..., 1], d[..., 1])
-    cxy = np.einsum("ij,ij->i", d[..., 0], d[..., 1])
-    # Major axis of the 2x2 covariance in closed form; the normal is perpendicular.
-    major = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
-    normals = np.column_stack([-np.sin(major), np.cos(major)])
-    half_trace = 0.5 * (cxx + cyy)
-    root = np.sqrt(np.maximum(0.25 * (cxx - cyy) ** 2 + cxy**2, 0.0))
-    lam_major, lam_minor = half_trace + root, np.maximum(half_trace - root, 0.0)
-    linearity = np.where(lam_major > 0, 1.0 - lam_minor / np.maximum(lam_major, 1e-12), 0.0)
-    return normals, linearity
-
-
-def build_point_map(points: np.ndarray, voxel_m: float, normal_neighbours: int, min_linearity: float) -> PointMap:
-    """A point map of planar points (m, 2): voxel-thinned, with normals;
-    points whose neighbourhood is not line-like (linearity below
-    ``min_linearity``) are dropped, as a point-to-line residual means nothing
-    there."""
-    pts = voxel_downsample(np.asarray(points, dtype=np.float64), voxel_m)
-    if len(pts) < 3:
-        return PointMap(pts, np.zeros_like(pts), cKDTree(pts if len(pts) else np.zeros((1, 2))))
-    normals, linearity = estimate_normals(pts, normal_neighbours)
-    keep = linearity >= min_linearity
-    pts, normals = pts[keep], normals[keep]
-    return PointMap(pts, normals, cKDTree(pts) if len(pts) else cKDTree(np.zeros((1, 2))))
+def build_point_map(points: np.ndarray, normals: np.ndarray, resolution_m: float, radius_m: float) -> PointMap:
+    """A point map whose lookups reach ``radius_m`` (the largest
+    correspondence distance) on cells of ``resolution_m``."""
+    pts = np.asarray(points, dtype=np.float64)
+    return PointMap(pts, np.asarray(normals, dtype=np.float64), NearestGrid(pts, resolution_m, radius_m))
 
 
 @dataclass
@@ -104,14 +143,15 @@ def _rotation(yaw: float) -> np.ndarray:
 
 def _residuals(q: np.ndarray, pmap: PointMap, pose: np.ndarray, max_distance_m: float):
     """Correspondences of ``q`` at ``pose`` within ``max_distance_m``: mask
-    (n,), point-to-line residuals and Jacobians (m,), (m, 3) of the matched."""
-    r_mat = _rotation(pose[2])
-    rq = q @ r_mat.T
+    (n,), point-to-line residuals (m,) and Jacobians (m, 3) of the matched."""
+    rq = q @ _rotation(pose[2]).T
     qw = rq + pose[:2]
-    dist, idx = pmap.tree.query(qw, distance_upper_bound=max_distance_m)
-    ok = np.isfinite(dist)
+    idx = pmap.grid.lookup(qw)
+    found = idx >= 0
+    diff = qw - pmap.points[np.maximum(idx, 0)]
+    ok = found & ((diff**2).sum(axis=1) <= max_distance_m**2)
     n = pmap.normals[idx[ok]]
-    res = np.einsum("ij,ij->i", n, qw[ok] - pmap.points[idx[ok]])
+    res = np.einsum("ij,ij->i", n, diff[ok])
     rq = rq[ok]
     jac = np.column_stack([n[:, 0], n[:, 1], n[:, 1] * rq[:, 0] - n[:, 0] * rq[:, 1]])
     return ok, res, jac
@@ -130,11 +170,11 @@ def register(
     """Align ``query`` points (n, 2) to ``pmap`` from the pose ``guess``
     (x, y, yaw); see the module docstring.
 
-    The correspondence distance starts at ``max_distance_m`` and shrinks by
-    a third per iteration down to ``inlier_distance_m`` (coarse to fine: a
-    wide basin first, then only close points); ``kernel_m`` is the Cauchy
-    scale of the point-to-line residual. ``overlap``, ``rms_m`` and the
-    information are taken at the end with ``inlier_distance_m``.
+    The correspondence distance starts at ``max_distance_m`` (at most the
+    map's lookup radius) and halves each iteration down to
+    ``inlier_distance_m``; ``kernel_m`` is the Cauchy scale of the
+    point-to-line residual. ``overlap``, ``rms_m`` and the information are
+    taken at the end with ``inlier_distance_m``.
     """
     pose = np.asarray(guess, dtype=np.float64).copy()
     q = np.asarray(query, dtype=np.float64)
@@ -159,7 +199,7 @@ def register(
         if small and gate <= inlier_distance_m:
             converged = True
             break
-        gate = max(gate * (2.0 / 3.0), inlier_distance_m)
+        gate = max(gate * 0.5, inlier_distance_m)
     ok, res, jac = _residuals(q, pmap, pose, inlier_distance_m)
     if len(res) < 4:
         return empty
@@ -168,15 +208,3 @@ def register(
     information = jac.T @ (jac * w[:, None]) / max(variance, 1e-12)
     rms = float(np.sqrt(np.mean(res**2)))
     return Registration(pose, information, rms, float(ok.mean()), int(ok.sum()), iteration, converged)
-
-
-def weakest_direction(information: np.ndarray, length_m: float) -> tuple[float, np.ndarray]:
-    """Standard deviation (m) of the worst-constrained direction of a pose
-    information matrix, and that direction (3,) in (x, y, yaw * length_m)
-    units: yaw is scaled by ``length_m`` (the extent of the scan) so a
-    rotation is compared with the displacement it causes at that range."""
-    scale = np.array([1.0, 1.0, 1.0 / length_m])
-    scaled = information * np.outer(scale, scale)
-    values, vectors = np.linalg.eigh(scaled)
-    smallest = max(float(values[0]), 1e-300)
-    return float(1.0 / np.sqrt(smallest)), vectors[:, 0]

@@ -68,6 +68,8 @@ def find_loops(
         log.info("no laser scans and no listed loops: no loop closing")
         return LoopSearch(chain, [], chain.poses.copy(), None, "none", time.perf_counter() - start)
     fe = config.frontend
-    points = KeyframePoints(recording.scans, meas.scan_index, fe.min_range_m, fe.max_range_m, cfg.voxel_m)
+    points = KeyframePoints(
+        recording.scans, meas.scan_index, fe.min_range_m, fe.max_range_m, cfg.voxel_m, cfg.registration
+    )
     det = LoopDetector(points, chain, cfg).run()
     return LoopSearch(chain, det.loops, det.estimate, det, source, time.perf_counter() - start)
