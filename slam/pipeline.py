@@ -278,8 +278,7 @@ class MappingPipeline:
             out.update(places=len(det.places), candidates=det.candidates, registrations=det.registrations)
             out["verification_rejected"] = dict(sorted(det.rejected.items()))
         out["clique_proven"] = obs.clique_proven
-        out["detection_time_s"] = round(search.time_s, 4)
-        out["observer_time_s"] = round(obs.time_s, 4)
+        out["chain_scale"] = round(obs.chain_scale, 3)
         truth = self._keyframe_truth()
         if truth is not None:
             from validation.loops import loop_is_true

@@ -212,15 +212,31 @@ def square_case(rng_seed=5):
 
 def test_observer_keeps_the_true_loop_and_rejects_the_false_one():
     truth, chain, true_loop, false_loop = square_case()
-    obs = observe_loops(chain, [true_loop, false_loop], ObserverConfig())
+    alone = ObserverConfig(min_support=0)
+    obs = observe_loops(chain, [true_loop, false_loop], alone)
     assert [v.accepted for v in obs.verdicts] == [True, False]
     assert obs.verdicts[1].reason == "chain"
     # Without the chain check, PCM alone must choose; two loops that disagree
     # are each a clique of one, so add a second true loop that agrees.
     second = LoopConstraint(2, 10, len(truth) - 3, between(truth[10], truth[-3]), true_loop.information)
-    obs = observe_loops(chain, [true_loop, false_loop, second], ObserverConfig(chain_check=False))
+    obs = observe_loops(chain, [true_loop, false_loop, second], ObserverConfig(chain_check=False, min_support=0))
     assert [v.accepted for v in obs.verdicts] == [True, False, True]
     assert obs.verdicts[1].reason == "pcm"
+
+
+def test_a_loop_needs_a_close_consistent_loop_to_support_it():
+    truth, chain, true_loop, _ = square_case()
+    end = len(truth) - 1
+    # A second loop of the same revisit: the cycle of the two spans 2 m of chain.
+    neighbour = LoopConstraint(2, 1, end - 1, between(truth[1], truth[end - 1]), true_loop.information)
+    obs = observe_loops(chain, [true_loop, neighbour], ObserverConfig(support_path_m=5.0))
+    assert [v.accepted for v in obs.verdicts] == [True, True]
+    # A lone loop has no support; loops 30 m of chain apart do not support each other.
+    obs = observe_loops(chain, [true_loop], ObserverConfig())
+    assert [v.reason for v in obs.verdicts] == ["support"]
+    far = LoopConstraint(3, 10, 30, between(truth[10], truth[30]), true_loop.information)
+    obs = observe_loops(chain, [true_loop, far], ObserverConfig(support_path_m=5.0))
+    assert [v.reason for v in obs.verdicts] == ["support", "support"]
 
 
 def test_loop_factors_close_the_square():
@@ -272,7 +288,7 @@ def test_a_rejected_loop_makes_loop_the_diagnosis_and_gates_the_next():
     later = LoopConstraint(2, 0, len(truth) - 1, true_loop.delta, true_loop.information)
     false_loop.j, true_loop.j = 20, 22  # the false loop 2 s before a true one
     true_loop.delta = between(truth[0], truth[22])
-    obs = observe_loops(chain, [false_loop, true_loop, later], ObserverConfig())
+    obs = observe_loops(chain, [false_loop, true_loop, later], ObserverConfig(min_support=0))
     assert [v.accepted for v in obs.verdicts] == [False, True, True]
     step_t = np.arange(0.0, len(truth), 0.5)
     gated = gate_loops(obs, step_t, keyframe_t, model, GatingConfig(holdoff_s=5.0))
@@ -289,7 +305,7 @@ def test_validation_model_without_loop_is_an_error():
     from validation.model import SystemModel
 
     truth, chain, true_loop, _ = square_case()
-    obs = observe_loops(chain, [true_loop], ObserverConfig())
+    obs = observe_loops(chain, [true_loop], ObserverConfig(min_support=0))
     with pytest.raises(ValidationError, match="needs a component LOOP"):
         gate_loops(obs, np.arange(5.0), np.arange(len(truth), dtype=float), SystemModel(components=("ODO",)), GatingConfig())
 
@@ -309,7 +325,7 @@ def test_listed_loops_are_position_only_and_the_false_one_is_rejected():
     assert [(lp.i, lp.j) for lp in loops] == [(0, end), (0, end), (3, 25)]
     assert all(lp.information[2, 2] == 0 for lp in loops)
     assert loops[1].information[0, 0] == pytest.approx(0.8 / 0.5**2)
-    obs = observe_loops(chain, loops, ObserverConfig())
+    obs = observe_loops(chain, loops, ObserverConfig(min_support=0))
     # Keyframes 3 and 25 are 12 m apart: that match is false.
     assert [v.accepted for v in obs.verdicts] == [True, True, False]
 

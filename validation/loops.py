@@ -9,6 +9,12 @@ loop passes when ``W^T (S + N)^-1 W`` is within the chi-square quantile at
 ``chain_probability`` (3 dof; 2 for a position-only loop, tested on its
 position).
 
+A chain's sigmas come from its sensors' configured noise, and real drift is
+often larger (biases, slip). With ``chain_scale_from_loops``, the chain's
+covariance is first inflated by the factor that makes the median loop look
+like a median chi-square draw (:func:`chain_scale`; never deflated): the
+loops, most of them true, say how far the chain really drifts.
+
 **Pairwise consistency** (PCM, Mangelson et al., ICRA 2018). Two loops a
 (i -> j) and b (k -> l) with the chain between them form a cycle; its
 residual is ``W_a - W_b``, whose chain part is the sum over the steps in one
@@ -18,7 +24,13 @@ normalised residual is within the quantile at ``pcm_probability``. Position-
 only loops cannot close a cycle (their yaw is unknown): such a pair is tested
 jointly against the chain (4 dof, shared steps correlated). The loops kept
 are a maximum clique of the consistency graph (validation.loop_cliques).
-PCM looks at the whole run at once (offline); the chain check is causal.
+A pair whose cycle runs over a long stretch of chain is consistent almost
+whatever its loops say; a pair over a short one (two loops of one revisit)
+is a strict test. So a loop is kept only with at least ``min_support`` other
+kept loops whose cycle with it has at most ``support_path_m`` of chain (as
+Karto asks for a chain of matches before it closes a loop); a lone loop is
+rejected as ``support``. PCM looks at the whole run at once (offline); the
+chain check is causal.
 
 **LOOP in the diagnosis.** With validation on, each validation step gets a
 unary observation ``loop_consistency`` of component LOOP: implausible when a
@@ -55,8 +67,9 @@ WEAK_VARIANCE = 1e6
 class LoopVerdict:
     """The decision on one loop: ``accepted``, else ``reason`` is ``chain``
     (inconsistent with the chain), ``pcm`` (outside the largest consistent
-    set), ``gated`` (LOOP excluded by the diagnosis at its step) or
-    ``oracle`` (wrong against ground truth). ``chain_chi2``: its normalised
+    set), ``support`` (no other kept loop close enough to check it),
+    ``gated`` (LOOP excluded by the diagnosis at its step) or ``oracle``
+    (wrong against ground truth). ``chain_chi2``: its normalised
     disagreement with the chain."""
 
     loop: LoopConstraint
@@ -69,7 +82,8 @@ class LoopVerdict:
 class LoopObservation:
     """The observer's verdicts (in the order of the loops) and bookkeeping;
     ``inflation``: per loop id, the sigma multiplier gating gave an inflated
-    loop."""
+    loop; ``chain_scale``: the factor on the chain's sigmas the loops
+    called for (:func:`chain_scale`)."""
 
     verdicts: list[LoopVerdict]
     clique_size: int = 0
@@ -77,6 +91,7 @@ class LoopObservation:
     time_s: float = 0.0
     counts: dict[str, int] = field(default_factory=dict)
     inflation: dict[int, float] = field(default_factory=dict)
+    chain_scale: float = 1.0
 
     @property
     def accepted(self) -> list[LoopConstraint]:
@@ -152,28 +167,61 @@ def _chi2_of(residual: np.ndarray, cov: np.ndarray, dof: np.ndarray) -> np.ndarr
     return out
 
 
-def chain_check(chain: Chain, loops: list[LoopConstraint]) -> np.ndarray:
-    """Normalised disagreement (chi-square) of each loop with the chain."""
-    if not loops:
-        return np.zeros(0)
-    i, j, w, n, proj, pos = _measured(chain, loops)
-    s = chain.covariance(i, j)
+def _chain_chi2(chain: Chain, measured, scale2: float) -> np.ndarray:
+    i, j, w, n, proj, pos = measured
+    s = scale2 * chain.covariance(i, j)
     m = np.einsum("nij,nj->ni", proj, w)
     cov = proj @ s @ np.transpose(proj, (0, 2, 1)) + n
     return _chi2_of(m, cov, np.where(pos, 2, 3))
 
 
-def pairwise_consistency(chain: Chain, loops: list[LoopConstraint], probability: float) -> np.ndarray:
+def chain_check(chain: Chain, loops: list[LoopConstraint], scale2: float = 1.0) -> np.ndarray:
+    """Normalised disagreement (chi-square) of each loop with the chain,
+    whose covariance is multiplied by ``scale2``."""
+    if not loops:
+        return np.zeros(0)
+    return _chain_chi2(chain, _measured(chain, loops), scale2)
+
+
+def chain_scale(chain: Chain, loops: list[LoopConstraint], max_scale: float = 1e4) -> float:
+    """How much larger (a variance factor, >= 1) the chain's covariance must
+    be for the loops' disagreements to look as a chi-square sample should:
+    the factor that brings the median of the loops' normalised disagreements
+    (each over its own dof's median) to 1. A median is robust to a minority
+    of false loops; the factor only ever inflates, so a chain that already
+    explains its loops is left alone."""
+    if len(loops) < 3:
+        return 1.0
+    measured = _measured(chain, loops)
+    dof = np.where(measured[5], 2, 3)
+    median = np.where(dof == 2, chi2_quantile(0.5, 2), chi2_quantile(0.5, 3))
+
+    def excess(scale2: float) -> float:
+        return float(np.median(_chain_chi2(chain, measured, scale2) / median)) - 1.0
+
+    if excess(1.0) <= 0.0:
+        return 1.0
+    if excess(max_scale) > 0.0:
+        return max_scale
+    lo, hi = 0.0, np.log(max_scale)
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if excess(float(np.exp(mid))) > 0.0 else (lo, mid)
+    return float(np.exp(hi))
+
+
+def pairwise_consistency(chain: Chain, loops: list[LoopConstraint], probability: float, scale2: float = 1.0) -> np.ndarray:
     """Boolean (n, n): loops a and b are consistent with each other (see the
-    module docstring); the diagonal is True."""
+    module docstring); the diagonal is True. ``scale2`` multiplies the
+    chain's covariance."""
     k = len(loops)
     if k == 0:
         return np.zeros((0, 0), dtype=bool)
     i, j, w, n, proj, pos = _measured(chain, loops)
     a, b = np.triu_indices(k, 1)
-    s_a, s_b = chain.covariance(i[a], j[a]), chain.covariance(i[b], j[b])
+    s_a, s_b = scale2 * chain.covariance(i[a], j[a]), scale2 * chain.covariance(i[b], j[b])
     lo, hi = np.maximum(i[a], i[b]), np.minimum(j[a], j[b])
-    s_ab = np.where((hi > lo)[:, None, None], chain.covariance(lo, np.maximum(hi, lo)), 0.0)
+    s_ab = np.where((hi > lo)[:, None, None], scale2 * chain.covariance(lo, np.maximum(hi, lo)), 0.0)
     ok = np.zeros(len(a), dtype=bool)
     both_pose = ~pos[a] & ~pos[b]
     if both_pose.any():
@@ -181,53 +229,74 @@ def pairwise_consistency(chain: Chain, loops: list[LoopConstraint], probability:
         r = w[a[m]] - w[b[m]]
         cov = s_a[m] + s_b[m] - 2.0 * s_ab[m] + n[a[m]] + n[b[m]]
         ok[m] = _chi2_of(r, cov, np.full(m.sum(), 3)) <= chi2_quantile(probability, 3)
-    other = ~both_pose
-    if other.any():
-        # Joint test of what each loop measures, correlated through shared steps.
-        m = other
-        pa, pb = proj[a[m]], proj[b[m]]
+    # Otherwise a joint test of what each loop measures (2 components for a
+    # position-only loop, 3 for a pose), correlated through shared steps.
+    for pos_a, pos_b in ((True, True), (True, False), (False, True)):
+        m = (pos[a] == pos_a) & (pos[b] == pos_b)
+        if not m.any():
+            continue
+        da, db = (2 if pos_a else 3), (2 if pos_b else 3)
+        pa, pb = proj[a[m]][:, :da], proj[b[m]][:, :db]
         ma = np.einsum("nij,nj->ni", pa, w[a[m]])
         mb = np.einsum("nij,nj->ni", pb, w[b[m]])
-        caa = pa @ s_a[m] @ np.transpose(pa, (0, 2, 1)) + n[a[m]]
-        cbb = pb @ s_b[m] @ np.transpose(pb, (0, 2, 1)) + n[b[m]]
+        caa = pa @ s_a[m] @ np.transpose(pa, (0, 2, 1)) + n[a[m]][:, :da, :da]
+        cbb = pb @ s_b[m] @ np.transpose(pb, (0, 2, 1)) + n[b[m]][:, :db, :db]
         cab = pa @ s_ab[m] @ np.transpose(pb, (0, 2, 1))
-        da = np.where(pos[a[m]], 2, 3)
-        db = np.where(pos[b[m]], 2, 3)
-        values = np.empty(m.sum())
-        for idx in range(m.sum()):
-            x, y = da[idx], db[idx]
-            r = np.concatenate([ma[idx, :x], mb[idx, :y]])
-            c = np.block([[caa[idx, :x, :x], cab[idx, :x, :y]], [cab[idx, :x, :y].T, cbb[idx, :y, :y]]])
-            values[idx] = r @ np.linalg.solve(c, r) - chi2_quantile(probability, int(x + y))
-        ok[m] = values <= 0.0
+        r = np.concatenate([ma, mb], axis=1)
+        cov = np.concatenate([np.concatenate([caa, cab], axis=2), np.concatenate([np.transpose(cab, (0, 2, 1)), cbb], axis=2)], axis=1)
+        value = np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0])
+        ok[m] = value <= chi2_quantile(probability, da + db)
     out = np.eye(k, dtype=bool)
     out[a, b] = ok
     out[b, a] = ok
     return out
 
 
+def short_cycles(chain: Chain, loops: list[LoopConstraint], max_path_m: float) -> np.ndarray:
+    """Boolean (n, n): the chain in the cycle of loops a and b (the steps in
+    one interval but not the other) is at most ``max_path_m`` long, so their
+    pairwise test is strict. The diagonal is True."""
+    i = np.array([lp.i for lp in loops])
+    j = np.array([lp.j for lp in loops])
+    s = chain.path_m
+    lo, hi = np.maximum(i[:, None], i[None]), np.minimum(j[:, None], j[None])
+    shared = np.where(hi > lo, s[np.maximum(hi, lo)] - s[lo], 0.0)
+    own = s[j] - s[i]
+    return own[:, None] + own[None] - 2.0 * shared <= max_path_m
+
+
 def observe_loops(chain: Chain, loops: list[LoopConstraint], config: ObserverConfig) -> LoopObservation:
     """Chain check, then the largest pairwise-consistent set; see the module docstring."""
     start = time.perf_counter()
-    chi = chain_check(chain, loops)
+    scale2 = chain_scale(chain, loops) if config.chain_scale_from_loops else 1.0
+    chi = chain_check(chain, loops, scale2)
     dof = np.array([2 if _position_only(lp) else 3 for lp in loops])
     passed = np.ones(len(loops), dtype=bool)
     if config.chain_check and len(loops):
         passed = chi <= np.array([chi2_quantile(config.chain_probability, int(d)) for d in dof])
     kept = passed.copy()
+    supported = np.ones(len(loops), dtype=bool)
     clique_size, proven = int(passed.sum()), True
     if config.pcm and passed.sum() > 1:
         idx = np.flatnonzero(passed)
-        adjacency = pairwise_consistency(chain, [loops[k] for k in idx], config.pcm_probability)
+        chosen = [loops[k] for k in idx]
+        adjacency = pairwise_consistency(chain, chosen, config.pcm_probability, scale2)
         clique, proven = maximum_clique(adjacency, config.max_clique_steps)
         kept = np.zeros(len(loops), dtype=bool)
         kept[idx[clique]] = True
         clique_size = len(clique)
+        if config.min_support > 0:
+            close = short_cycles(chain, [chosen[c] for c in clique], config.support_path_m)
+            support = (close & adjacency[np.ix_(clique, clique)]).sum(axis=1) - 1
+            supported[idx[clique]] = support >= config.min_support
+    elif config.min_support > 0:
+        supported[:] = False
     verdicts = []
     for k, lp in enumerate(loops):
-        reason = "" if kept[k] else ("chain" if not passed[k] else "pcm")
-        verdicts.append(LoopVerdict(lp, bool(kept[k]), reason, round(float(chi[k]), 3)))
+        reason = "" if kept[k] and supported[k] else ("chain" if not passed[k] else "pcm" if not kept[k] else "support")
+        verdicts.append(LoopVerdict(lp, bool(kept[k] and supported[k]), reason, round(float(chi[k]), 3)))
     obs = LoopObservation(verdicts, clique_size, proven, time.perf_counter() - start)
+    obs.chain_scale = float(np.sqrt(scale2))
     obs.counts = count_reasons(verdicts)
     return obs
 
@@ -331,10 +400,15 @@ def oracle_loops(obs: LoopObservation, truth: np.ndarray, max_trans_m: float, ma
 
 
 def loop_is_true(loop: LoopConstraint, truth: np.ndarray, max_trans_m: float, max_yaw_rad: float) -> bool:
-    """Whether ``loop`` agrees with the true keyframe poses (K, 3)."""
+    """Whether ``loop`` agrees with the true keyframe poses (K, 3): within
+    ``max_trans_m`` and ``max_yaw_rad``; a position-only loop, whose stated
+    sigma is usually larger, within three of its sigmas (at least
+    ``max_trans_m``)."""
     from slam.loops.chain import between
 
     if _position_only(loop):
-        return bool(np.hypot(*(truth[loop.i, :2] - truth[loop.j, :2])) <= max_trans_m)
+        sigma = 1.0 / np.sqrt(max(loop.information[0, 0], 1e-12))
+        limit = max(max_trans_m, 3.0 * sigma)
+        return bool(np.hypot(*(truth[loop.i, :2] - truth[loop.j, :2])) <= limit)
     err = between(between(truth[loop.i], truth[loop.j]), loop.delta)
     return bool(np.hypot(err[0], err[1]) <= max_trans_m and abs(err[2]) <= max_yaw_rad)

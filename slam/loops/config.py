@@ -48,10 +48,10 @@ class RegistrationConfig(_Strict):
     matched against (corners, clutter).
     """
 
-    max_distance_m: float = Field(0.5, gt=0.0)
+    max_distance_m: float = Field(0.4, gt=0.0)
     inlier_distance_m: float = Field(0.2, gt=0.0)
     kernel_m: float = Field(0.1, gt=0.0)
-    max_iterations: int = Field(30, ge=1)
+    max_iterations: int = Field(20, ge=1)
     normal_half_window: int = Field(2, ge=1)
     normal_max_gap_m: float = Field(0.3, gt=0.0)
     min_linearity: float = Field(0.8, ge=0.0, le=1.0)
@@ -59,16 +59,17 @@ class RegistrationConfig(_Strict):
 
 class CorrelativeConfig(_Strict):
     """Coarse search before ICP (slam.loops.correlative), on a score grid of
-    ``resolution_m`` cells, in ``angular_step_deg`` steps, with at most
+    ``resolution_m`` cells, in ``angular_step_deg`` steps (both coarsened so
+    a window has at most 11 x 11 translations and 15 yaws), with at most
     ``max_points`` query points (evenly subsampled). Skipped when the search
     window is within ``skip_below_m`` and ``skip_below_deg``: ICP's own
     basin covers it."""
 
     resolution_m: float = Field(0.2, gt=0.0)
     angular_step_deg: float = Field(1.0, gt=0.0)
-    max_points: int = Field(100, ge=3)
-    skip_below_m: float = Field(0.3, ge=0.0)
-    skip_below_deg: float = Field(3.0, ge=0.0)
+    max_points: int = Field(60, ge=3)
+    skip_below_m: float = Field(0.5, ge=0.0)
+    skip_below_deg: float = Field(5.0, ge=0.0)
 
 
 class AcceptanceConfig(_Strict):
@@ -100,10 +101,21 @@ class ObserverConfig(_Strict):
     around the cycle they form with the chain (pairwise consistency, PCM);
     the largest set of mutually consistent loops is kept.
     ``max_clique_steps``: work budget of the exact maximum-clique search
-    (branch and bound); past it the best clique found so far is kept.
+    (branch and bound; vertices coloured and tried, about a microsecond
+    each); past it the best clique found so far is kept (at least a greedy
+    one), and ``clique_proven`` is false in the metrics.
+    ``chain_scale_from_loops``: inflate the chain's covariance until the
+    median loop's disagreement is a median chi-square draw (the loops, most
+    of them true, measure the chain's real drift; never deflated).
+    ``min_support``: a kept loop needs this many other kept loops whose cycle
+    with it spans at most ``support_path_m`` of chain (their pairwise test is
+    strict there); 0 turns the requirement off (needs ``pcm``).
     """
 
     chain_check: bool = True
+    chain_scale_from_loops: bool = True
+    min_support: int = Field(1, ge=0)
+    support_path_m: float = Field(20.0, gt=0.0)
     chain_probability: float = Field(0.999, gt=0.0, lt=1.0)
     pcm: bool = True
     pcm_probability: float = Field(0.99, gt=0.0, lt=1.0)

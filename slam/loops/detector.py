@@ -165,6 +165,7 @@ class LoopDetector:
         idx_far = np.flatnonzero(far)
         dist = np.hypot(*(est[idx[idx_far], :2] - est[j, :2]).T)
         order = np.argsort(dist, kind="stable")
+        # Geometric candidates go nearest first: no descriptor needed.
         found: dict[int, _Candidate] = {}
         for p in idx_far[order[dist[order] <= cfg.candidate_distance_m]][: cfg.max_candidates]:
             found[int(p)] = _Candidate(int(idx[p]), between(est[idx[p]], est[j]), radius, yaw, np.nan, True)
@@ -188,10 +189,10 @@ class LoopDetector:
         guess = cand.guess
         if cand.linear_m > cor.skip_below_m or cand.angular_rad > np.radians(cor.skip_below_deg):
             step = max(len(query) // cor.max_points, 1)
-            # At most about 15 x 15 translations and 21 yaws, however wide
-            # the window: ICP refines what the coarse grid leaves.
-            resolution = max(cor.resolution_m, cand.linear_m / 7.0)
-            angular_step = max(np.radians(cor.angular_step_deg), cand.angular_rad / 10.0)
+            # At most 11 x 11 translations and 15 yaws, however wide the
+            # window: ICP refines what the coarse grid leaves.
+            resolution = max(cor.resolution_m, cand.linear_m / 5.0)
+            angular_step = max(np.radians(cor.angular_step_deg), cand.angular_rad / 7.0)
             guess, _ = correlative_search(
                 query[::step], self.maps.score_grid(cand.place, est, resolution), guess, cand.linear_m,
                 cand.angular_rad, angular_step,

@@ -45,15 +45,16 @@ class KeyframePoints:
 
         project = ScanProjector(scans.angles, min_range, min(max_range, scans.range_max))
         pts, row = project.planar_points(scans.ranges[scan_index])
+        # All scans at once: a stretch that crosses from one scan into the
+        # next is cut like a gap.
+        normals, linearity = scan_normals(pts, registration.normal_half_window, registration.normal_max_gap_m, row)
         bounds = np.searchsorted(row, np.arange(len(scan_index) + 1))
         self.points, self.normals, self.linear = [], [], []
         for a, b in zip(bounds[:-1], bounds[1:]):
-            p = pts[a:b]
-            n, lin = scan_normals(p, registration.normal_half_window, registration.normal_max_gap_m)
-            keep = voxel_first(p, voxel_m)
-            self.points.append(p[keep])
-            self.normals.append(n[keep])
-            self.linear.append(lin[keep] >= registration.min_linearity)
+            keep = a + voxel_first(pts[a:b], voxel_m)
+            self.points.append(pts[keep])
+            self.normals.append(normals[keep])
+            self.linear.append(linearity[keep] >= registration.min_linearity)
         self.voxel_m = voxel_m
 
     def __len__(self) -> int:

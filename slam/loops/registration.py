@@ -29,12 +29,15 @@ _NO_POINT = np.iinfo(np.int64).max
 _INDEX_BITS = 24
 
 
-def scan_normals(points: np.ndarray, half_window: int, max_gap_m: float) -> tuple[np.ndarray, np.ndarray]:
+def scan_normals(
+    points: np.ndarray, half_window: int, max_gap_m: float, scan: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals (m, 2) of a scan's points (m, 2) in beam order, from the
     ``2 * half_window + 1`` consecutive points around each, and the
     linearity (m,) of that stretch in [0, 1]: 1 - minor / major spread, 1
-    on a straight wall; 0 where the stretch is cut (ends of the scan, or two
-    neighbours more than ``max_gap_m`` apart)."""
+    on a straight wall; 0 where the stretch is cut (ends of the scan, two
+    neighbours more than ``max_gap_m`` apart, or, with ``scan`` (m,) the
+    scan of each point for several scans in a row, a change of scan)."""
     m = len(points)
     w = 2 * half_window + 1
     normals = np.zeros((m, 2))
@@ -53,6 +56,9 @@ def scan_normals(points: np.ndarray, half_window: int, max_gap_m: float) -> tupl
     lam_major, lam_minor = half_trace + root, np.maximum(half_trace - root, 0.0)
     lin = np.where(lam_major > 0, 1.0 - lam_minor / np.maximum(lam_major, 1e-12), 0.0)
     lin = np.where(gaps <= max_gap_m, lin, 0.0)
+    if scan is not None:
+        scan_win = sliding_window_view(np.asarray(scan), w)
+        lin = np.where(scan_win[:, 0] == scan_win[:, -1], lin, 0.0)
     centre = slice(half_window, m - half_window)
     normals[centre] = np.column_stack([-np.sin(major), np.cos(major)])
     linearity[centre] = lin
@@ -165,7 +171,7 @@ def register(
     inlier_distance_m: float,
     kernel_m: float,
     max_iterations: int = 30,
-    tolerance: float = 1e-4,
+    tolerance: float = 1e-3,
 ) -> Registration:
     """Align ``query`` points (n, 2) to ``pmap`` from the pose ``guess``
     (x, y, yaw); see the module docstring.
