@@ -210,6 +210,10 @@ def chain_scale(chain: Chain, loops: list[LoopConstraint], max_scale: float = 1e
     return float(np.exp(hi))
 
 
+PAIRS_PER_CHUNK = 100_000
+"""Pairs tested at once (bounds the memory of the pairwise test)."""
+
+
 def pairwise_consistency(chain: Chain, loops: list[LoopConstraint], probability: float, scale2: float = 1.0) -> np.ndarray:
     """Boolean (n, n): loops a and b are consistent with each other (see the
     module docstring); the diagonal is True. ``scale2`` multiplies the
@@ -217,8 +221,21 @@ def pairwise_consistency(chain: Chain, loops: list[LoopConstraint], probability:
     k = len(loops)
     if k == 0:
         return np.zeros((0, 0), dtype=bool)
-    i, j, w, n, proj, pos = _measured(chain, loops)
+    measured = _measured(chain, loops)
     a, b = np.triu_indices(k, 1)
+    ok = np.zeros(len(a), dtype=bool)
+    for lo in range(0, len(a), PAIRS_PER_CHUNK):
+        sl = slice(lo, lo + PAIRS_PER_CHUNK)
+        ok[sl] = _pairs_consistent(chain, measured, a[sl], b[sl], probability, scale2)
+    out = np.eye(k, dtype=bool)
+    out[a, b] = ok
+    out[b, a] = ok
+    return out
+
+
+def _pairs_consistent(chain: Chain, measured, a: np.ndarray, b: np.ndarray, probability: float, scale2: float) -> np.ndarray:
+    """The pairwise test for the pairs of loops (a[k], b[k])."""
+    i, j, w, n, proj, pos = measured
     s_a, s_b = scale2 * chain.covariance(i[a], j[a]), scale2 * chain.covariance(i[b], j[b])
     lo, hi = np.maximum(i[a], i[b]), np.minimum(j[a], j[b])
     s_ab = np.where((hi > lo)[:, None, None], scale2 * chain.covariance(lo, np.maximum(hi, lo)), 0.0)
@@ -246,10 +263,7 @@ def pairwise_consistency(chain: Chain, loops: list[LoopConstraint], probability:
         cov = np.concatenate([np.concatenate([caa, cab], axis=2), np.concatenate([np.transpose(cab, (0, 2, 1)), cbb], axis=2)], axis=1)
         value = np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0])
         ok[m] = value <= chi2_quantile(probability, da + db)
-    out = np.eye(k, dtype=bool)
-    out[a, b] = ok
-    out[b, a] = ok
-    return out
+    return ok
 
 
 def short_cycles(chain: Chain, loops: list[LoopConstraint], max_path_m: float) -> np.ndarray:

@@ -44,6 +44,9 @@ from slam.loops.registration import Registration, register
 
 log = logging.getLogger(__name__)
 
+MIN_QUERY_POINTS = 20
+"""A query with fewer laser points than this is not a place."""
+
 
 @dataclass
 class Detection:
@@ -122,6 +125,8 @@ class LoopDetector:
                 continue
             last_query_m = s_j
             query = self.points.gather(j, window(chain.path_m, j, cfg.query_map_m, 0.0, cfg.local_map_scans), est)[0]
+            if len(query) < MIN_QUERY_POINTS:
+                continue  # nothing in range (an open yard): no place here
             d = cfg.descriptor
             context = scan_context(query, d.rings, d.sectors, d.max_radius_m)
             key = ring_key(context)
