@@ -169,7 +169,7 @@ def bench_false_loops(report: Report, cache: Path, seeds: list[int], root: Path,
     for name in CARMEN_LOGS:
         path = root / "carmen" / f"{name}-corrected.log.gz"
         if path.is_file():
-            cases.append((name, path, CARMEN, []))
+            cases.append((name, path, CARMEN, ["loops.enabled=true"]))
     for k, (label, path, config, overrides) in enumerate(cases):
         shared = {}
         clean = mapped(path, config, overrides, shared)

@@ -243,12 +243,8 @@ class MappingPipeline:
 
     def optimise(self) -> None:
         pose0 = self._initial_pose()
-        start = None
-        if self.loop_factors is not None and self.loop_factors.loops:
-            start = self.loop_search.estimate
         self.backend = optimise(
-            self.measurements, pose0, self.config.backend, self.weights, progress=self.progress,
-            loops=self.loop_factors, initial_estimate=start,
+            self.measurements, pose0, self.config.backend, self.weights, progress=self.progress, loops=self.loop_factors
         )
         self.timings.graph_build_s = self.backend.build_time_s
         self.timings.optimise_s = self.backend.optimise_time_s
