@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from slam.factors import pose_key
-from slam.loops.chain import Chain, J, between, build_chain, compose, integrate, world_discrepancy
+from slam.loops.chain import between, build_chain, compose, integrate, world_discrepancy
 from slam.loops.config import LoopsConfig, ObserverConfig
 from slam.loops.constraints import LoopConstraint
 from slam.loops.correlative import correlative_search, score_grid
@@ -24,7 +24,8 @@ from slam.loops.registration import build_point_map, register, scan_normals
 from slam.measurements import BetweenMeasurement, Measurements
 from slam.recording import PlaceMatches
 from validation.loop_cliques import maximum_clique
-from validation.loops import chi2_quantile, gate_loops, observe_loops
+from validation.loop_gating import gate_loops
+from validation.loops import chi2_quantile, observe_loops
 
 
 # --- helpers ---------------------------------------------------------------

@@ -98,7 +98,7 @@ def maximum_clique(adjacency: np.ndarray, max_steps: int = 200_000) -> tuple[lis
     exhausted = False
 
     def expand(clique: list[int], candidates: int) -> None:
-        nonlocal best, best_size, steps, exhausted
+        nonlocal best_size, steps, exhausted
         order = _colour(candidates, neighbours)
         steps += len(order)
         for v, colour in reversed(order):

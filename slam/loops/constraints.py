@@ -28,7 +28,3 @@ class LoopConstraint:
     information: np.ndarray
     source: str = "scans"
     quality: dict[str, float] = field(default_factory=dict)
-
-    def covariance(self, weak_variance: float) -> np.ndarray:
-        """Covariance (3, 3); directions without information get ``weak_variance``."""
-        return np.linalg.inv(self.information + np.eye(3) / weak_variance)

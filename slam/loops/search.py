@@ -27,15 +27,12 @@ class LoopSearch:
     """Loops found in one run, before the loop observer.
 
     ``chain``: the dead-reckoning chain they are judged against;
-    ``estimate`` (K, 3): the keyframe poses detection ended with (re-anchored
-    at accepted loops; the chain for listed loops), a start for the back-end;
     ``detection``: detection's counts (None for listed loops); ``source``:
-    ``scans`` or ``file``; ``time_s``: wall time.
+    ``scans``, ``file`` or ``none``; ``time_s``: wall time.
     """
 
     chain: Chain
     loops: list[LoopConstraint]
-    estimate: np.ndarray
     detection: Detection | None
     source: str
     time_s: float
@@ -61,15 +58,15 @@ def find_loops(
             raise GslamError(f"loops.source is file, but {recording.name} lists no loop closures")
         max_gap = float(np.median(np.diff(meas.t))) if len(meas) > 1 else 0.0
         loops = file_loops(recording.place_matches, meas.t, cfg.file, max_gap)
-        return LoopSearch(chain, loops, chain.poses.copy(), None, source, time.perf_counter() - start)
+        return LoopSearch(chain, loops, None, source, time.perf_counter() - start)
     if recording.scans is None or meas.scan_index is None:
         if cfg.source == "scans":
             raise GslamError(f"loops.source is scans, but {recording.name} has no laser scans (or scan matching is off)")
         log.info("no laser scans and no listed loops: no loop closing")
-        return LoopSearch(chain, [], chain.poses.copy(), None, "none", time.perf_counter() - start)
+        return LoopSearch(chain, [], None, "none", time.perf_counter() - start)
     fe = config.frontend
     points = KeyframePoints(
         recording.scans, meas.scan_index, fe.min_range_m, fe.max_range_m, cfg.voxel_m, cfg.registration
     )
     det = LoopDetector(points, chain, cfg).run()
-    return LoopSearch(chain, det.loops, det.estimate, det, source, time.perf_counter() - start)
+    return LoopSearch(chain, det.loops, det, source, time.perf_counter() - start)
