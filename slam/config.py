@@ -345,7 +345,11 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
     from validation.config import parse_sections
 
     try:
-        parse_sections(config.validation, config.gating)
+        vcfg, _ = parse_sections(config.validation, config.gating)
+        if config.loops.enabled and vcfg.mode == "on":
+            from validation.loop_gating import check_model
+
+            check_model(vcfg.model)
     except SectionError as e:
         raise GslamError(f"{source}: {e}") from None
     return config

@@ -240,8 +240,9 @@ def test_a_loop_needs_a_close_consistent_loop_to_support_it():
     assert [v.reason for v in obs.verdicts] == ["support", "support"]
 
 
-def test_loop_factors_close_the_square():
-    truth, chain, true_loop, _ = square_case()
+def odometry_graph(chain):
+    """The square's odometry as a GTSAM graph anchored at the origin, and
+    the chain as its initial values."""
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     graph.add(gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(0, 0, 0), gtsam.noiseModel.Isotropic.Sigma(3, 1e-3)))
     sigma = gtsam.noiseModel.Diagonal.Sigmas(np.array([0.02, 0.02, np.radians(0.5)]))
@@ -249,6 +250,12 @@ def test_loop_factors_close_the_square():
         graph.add(gtsam.BetweenFactorPose2(pose_key(k - 1), pose_key(k), gtsam.Pose2(*chain.deltas[k]), sigma))
     for k in range(len(chain)):
         values.insert(pose_key(k), gtsam.Pose2(*chain.poses[k]))
+    return graph, values
+
+
+def test_loop_factors_close_the_square():
+    truth, chain, true_loop, _ = square_case()
+    graph, values = odometry_graph(chain)
     end = len(chain) - 1
     before = np.hypot(*(chain.poses[end, :2] - truth[end, :2]))
     graph.add(loop_factor(true_loop))
@@ -261,13 +268,7 @@ def test_gnc_drops_a_false_loop_the_observer_let_through():
     from slam.backend import _optimise_gnc_loops
 
     truth, chain, true_loop, false_loop = square_case()
-    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-    graph.add(gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(0, 0, 0), gtsam.noiseModel.Isotropic.Sigma(3, 1e-3)))
-    sigma = gtsam.noiseModel.Diagonal.Sigmas(np.array([0.02, 0.02, np.radians(0.5)]))
-    for k in range(1, len(chain)):
-        graph.add(gtsam.BetweenFactorPose2(pose_key(k - 1), pose_key(k), gtsam.Pose2(*chain.deltas[k]), sigma))
-    for k in range(len(chain)):
-        values.insert(pose_key(k), gtsam.Pose2(*chain.poses[k]))
+    graph, values = odometry_graph(chain)
     graph.add(loop_factor(true_loop))
     graph.add(loop_factor(false_loop))
     result, _ = _optimise_gnc_loops(graph, values, [graph.size() - 2, graph.size() - 1])
@@ -339,3 +340,10 @@ def test_loops_config_rejects_unknown_keys():
         load_config(None, ["loops.search_radius=2"])
     cfg = load_config(None, ["loops.enabled=true", "loops.observer.pcm=false"])
     assert cfg.loops.enabled and not cfg.loops.observer.pcm
+    # Loops gated by validation need LOOP in the model: said before any work.
+    model = "validation.model={components: [ODO, IMU_GYRO, IMU_YAW, SM, GPS]}"
+    none = ["validation.observers.relations=[]", "validation.observers.magnetometer.enabled=false",
+            "validation.observers.gps.enabled=false"]
+    with pytest.raises(GslamError, match="needs a component LOOP"):
+        load_config(None, ["loops.enabled=true", "validation.mode=on", model, *none])
+    load_config(None, ["loops.enabled=false", "validation.mode=on", model, *none])
