@@ -24,6 +24,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from slam.errors import GslamError
+from slam.loops.config import LoopsConfig
 from slam.io.yamlfile import check_finite, load_yaml, non_finite, read_text_file, yaml_number
 
 __all__ = [  # the YAML helpers are used through this module too
@@ -271,6 +272,7 @@ class PipelineConfig(Strict):
     backend: BackendConfig = BackendConfig()
     evaluation: EvaluationConfig = EvaluationConfig()
     output: OutputConfig = OutputConfig()
+    loops: LoopsConfig = LoopsConfig()
     validation: dict[str, Any] = Field(default_factory=lambda: _section_defaults()[0])
     gating: dict[str, Any] = Field(default_factory=lambda: _section_defaults()[1])
 
@@ -385,6 +387,10 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
         raise GslamError(describe_validation_error(who, e)) from None
     try:
         vcfg, gcfg = _parse_sections(config.validation, config.gating)
+        if config.loops.enabled and vcfg.mode == "on":
+            from validation.loop_gating import check_model
+
+            check_model(vcfg.model)
     except SectionError as e:
         raise GslamError(f"{_blame(source, applied, _section_error_key(str(e)))}: {e}") from None
     # The checked sections, every default spelled out (validate_assignment
