@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slam.loops.constraints import LoopConstraint
+from validation.loop_model import LoopConstraint
 from validation.loops import LoopObservation, LoopVerdict, count_reasons, position_only
 
 LOOP_COMPONENT = "LOOP"
@@ -125,7 +125,7 @@ def loop_is_true(loop: LoopConstraint, truth: np.ndarray, max_trans_m: float, ma
     ``max_trans_m`` and ``max_yaw_rad``; a position-only loop, whose stated
     sigma is usually larger, within three of its sigmas (at least
     ``max_trans_m``)."""
-    from slam.loops.chain import between
+    from validation.chain import between
 
     if position_only(loop):
         sigma = 1.0 / np.sqrt(max(loop.information[0, 0], 1e-12))

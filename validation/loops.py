@@ -2,7 +2,7 @@
 chain, and with the other loops?
 
 **Chain check** (Kimera-RPGO's "odometry check"). A loop from keyframe i to
-j disagrees with the chain by ``W`` (slam.loops.chain.world_discrepancy);
+j disagrees with the chain by ``W`` (validation.chain.world_discrepancy);
 under the chain's linearised error model ``W`` is zero-mean with covariance
 ``S(i, j) + N`` (the chain's steps in (i, j] plus the loop's own noise). The
 loop passes when ``W^T (S + N)^-1 W`` is within the chi-square quantile at
@@ -44,9 +44,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from slam.loops.chain import Chain, J, world_covariance, world_discrepancy
-from slam.loops.config import ObserverConfig
-from slam.loops.constraints import LoopConstraint
+from validation.chain import Chain, J, world_covariance, world_discrepancy
+from validation.loop_model import LoopConstraint, ObserverConfig
 from validation.loop_cliques import maximum_clique
 
 WEAK_VARIANCE = 1e6

@@ -10,6 +10,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from validation.loop_model import ObserverConfig
+
 
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
@@ -90,36 +92,6 @@ class AcceptanceConfig(_Strict):
     min_relative_information: float = Field(0.05, ge=0.0, le=1.0)
     min_pinned: int = Field(1, ge=1, le=3)
     max_correction_m: float = Field(3.0, gt=0.0)
-
-
-class ObserverConfig(_Strict):
-    """The loop observer (validation.loops).
-
-    ``chain_probability``: a loop is consistent with the dead-reckoning chain
-    when its normalised disagreement is within the chi-square quantile (3
-    dof) at this probability. ``pcm_probability``: the same for two loops
-    around the cycle they form with the chain (pairwise consistency, PCM);
-    the largest set of mutually consistent loops is kept.
-    ``max_clique_steps``: work budget of the exact maximum-clique search
-    (branch and bound; vertices coloured and tried, about a microsecond
-    each); past it the best clique found so far is kept (at least a greedy
-    one), and ``clique_proven`` is false in the metrics.
-    ``chain_scale_from_loops``: inflate the chain's covariance until the
-    median loop's disagreement is a median chi-square draw (the loops, most
-    of them true, measure the chain's real drift; never deflated).
-    ``min_support``: a kept loop needs this many other kept loops whose cycle
-    with it spans at most ``support_path_m`` of chain (their pairwise test is
-    strict there); 0 turns the requirement off (needs ``pcm``).
-    """
-
-    chain_check: bool = True
-    chain_scale_from_loops: bool = True
-    min_support: int = Field(1, ge=0)
-    support_path_m: float = Field(20.0, gt=0.0)
-    chain_probability: float = Field(0.999, gt=0.0, lt=1.0)
-    pcm: bool = True
-    pcm_probability: float = Field(0.99, gt=0.0, lt=1.0)
-    max_clique_steps: int = Field(200_000, ge=1)
 
 
 class FileLoopsConfig(_Strict):
