@@ -9,7 +9,7 @@ Each (scenario, seed) is simulated once into ``OUT/inputs/`` and mapped with
 every variant of ``configs/variants.yaml`` (the recording read and
 scan-matched once, as ``gslam compare`` does). One row per run and variant
 goes to ``OUT/results.csv``; finished (scenario, seed) pairs are skipped when
-the command runs again with the same config, variants and overrides.
+the command runs again with the same config, variants, overrides and code.
 Each variant's result folder is ``OUT/maps-KEY/<scenario>-seed<N>/<variant>/``,
 KEY naming the config, variants and overrides. ``OUT/summary.md`` has, per faulty scenario, the median and worst ATE of
 each variant, the ratio of gated to the best robust kernel (the kernel with
@@ -108,7 +108,12 @@ def run_one(
 
 
 def _key(config: str, variants: dict, overrides: list[str]) -> str:
+    """Names the results: the config, the variants, the overrides and the
+    code (every module and config of the package), so a change of any
+    gives new runs."""
     text = Path(config).read_text() + json.dumps(variants, sort_keys=True) + json.dumps(overrides)
+    for path in sorted([*REPO.glob("slam/**/*.py"), *REPO.glob("validation/*.py"), *REPO.glob("configs/**/*.yaml")]):
+        text += path.read_text()
     return hashlib.sha1(text.encode()).hexdigest()[:10]
 
 

@@ -152,9 +152,10 @@ class FactorConfig(Strict):
 class OdometryFactorConfig(FactorConfig):
     """Between factor from track odometry; sigma grows with the step length.
 
-    ``learn_scale``: with validation on (or an oracle), correct the
-    odometry's distance by its scale against scan matching, learnt over the
-    stretches where validation keeps both; see :mod:`slam.selfcal`."""
+    ``learn_scale``: with validation on (or an oracle), where the scan
+    matcher's forward motion is gated, the odometry's distance is corrected
+    by its scale against scan matching, learnt over the stretches where
+    validation keeps both; see :mod:`slam.selfcal`."""
 
     learn_scale: bool = False
     sigma_xy_m: float = Field(0.01, gt=0.0)

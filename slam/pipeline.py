@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from slam.backend import BackendResult, FactorWeights, optimise, unit_weights
+from slam.backend import BackendResult, FactorWeights, dof_weights, optimise, unit_weights
 from slam.config import PipelineConfig, dump_config
 from slam.errors import GslamError
 from slam.frontend import FrontendResult, ScanProjector, run_frontend
@@ -198,21 +198,26 @@ class MappingPipeline:
 
     def learn_odometry_scale(self) -> None:
         """With ``backend.factors.odometry.learn_scale`` and validation on
-        (or an oracle), correct the odometry's distance by its scale against
-        scan matching, learnt where validation keeps both
-        (:mod:`slam.selfcal`). Without validation nothing says where the scan
+        (or an oracle), the odometry stands in for the scan matcher with the
+        scan matcher's scale: its distance is corrected by the scale learnt
+        where validation keeps both (:mod:`slam.selfcal`), on the steps where
+        the scan matcher's forward motion is gated. Elsewhere the graph fuses
+        the two as they are. Without validation nothing says where the scan
         matcher can be trusted, and nothing is learnt."""
         from slam.config import validation_sections
         from slam.selfcal import odometry_scale
 
-        if not self.config.backend.factors.odometry.learn_scale or self.measurements.odometry is None:
+        odo, sm = self.measurements.odometry, self.measurements.scan_matching
+        if not self.config.backend.factors.odometry.learn_scale or odo is None or sm is None:
             return
         if validation_sections(self.config)[0].mode == "off":
             return
         est = odometry_scale(self.measurements, self.weights)
-        self.measurements.odometry.delta[:, :2] *= est.scale
+        stand_in = dof_weights(self.weights["scan_matching"], "scan_matching")[:, 0] > 1.0
+        odo.delta[stand_in, :2] *= est.scale
         self.extra_metrics["odometry_scale"] = {
-            "scale": round(est.scale, 5), "windows": est.windows, "spread": round(est.spread, 5)
+            "scale": round(est.scale, 5), "windows": est.windows, "spread": round(est.spread, 5),
+            "steps_corrected": int(stand_in.sum()),
         }
 
     def second_pass(self) -> None:
