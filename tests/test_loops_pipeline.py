@@ -33,8 +33,8 @@ def maps(lab_loop, tmp_path_factory):
     out = {}
     for name, overrides in {
         "without": ["loops.enabled=false"],
-        "with": [],
-        "isam2": ["backend.optimizer=isam2"],
+        "with": ["loops.enabled=true"],
+        "isam2": ["loops.enabled=true", "backend.optimizer=isam2"],
     }.items():
         cfg = load_config(TELEMAX_CONFIG, ["validation.mode=on", "output.plots=false", *overrides])
         out[name] = run_map(lab_loop.run_dir, cfg, root / name)

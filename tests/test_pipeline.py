@@ -21,7 +21,7 @@ from tests.conftest import TELEMAX_CONFIG, short_scenario
 
 MAP_FILES = {
     "trajectory.tum", "groundtruth.tum", "metrics.json", "config.yaml",
-    "trajectory.png", "map.ply", "map.png", ".gslam-result.json", "loops.csv",
+    "trajectory.png", "map.ply", "map.png", ".gslam-result.json",
 }
 METRICS = ("ate_rmse_m", "rpe_trans_pct", "rpe_rot_deg_per_m", "final_error_m", "n_poses", "runtime_s")
 VALIDATION_METRICS = (
