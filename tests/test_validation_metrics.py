@@ -180,6 +180,15 @@ def test_blame_end_lag():
     assert m["detection_delay_s"] == {"IMU_YAW": 1.0}
 
 
+def test_blame_end_lag_stops_at_the_next_fault():
+    # Faults at 1-2 s and 4-5 s, blamed 1-7 s: the first fault's blame runs
+    # into the second, counted to the last step before it (3 s: lag 1 s); the
+    # second's ends 2 s late; the mean is 1.5 s.
+    results = [CLEAN] + [consistent({"IMU_YAW"})] * 7 + [CLEAN] * 2
+    m = validation_metrics(STEP_T, results, DECISIONS, {"IMU_YAW": [(1.0, 2.0), (4.0, 5.0)]})
+    assert m["blame_end_lag_s"] == {"IMU_YAW": 1.5}
+
+
 def test_oracle_decisions_are_perfect():
     faults = {"SM": [(2.0, 5.0)], "GPS": [(8.0, 20.0)]}
     decisions = oracle_actions(GATING, STEP_T, faults)

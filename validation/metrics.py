@@ -30,8 +30,10 @@ Definitions (validation steps at ``validation.rate_hz``):
   detected.
 * ``blame_end_lag_s``: per component with detected faults, the mean over
   them of the time from the fault's end to the end of the blame (the run of
-  steps blaming the component that holds the interval's last blamed step);
-  negative when the blame ends before the fault.
+  steps blaming the component that holds the interval's last blamed step),
+  or to the start of the component's next fault if the blame runs on into
+  it; negative when the blame ends before the fault. Blame carried across a
+  gap between two faults counts in full as false alarm.
 * ``truth_components``: the components whose truth is known.
 """
 
@@ -71,14 +73,17 @@ def _blamed(
     return gated, gated, np.array([bool(c) for c in gated], dtype=bool)
 
 
-def _blame_end_lag(step_t: np.ndarray, blamed: np.ndarray, a: float, b: float) -> float | None:
+def _blame_end_lag(
+    step_t: np.ndarray, blamed: np.ndarray, a: float, b: float, next_start: float = np.inf
+) -> float | None:
     """Time from the fault's end ``b`` to the end of the blame run holding the
-    last blamed step within ``[a, b]``; None when nothing in it is blamed."""
+    last blamed step within ``[a, b]``, at most to ``next_start`` (the next
+    fault of the component); None when nothing in it is blamed."""
     inside = np.flatnonzero(blamed & (step_t >= a) & (step_t <= b))
     if not len(inside):
         return None
     k = inside[-1]
-    while k + 1 < len(blamed) and blamed[k + 1]:
+    while k + 1 < len(blamed) and blamed[k + 1] and step_t[k + 1] < next_start:
         k += 1
     return float(step_t[k] - b)
 
@@ -110,12 +115,14 @@ def validation_metrics(
     for comp, intervals in faults.items():
         found, ends = [], []
         comp_blamed = np.array([comp in u for u in blamed], dtype=bool)
+        starts = sorted(a for a, _ in intervals)
         for a, b in intervals:
+            next_start = min((s for s in starts if s > b), default=np.inf)
             hits = [t for t, u in zip(step_t, union) if a <= t <= b and comp in u]
             if hits:
                 found.append(hits[0] - a)
                 detected += 1
-                lag = _blame_end_lag(step_t, comp_blamed, a, b)
+                lag = _blame_end_lag(step_t, comp_blamed, a, b, next_start)
                 if lag is not None:
                     ends.append(lag)
             elif np.any((step_t >= a) & (step_t <= b)):
