@@ -22,11 +22,11 @@ An *offset* relation (``kind: offset``) compares the streams themselves: an
 absolute heading against an integrated one, which agree up to an offset
 that changes slowly (the gyro's bias). The difference ``d = b - gain * a``
 is compared with its own level, learnt from the steps that agree with it
-(a disturbance does not drag the level along): offline, the median of
+(a disturbance does not drag the level along): offline, a line fitted to
 ``d`` over a window of ``level_window_s`` centred on the step (a steady
-drift has no lag there), taken again over the steps within ``k_sigma *
-sigma_floor`` of the first, and within half a window of the ends of the
-data continued along the slope of the levels inside; causal, over the agreeing steps of the
+drift has no lag there), started from the window's median and refitted on
+the steps within ``k_sigma * sigma_floor`` of it; near the ends of the data
+the window is shifted inside it rather than cut short; causal, over the agreeing steps of the
 trailing window, the median of its recent half extrapolated to the step
 with the slope between the medians of its two halves (a steady drift would
 lag by half a window otherwise), held while no step agrees. Windows do not
@@ -138,30 +138,40 @@ def running_level(
 
 
 def _centred_level(t: np.ndarray, d: np.ndarray, window_s: float, tolerance: float) -> np.ndarray:
-    """Level of one unbroken run: the median over each step's centred window,
-    again over the steps within ``tolerance`` of it. Within half a window of
-    the run's ends a centred window would be cut short, and a disturbance
-    could fill half of it: there the level goes on along the slope the
-    interior levels had over the last half window."""
-    half = 0.5 * window_s
+    """Level of one unbroken run: at each step, a line fitted to the steps of
+    its window that lie within ``tolerance`` of it (a disturbance does not
+    drag the level along; a slow drift, such as a gyro's bias, is followed).
+    The window is centred on the step, shifted inside the run within half a
+    window of its ends (the whole run when it is shorter), so the level at
+    the ends is read off the same full window, not a half one."""
     eps = _TOL * window_s
-    a = np.searchsorted(t, t - half - eps, side="left")
-    b = np.searchsorted(t, t + half + eps, side="right")
+    span = t[-1] - t[0]
+    lo = np.clip(t - 0.5 * window_s, t[0], max(t[0], t[-1] - window_s))
+    hi = np.minimum(lo + window_s, t[-1]) if span >= window_s else np.full(len(t), t[-1])
+    a = np.searchsorted(t, lo - eps, side="left")
+    b = np.searchsorted(t, hi + eps, side="right")
     level = np.empty(len(t))
     for k, (i, j) in enumerate(zip(a, b)):
-        first = float(np.median(d[i:j]))
-        near = d[i:j][np.abs(d[i:j] - first) <= tolerance]
-        level[k] = float(np.median(near)) if len(near) else first
-    interior = (t - t[0] >= half - eps) & (t[-1] - t >= half - eps)
-    if not interior.any():
-        return np.full(len(t), float(np.median(d)))
-    inner = np.flatnonzero(interior)
-    for edge, sign in ((inner[0], 1.0), (inner[-1], -1.0)):
-        ref = int(np.clip(np.searchsorted(t, t[edge] + sign * half), inner[0], inner[-1]))
-        slope = (level[ref] - level[edge]) / (t[ref] - t[edge]) if t[ref] != t[edge] else 0.0
-        outside = t < t[edge] if sign > 0 else t > t[edge]
-        level[outside] = level[edge] + slope * (t[outside] - t[edge])
+        level[k] = _robust_line(t[i:j] - t[k], d[i:j], tolerance)
     return level
+
+
+def _robust_line(x: np.ndarray, y: np.ndarray, tolerance: float) -> float:
+    """Value at ``x = 0`` of a line through the points within ``tolerance``
+    of it: started from the window's median, refitted on the points that
+    agree (three times, so a slow drift brings the window's ends back in);
+    the median where too few agree."""
+    offset, slope = float(np.median(y)), 0.0
+    for _ in range(3):
+        near = np.abs(y - (offset + slope * x)) <= tolerance
+        if near.sum() < max(3, len(x) // 10):
+            return float(np.median(y))
+        xs, ys = x[near], y[near]
+        xm, ym = xs.mean(), ys.mean()
+        var = float(((xs - xm) ** 2).sum())
+        slope = float(((xs - xm) * (ys - ym)).sum()) / var if var > 0 else 0.0
+        offset = ym - slope * xm
+    return float(offset)
 
 
 def offset_test(rel: RelationConfig, d: np.ndarray, level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
