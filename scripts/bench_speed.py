@@ -52,7 +52,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SEED = 5
 TARGET_RATIO = 1.3
 TARGET_RTF = 100.0
-STEPS = ("read", "frontend", "frontend_wait", "validation", "loops", "graph_build", "optimise", "write", "plots_wait")
+STEPS = ("read", "prepare", "frontend", "frontend_wait", "validation", "loops", "graph_build", "optimise", "write", "plots_wait")
 TIMING_KEYS = ("runtime_s", "realtime_factor", "timings_s", "validation_time_s")
 
 
@@ -98,11 +98,11 @@ def data_span(run: Path) -> float:
     return float(json.loads((run / "truth.json").read_text())["duration_s"])
 
 
-def _timed(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
+def _timed(cmd: list[str], env: dict[str, str] | None = None, cwd: Path = ROOT) -> tuple[float, float]:
     """Wall and CPU seconds (user + sys of the child and its children) of ``cmd``."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
+    proc = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode != 0:
@@ -123,7 +123,7 @@ def run_gslam(name: str, program: str, code: Path, run: Path, config: Path, out:
     cmd = [sys.executable, "-m", "slam.cli", "-q", "map", str(run), "--config", str(config), "--out", str(out),
            "--gating", "on"]
     load = os.getloadavg()[0]
-    wall, cpu = _timed(cmd, env)
+    wall, cpu = _timed(cmd, env, cwd=code)  # python -m puts the working folder first on the path
     metrics = json.loads((out / "metrics.json").read_text())
     steps = {k: float(v) for k, v in metrics.get("timings_s", {}).items()}
     steps["start-up"] = wall - float(metrics["runtime_s"])

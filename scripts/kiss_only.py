@@ -8,7 +8,10 @@ message, turns each scan into planar points (finite ranges, z = 0) and
 registers it with KissICP's default config, with ``max_range`` from the
 scan's ``range_max`` and the voxel ``max_range / 100`` (KISS-ICP's own rule
 when no voxel is given). No 2D scanner gives per-point stamps, so no point
-is deskewed. It prints the scans registered, the data span and the wall
+is deskewed. After each scan the pose and velocity are made exactly planar
+again, as gslam's front-end does: without it, round-off over a long blind
+stretch makes KISS-ICP's Sophus abort the process (telemax_loop does this).
+It prints the scans registered, the data span and the wall
 time of the process so far (imports included). ``BAG`` is a ``.bag``, a
 rosbag2 folder, or a simulated run folder (its ``bag/``).
 
@@ -39,6 +42,16 @@ def bag_path(path: Path) -> Path:
     return path
 
 
+def planar(transform: np.ndarray) -> np.ndarray:
+    """The planar rigid transform closest in yaw to a 4x4 ``transform``."""
+    yaw = np.arctan2(transform[1, 0], transform[0, 0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = np.eye(4)
+    out[:2, :2] = [[c, -s], [s, c]]
+    out[:2, 3] = transform[:2, 3]
+    return out
+
+
 def kiss_only(path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
     """Stamps (s, header) and KISS-ICP poses (n, 4, 4) of every scan on ``topic``."""
     store = get_typestore(Stores.ROS1_NOETIC if path.suffix == ".bag" else Stores.LATEST)
@@ -62,6 +75,10 @@ def kiss_only(path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
             ok = np.isfinite(r)
             points = np.column_stack([r[ok] * cos[ok], r[ok] * sin[ok], np.zeros(int(ok.sum()))])
             icp.register_frame(points, np.zeros(0))
+            # Over a long blind stretch (the yard: no returns, prediction only)
+            # KISS-ICP's 4x4 float products drift off a rotation and Sophus
+            # aborts the process; keep them planar, as slam/frontend.py does.
+            icp.last_pose, icp.last_delta = planar(icp.last_pose), planar(icp.last_delta)
             stamps.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
             poses.append(icp.last_pose.copy())
     return np.asarray(stamps), np.asarray(poses)
