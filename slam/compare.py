@@ -149,7 +149,13 @@ def _variant_config(config_path, overrides: list[str], variants_path: Path, name
 def _run_variants(
     input_path: str | Path, configs: dict[str, PipelineConfig], folder: Path, progress: bool
 ) -> tuple[dict[str, MapResult], object]:
-    """Each variant into ``folder/<name>``, sharing reading and scan matching."""
+    """Each variant into ``folder/<name>``, sharing reading and scan matching.
+
+    matplotlib is imported here once: the comparison's figures need it, and
+    each variant's figures are drawn by a process forked from this one
+    (slam.io.plot_writer), which then starts with it loaded."""
+    import slam.plots  # noqa: F401
+
     recording, frontend, frontend_cfg = None, None, None
     shared_s = 0.0
     results: dict[str, MapResult] = {}

@@ -7,6 +7,14 @@ a method. The result folder follows :mod:`slam.io.outdir`: ``--out`` is
 checked before any work, the result is built in a temporary sibling and
 renamed into place at the end, so a killed run leaves a complete folder or
 none.
+
+Two steps run beside the others on the second core (``concurrent``, the
+default): KISS-ICP registers the scans while the other topics are read and
+the next steps prepared (:mod:`slam.prefetch`), and the figures are drawn
+while the numeric results are written (:mod:`slam.io.plot_writer`). Both
+are the same code on the same data as in the plain order
+(``concurrent=False``), so the results are the same bytes. gtsam and
+validation are imported while the scans are matched, not before.
 """
 
 from __future__ import annotations
@@ -17,17 +25,21 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from slam.backend import BackendResult, FactorWeights, dof_weights, optimise, unit_weights
 from slam.config import PipelineConfig, dump_config
 from slam.errors import GslamError
 from slam.frontend import FrontendResult, ScanProjector, run_frontend
 from slam.io.outdir import result_folder
+from slam.io.plot_writer import MapFigures, PlotWriter
 from slam.measurements import Measurements, build_measurements, interpolate_poses, select_keyframes
+from slam.prefetch import BackgroundScanMatching, import_next_steps
 from slam.recording import Recording, Trajectory
+
+if TYPE_CHECKING:
+    from slam.backend import BackendResult, FactorWeights
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +64,9 @@ class _Timings:
     graph_build_s: float = 0.0
     optimise_s: float = 0.0
     write_s: float = 0.0
+    prepare_s: float = 0.0  # beside scan matching: imports, the files that do not need the estimate
+    frontend_wait_s: float = 0.0  # waiting for scan matching in the second process
+    plots_wait_s: float = 0.0  # waiting for the figures in the second process
     extra: dict[str, float] = field(default_factory=dict)
 
 
@@ -62,7 +77,8 @@ class MappingPipeline:
     variant of the same run already computed (``gslam compare``).
     ``inputs``: other files the run reads (the config), which ``out_dir``
     must not be or hold; ``force``: write into a folder that is not a map
-    result (see :mod:`slam.io.outdir`).
+    result (see :mod:`slam.io.outdir`); ``concurrent``: match scans and
+    draw figures in a second process (see the module docstring).
     """
 
     def __init__(
@@ -75,8 +91,12 @@ class MappingPipeline:
         frontend: FrontendResult | None = None,
         inputs: Sequence[str | Path] = (),
         force: bool = False,
+        concurrent: bool = True,
     ):
         self.input_path = Path(input_path)
+        self.concurrent = concurrent
+        self.scan_matching: BackgroundScanMatching | None = None
+        self.plots: PlotWriter | None = None
         self.inputs = [self.input_path, *map(Path, inputs)]
         self.force = force
         self.config = config
@@ -103,40 +123,85 @@ class MappingPipeline:
     def run(self) -> MapResult:
         self._start = time.perf_counter()
         with result_folder(self.out_dir, "map", self.inputs, self.force) as tmp:
-            self.read()
-            self.match_scans()
-            self.build_measurements()
-            self.validate()
-            self.learn_odometry_scale()
-            self.second_pass()
-            self.close_loops()
-            self.optimise()
-            self.evaluate()
-            self.write(tmp)
+            self.start_helpers()
+            try:
+                self.read()
+                self.prepare(tmp)
+                self.match_scans()
+                self.build_measurements()
+                self.validate()
+                self.learn_odometry_scale()
+                self.second_pass()
+                self.close_loops()
+                self.optimise()
+                self.evaluate()
+                self.write(tmp)
+            finally:  # before a failed result's folder is removed
+                self.close_helpers()
         return MapResult(self.out_dir, self.metrics, self.backend.trajectory, self.recording, self.validation)
 
     # -- steps ----------------------------------------------------------------
+
+    def start_helpers(self) -> None:
+        """The second process's work: scan matching (unless it is reused)
+        and the figures; both wait for their data."""
+        cfg = self.config
+        if cfg.output.plots:
+            self.plots = PlotWriter(self.concurrent)
+        if self.recording is None and self.frontend is None and self._matches_scans():
+            self.scan_matching = BackgroundScanMatching(cfg.frontend, self.progress, self.concurrent)
+
+    def close_helpers(self) -> None:
+        for helper in (self.scan_matching, self.plots):
+            if helper is not None:
+                helper.close()
 
     def read(self) -> None:
         t = time.perf_counter()
         if self.recording is None:
             from slam.io.readers import read_recording
 
-            self.recording = read_recording(self.input_path, self.config.input)
+            sm = self.scan_matching
+            early = sm.give if sm is not None and not sm.needs_odometry else None
+            self.recording = read_recording(self.input_path, self.config.input, on_scans=early)
+            if sm is not None:  # without scans, or for odometry guesses: now
+                sm.give(self.recording.scans, self.recording.odometry)
         self.timings.read_s = time.perf_counter() - t
         rec = self.recording
         log.info("read %s: %.1f s of data", rec.name, rec.duration)
 
+    def prepare(self, folder: Path) -> None:
+        """What needs no estimate, done while the scans are matched: the
+        config and the reference into ``folder``, and the imports of the
+        next steps."""
+        t = time.perf_counter()
+        rec = self.recording
+        (folder / "config.yaml").write_text(dump_config(self.config))
+        if rec.groundtruth is not None:
+            from slam.io.tum import write_tum
+
+            write_tum(folder / "groundtruth.tum", rec.groundtruth, rec.t0)
+        if self.scan_matching is not None:
+            import_next_steps()
+        self.timings.prepare_s = time.perf_counter() - t
+
     def match_scans(self) -> None:
         rec, cfg = self.recording, self.config
-        if rec.scans is None or not cfg.frontend.enabled or not cfg.backend.factors.scan_matching.enabled:
+        if rec.scans is None or not self._matches_scans():
             self.frontend = None
             return
         if self.frontend is not None:  # reused from another variant
             return
-        self.frontend = run_frontend(rec.scans, cfg.frontend, progress=self.progress, odometry=rec.odometry)
+        if self.scan_matching is not None:
+            self.frontend, self.timings.frontend_wait_s = self.scan_matching.result(rec.scans)
+        else:
+            self.frontend = run_frontend(rec.scans, cfg.frontend, progress=self.progress, odometry=rec.odometry)
         self.timings.frontend_s = self.frontend.time_s
         self.label_scan_matching_faults()
+
+    def _matches_scans(self) -> bool:
+        cfg = self.config
+        return cfg.frontend.enabled and cfg.backend.factors.scan_matching.enabled
 
     def label_scan_matching_faults(self) -> None:
         """Add the times where the front-end's output is wrong (against
@@ -177,6 +242,8 @@ class MappingPipeline:
         vcfg, gcfg = validation_sections(self.config)
         n = len(self.measurements)
         if vcfg.mode == "off":
+            from slam.backend import unit_weights
+
             self.weights = unit_weights(n)
             return
         if vcfg.mode == "oracle":
@@ -204,6 +271,7 @@ class MappingPipeline:
         the scan matcher's forward motion is gated. Elsewhere the graph fuses
         the two as they are. Without validation nothing says where the scan
         matcher can be trusted, and nothing is learnt."""
+        from slam.backend import dof_weights
         from slam.config import validation_sections
         from slam.selfcal import odometry_scale
 
@@ -319,6 +387,8 @@ class MappingPipeline:
         return buf.getvalue()
 
     def optimise(self) -> None:
+        from slam.backend import optimise
+
         pose0 = self._initial_pose()
         # Building the batch graph takes milliseconds: a bar would only ever
         # show 0 %. iSAM2 updates per keyframe take long enough to show one.
@@ -369,10 +439,19 @@ class MappingPipeline:
 
     def write(self, folder: Path) -> None:
         """Write the results into ``folder`` (the temporary folder that is
-        renamed into place afterwards)."""
+        renamed into place afterwards): the figures are handed to the second
+        process first, the numbers written meanwhile, metrics.json last."""
         t = time.perf_counter()
-        self._write_into(folder)
+        points = self.map_points()
+        if self.plots is not None:
+            rec = self.recording
+            self.plots.submit(MapFigures(folder, rec.name, self.backend.trajectory, rec.groundtruth, rec.faults, points))
+        self._write_into(folder, points)
         self.timings.write_s = time.perf_counter() - t
+        if self.plots is not None:
+            t = time.perf_counter()
+            self.plots.wait()
+            self.timings.plots_wait_s = time.perf_counter() - t
         # Everything but renaming the folder into place and writing this file.
         self.metrics["runtime_s"] = round(time.perf_counter() - self._start, 4)
         self._add_timings()
@@ -420,34 +499,27 @@ class MappingPipeline:
             "graph_build": round(tm.graph_build_s, 4),
             "optimise": round(tm.optimise_s, 4),
             "write": round(tm.write_s, 4),
+            "prepare": round(tm.prepare_s, 4),
+            "frontend_wait": round(tm.frontend_wait_s, 4),
+            "plots_wait": round(tm.plots_wait_s, 4),
         }
         total = self.metrics.get("runtime_s") or 0.0
         if total:
             self.metrics["realtime_factor"] = round(self.recording.duration / total, 2)
 
-    def _write_into(self, d: Path) -> None:
+    def _write_into(self, d: Path, points: np.ndarray | None) -> None:
+        """The numeric results (config.yaml and groundtruth.tum are written
+        by :meth:`prepare`, the figures by the plot writer)."""
         from slam.io.tum import write_tum
 
-        rec, est, out = self.recording, self.backend.trajectory, self.config.output
+        rec, est = self.recording, self.backend.trajectory
         write_tum(d / "trajectory.tum", est, rec.t0)
-        if rec.groundtruth is not None:
-            write_tum(d / "groundtruth.tum", rec.groundtruth, rec.t0)
-        (d / "config.yaml").write_text(dump_config(self.config))
         for name, text in self.extra_outputs.items():
             (d / name).write_text(text)
-        points = self.map_points()
         if points is not None:
             from slam.io.pointcloud import write_ply
 
             write_ply(d / "map.ply", points)
-        if out.plots:
-            from slam.plots import fault_shading, plot_map, plot_trajectories
-
-            ref = rec.groundtruth
-            shaded = fault_shading(rec.faults)
-            plot_trajectories(d / "trajectory.png", {"estimate": est}, ref, title=rec.name, shaded=shaded)
-            if points is not None:
-                plot_map(d / "map.png", points, est, title=f"{rec.name}: laser map")
 
     def map_points(self, chunk: int = 2048) -> np.ndarray | None:
         """Laser points of every keyframe in its optimised pose, voxel-thinned
@@ -482,7 +554,9 @@ def run_map(
     progress: bool = False,
     inputs: Sequence[str | Path] = (),
     force: bool = False,
+    concurrent: bool = True,
 ) -> MapResult:
-    """Map one run (the library form of ``gslam map``); ``inputs`` and
-    ``force`` as for :class:`MappingPipeline`."""
-    return MappingPipeline(input_path, config, out_dir, progress=progress, inputs=inputs, force=force).run()
+    """Map one run (the library form of ``gslam map``); ``inputs``,
+    ``force`` and ``concurrent`` as for :class:`MappingPipeline`."""
+    pipe = MappingPipeline(input_path, config, out_dir, progress=progress, inputs=inputs, force=force, concurrent=concurrent)
+    return pipe.run()

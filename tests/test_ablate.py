@@ -238,3 +238,48 @@ def test_ray_gives_the_same_summary_as_local(finished, tmp_path):
         return [{k: v for k, v in r.items() if not k.startswith(TIMING)} for r in rows]
 
     assert strip(local) == strip(remote)
+
+
+# --- jobs sharing reading and scan matching -------------------------------------
+
+
+def test_jobs_sharing_reading_and_scan_matching_are_grouped(tmp_path, short_scenario_yaml):
+    from slam.ablate.sharing import share_groups
+
+    variants = {"ungated": {"validation.mode": "off"}, "gated": {"validation.mode": "on"},
+                "coarse": {"frontend.voxel_size_m": 0.2}}
+    spec_path = write_spec(tmp_path / "s.yaml", short_scenario_yaml, variants=variants,
+                           inputs={"scenarios": [{"path": str(short_scenario_yaml), "seeds": [1, 2]}]})
+    jobs = expand_jobs(load_spec(spec_path))  # 2 seeds x 3 variants x 2 inflations
+    groups = share_groups(jobs, workers=1)
+    assert sorted(j.id for g in groups for j in g) == sorted(j.id for j in jobs)
+    for g in groups:  # one input, one front-end per group
+        assert len({j.seed for j in g}) == 1 and len({j.variant == "coarse" for j in g}) == 1
+    assert len(groups) == 4  # (seed 1, seed 2) x (voxel 0.1, voxel 0.2): 4 jobs, 2 jobs, 4, 2
+    assert len(share_groups(jobs, workers=4)) > len(groups)  # split further to keep 4 workers busy
+
+
+def test_shared_jobs_write_what_jobs_on_their_own_write(finished, tmp_path):
+    from slam.ablate.runner import run_job
+    from slam.ablate.sharing import run_jobs
+
+    spec_path, res = finished
+    out = tmp_path / "out"
+    shutil.copytree(res.out_dir / "inputs", out / "inputs")
+    jobs = res.jobs
+    outcomes = run_jobs(jobs, out)
+    assert [o.error for o in outcomes] == [None] * len(jobs)
+    alone = tmp_path / "alone"
+    shutil.copytree(res.out_dir / "inputs", alone / "inputs")
+    for job in jobs:
+        assert run_job(job, alone).error is None
+        a, b = out / "jobs" / job.id, alone / "jobs" / job.id
+        names = sorted(p.name for p in a.iterdir() if p.name != ".gslam-result.json")
+        assert names == sorted(p.name for p in b.iterdir() if p.name != ".gslam-result.json")
+        for name in names:
+            if name == "metrics.json":
+                ma, mb = (json.loads((d / name).read_text()) for d in (a, b))
+                drop = ("runtime_s", "realtime_factor", "timings_s", "validation_time_s", "input")
+                assert {k: v for k, v in ma.items() if k not in drop} == {k: v for k, v in mb.items() if k not in drop}
+            else:
+                assert (a / name).read_bytes() == (b / name).read_bytes(), (job.id, name)

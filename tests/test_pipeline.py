@@ -63,7 +63,10 @@ def test_map_writes_every_documented_file(mapped, short_run):
     for key in METRICS:
         assert isinstance(metrics[key], (int, float)), key
     assert metrics["n_poses"] == len(res.trajectory)
-    assert set(metrics["timings_s"]) == {"read", "frontend", "validation", "loops", "graph_build", "optimise", "write"}
+    assert set(metrics["timings_s"]) == {
+        "read", "frontend", "validation", "loops", "graph_build", "optimise", "write",
+        "prepare", "frontend_wait", "plots_wait",
+    }
     assert not any(k in metrics for k in ("alarm_fraction", "validation_steps"))
 
     # TUM files carry absolute stamps t0 + t.

@@ -7,6 +7,9 @@ Output folder ``OUT``:
 * ``OUT/failed/<id>.json``: the one-line error of a job that failed;
 * ``OUT/spec.yaml``, ``OUT/summary.csv``, ``OUT/summary.md``, ``OUT/plots/``.
 
+Jobs that read and scan-match the same thing run together in one worker
+and share that work (:mod:`slam.ablate.sharing`).
+
 ``OUT`` must be new or an earlier sweep folder (:func:`slam.io.outdir.open_container`).
 Every folder and file is written beside its place and renamed into it, so a
 job is finished exactly when ``jobs/<id>/metrics.json`` exists, whatever
@@ -37,6 +40,7 @@ import yaml
 from tqdm import tqdm
 
 from slam.ablate.jobs import Job, SimulatedInput, expand_jobs
+from slam.ablate.sharing import run_jobs, share_groups
 from slam.ablate.spec import AblationSpec
 from slam.errors import GslamError
 from slam.io.atomic import write_text
@@ -134,11 +138,17 @@ def run_job(job: Job, out_dir: str | Path) -> JobOutcome:
         config = load_config(job.config_path, list(job.overrides))
         run_map(job.input_dir(out_dir), config, out_dir / "jobs" / job.id)
     except Exception as e:  # noqa: BLE001 - a failing job must not stop the sweep
-        error = f"{type(e).__name__}: {e}".splitlines()[0]
-        write_text(failed, json.dumps({"id": job.id, "error": error}, indent=2) + "\n")
+        error = record_failure(out_dir, job, e)
         return JobOutcome(job.id, error, time.perf_counter() - t, sim_s)
     failed.unlink(missing_ok=True)
     return JobOutcome(job.id, None, time.perf_counter() - t, sim_s)
+
+
+def record_failure(out_dir: Path, job: Job, e: Exception) -> str:
+    """Write ``out_dir/failed/<id>.json`` with the one-line error; return it."""
+    error = f"{type(e).__name__}: {e}".splitlines()[0]
+    write_text(out_dir / "failed" / f"{job.id}.json", json.dumps({"id": job.id, "error": error}, indent=2) + "\n")
+    return error
 
 
 def _quiet_worker() -> None:
@@ -186,24 +196,25 @@ def _threads_per_worker(n: int) -> Iterator[None]:
                 os.environ[k] = v
 
 
-def _local(jobs: list[Job], out_dir: Path, workers: int) -> Iterator[JobOutcome]:
+def _local(groups: list[list[Job]], out_dir: Path, workers: int) -> Iterator[JobOutcome]:
     # spawn: forking a parent that has loaded gtsam/open3d threads is unsafe.
     ctx = multiprocessing.get_context("spawn")
     threads = max(1, (os.cpu_count() or 1) // workers)
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_pool_worker) as pool:
         with _threads_per_worker(threads):  # workers start on the first submits
-            pending = {pool.submit(run_job, job, str(out_dir)): job for job in jobs}
+            pending = {pool.submit(run_jobs, group, str(out_dir)): group for group in groups}
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
-                job = pending.pop(fut)
+                group = pending.pop(fut)
                 try:
-                    yield fut.result()
+                    yield from fut.result()
                 except Exception as e:  # noqa: BLE001 - e.g. a worker killed by a crash
-                    yield JobOutcome(job.id, f"{type(e).__name__}: {e}".splitlines()[0], 0.0)
+                    error = f"{type(e).__name__}: {e}".splitlines()[0]
+                    yield from (JobOutcome(job.id, error, 0.0) for job in group)
 
 
-def _ray(jobs: list[Job], out_dir: Path, workers: int, address: str | None) -> Iterator[JobOutcome]:
+def _ray(groups: list[list[Job]], out_dir: Path, workers: int, address: str | None) -> Iterator[JobOutcome]:
     try:
         import ray
     except ImportError:
@@ -215,24 +226,25 @@ def _ray(jobs: list[Job], out_dir: Path, workers: int, address: str | None) -> I
             kwargs["num_cpus"] = workers
         ray.init(address=address, **kwargs)
     try:
-        task = ray.remote(num_cpus=1)(_ray_job)
-        pending = {task.remote(job, str(out_dir)): job for job in jobs}
+        task = ray.remote(num_cpus=1)(_ray_jobs)
+        pending = {task.remote(group, str(out_dir)): group for group in groups}
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
             for ref in done:
-                job = pending.pop(ref)
+                group = pending.pop(ref)
                 try:
-                    yield ray.get(ref)
+                    yield from ray.get(ref)
                 except Exception as e:  # noqa: BLE001 - a task lost with its node
-                    yield JobOutcome(job.id, f"{type(e).__name__}: {e}".splitlines()[0], 0.0)
+                    error = f"{type(e).__name__}: {e}".splitlines()[0]
+                    yield from (JobOutcome(job.id, error, 0.0) for job in group)
     finally:
         if started:
             ray.shutdown()
 
 
-def _ray_job(job: Job, out_dir: str) -> JobOutcome:
+def _ray_jobs(jobs: list[Job], out_dir: str) -> list[JobOutcome]:
     _quiet_worker()
-    return run_job(job, out_dir)
+    return run_jobs(jobs, out_dir)
 
 
 # --- the sweep -------------------------------------------------------------------
@@ -274,8 +286,8 @@ def run_ablation(
                 todo.append(job)
         log.info("%d jobs: %d finished before, %d to run on %s x%d", len(jobs), len(result.skipped), len(todo), backend.value, workers)
         if todo:
-            todo = dispatch_order(todo)
-            runner = _local(todo, out_dir, workers) if backend is Backend.LOCAL else _ray(todo, out_dir, workers, address)
+            groups = share_groups(dispatch_order(todo), workers)
+            runner = _local(groups, out_dir, workers) if backend is Backend.LOCAL else _ray(groups, out_dir, workers, address)
             with tqdm(total=len(jobs), initial=len(result.skipped), unit="job", desc="ablate", disable=not progress) as bar:
                 for outcome in runner:
                     result.outcomes.append(outcome)

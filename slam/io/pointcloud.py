@@ -1,8 +1,12 @@
-"""Laser map as a point cloud, written with open3d.
+"""Laser map as a point cloud: a binary PLY file, written with numpy.
 
-open3d is imported here only, lazily: it is heavy, and on Debian its wheel
-links against libusb-1.0, which a bare system lacks. The ``libusb-package``
-wheel ships that library; it is loaded first so open3d imports anywhere.
+The file is byte for byte what open3d's ``write_point_cloud`` writes for a
+cloud of points only (its header, little-endian float64 x, y, z), so any
+PLY reader, open3d included, reads it; open3d itself is not imported:
+it costs half a second, and on Debian its wheel links against libusb-1.0,
+which a bare system lacks. :func:`import_open3d` is for readers of the
+files (tests, notebooks); the ``libusb-package`` wheel ships that library
+and is loaded first so open3d imports anywhere.
 """
 
 from __future__ import annotations
@@ -14,6 +18,11 @@ import numpy as np
 
 from slam.errors import GslamError
 from slam.io.atomic import atomic_path
+
+PLY_HEADER = (
+    "ply\nformat binary_little_endian 1.0\ncomment Created by Open3D\nelement vertex {n}\n"
+    "property double x\nproperty double y\nproperty double z\nend_header\n"
+)
 
 
 def import_open3d():
@@ -44,12 +53,16 @@ def voxel_downsample(points_xy: np.ndarray, voxel_m: float) -> np.ndarray:
     return points_xy[np.sort(first)]
 
 
+def ply_bytes(points_xy: np.ndarray) -> bytes:
+    """Planar points (n, 2) as a binary PLY point cloud at z = 0."""
+    pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    xyz = np.zeros((len(pts), 3), dtype="<f8")
+    xyz[:, :2] = pts
+    return PLY_HEADER.format(n=len(pts)).encode("ascii") + xyz.tobytes()
+
+
 def write_ply(path: str | Path, points_xy: np.ndarray) -> None:
     """Write planar points (n, 2) as a PLY point cloud at z = 0, atomically."""
-    o3d = import_open3d()
-    cloud = o3d.geometry.PointCloud()
-    xyz = np.column_stack([points_xy, np.zeros(len(points_xy))]) if len(points_xy) else np.zeros((0, 3))
-    cloud.points = o3d.utility.Vector3dVector(xyz)
+    data = ply_bytes(points_xy)
     with atomic_path(path) as tmp:
-        if not o3d.io.write_point_cloud(str(tmp), cloud):
-            raise GslamError(f"{path}: open3d could not write the point cloud")
+        tmp.write_bytes(data)

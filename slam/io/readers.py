@@ -30,7 +30,7 @@ from slam.config import GpsInputConfig, InputConfig
 from slam.io.yamlfile import read_text_file
 from slam.errors import GslamError
 from slam.io import broad, carmen, librsf
-from slam.io.rosbag import BAG_SUFFIXES, RosbagReader, is_rosbag
+from slam.io.rosbag import BAG_SUFFIXES, RosbagReader, ScansHook, is_rosbag
 from slam.recording import COMPONENTS, SENSOR_MODALITIES, MagneticReference, Recording, expand_sensor_labels
 
 log = logging.getLogger(__name__)
@@ -189,17 +189,22 @@ def attach_sidecar(rec: Recording, sidecar: Sidecar) -> None:
 # --- entry point ---------------------------------------------------------
 
 
-def read_recording(path: str | Path, config: InputConfig) -> Recording:
+def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | None = None) -> Recording:
     """Read a recorded run with the reader for ``config.format`` (``auto``
     guesses it from the path). A run folder reads its ``bag/``, is named
     after the folder and gets the sidecar's faults and magnetic reference;
-    the sidecar's GPS datum is used when the config sets none."""
+    the sidecar's GPS datum is used when the config sets none.
+
+    ``on_scans`` is called with the laser scans once they are read: by the
+    ROS bag reader before it reads the other topics (their ``t`` is then
+    relative to the first scan), by the others with the recording's scans
+    at the end; not at all without scans."""
     path = Path(path)
     fmt = guess_format(path) if config.format == "auto" else config.format
     if fmt not in READERS:
         raise GslamError(f"unknown input format '{fmt}'; known: {', '.join(READERS)}")
     if not is_run_folder(path):
-        return READERS[fmt].read(path, config)
+        return _read(fmt, path, config, on_scans)
 
     sidecar = load_sidecar(path / SIDECAR)
     unset = config.gps.datum_lat_deg is None and config.gps.datum_lon_deg is None
@@ -207,8 +212,18 @@ def read_recording(path: str | Path, config: InputConfig) -> Recording:
         lat, lon = sidecar.gps_datum.lat_deg, sidecar.gps_datum.lon_deg
         datum = GpsInputConfig(datum_lat_deg=lat, datum_lon_deg=lon)
         config = config.model_copy(update={"gps": datum})
-    rec = READERS[fmt].read(path / RUN_BAG, config)
+    rec = _read(fmt, path / RUN_BAG, config, on_scans)
     rec.name = path.name
     attach_sidecar(rec, sidecar)
     log.info("%s: run '%s' with faults in %s", path, sidecar.scenario, ", ".join(rec.faults) or "none")
+    return rec
+
+
+def _read(fmt: str, path: Path, config: InputConfig, on_scans: ScansHook | None) -> Recording:
+    reader = READERS[fmt]
+    if isinstance(reader, RosbagReader):
+        return reader.read(path, config, on_scans)
+    rec = reader.read(path, config)
+    if on_scans is not None and rec.scans is not None:
+        on_scans(rec.scans)
     return rec

@@ -30,6 +30,7 @@ Bad input raises :class:`GslamError` with one line naming the bag and topic.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +41,7 @@ from slam.io.rosbag_imu import _CompassImuStream, _CompassMagStream, _GyroStream
 from slam.io.rosbag_poses import _GpsStream, _PoseStream
 from slam.io.rosbag_scans import _ScanStream
 from slam.io.rosbag_streams import _NS, IMU, LASER_SCAN, MAGNETIC_FIELD, NAV_SAT_FIX, ODOMETRY, POSE_STAMPED, _Stream
-from slam.recording import Recording
+from slam.recording import Recording, Scans
 
 # The reader's public names, with the message types and world_yaw_rate of the
 # stream modules, so one import serves callers and test bag writers.
@@ -52,6 +53,8 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
+
+ScansHook = Callable[[Scans], None]
 
 BULK_CHUNK = 8192
 """Messages of one topic decoded together: bounds the raw bytes held."""
@@ -241,7 +244,7 @@ def _deserialize(reader: Any, path: Path, raw: bytes, msgtype: str) -> Any:
         raise GslamError(f"{path}: corrupt bag ({_first_line(err)})") from None
 
 
-def read_rosbag(path: str | Path, config: InputConfig) -> Recording:
+def read_rosbag(path: str | Path, config: InputConfig, on_scans: ScansHook | None = None) -> Recording:
     """Read one recorded run from a ROS 1 or ROS 2 bag.
 
     ``path``: a ``.bag`` file, a rosbag2 directory, a ``.db3``/``.mcap``
@@ -249,20 +252,34 @@ def read_rosbag(path: str | Path, config: InputConfig) -> Recording:
     the earliest first header stamp over the streams read (absolute s); each
     stream's ``t`` is relative to it. ``Recording.name`` is the file stem or
     directory name.
+
+    ``on_scans``: called with the laser scans as soon as they are read,
+    before the other topics, so scan matching can start while they are
+    read; their ``t`` is then relative to the first scan (the recording's
+    own scans are relative to ``t0``, as every stream).
     """
     path = resolve_bag_path(Path(path))
     streams = _make_streams(path, config)
     reader = _open_reader(path)
+    done: list[_Stream] = []
     try:
         wanted = _connections(reader, path, streams)
-        counts = _read_messages(reader, path, streams, wanted)
+        counts: dict[str, int] = {}
+        first = [s for s in streams if s.name == "scan"] if on_scans is not None else []
+        if first:
+            scan = first[0]
+            counts.update(_read_messages(reader, path, first, {scan.topic: wanted[scan.topic]}))
+            _finish(scan, counts)
+            done.append(scan)
+            on_scans(scan.build(scan.first_ns()))
+        rest = [s for s in streams if s not in done and s.topic not in counts]
+        counts.update(_read_messages(reader, path, rest, {s.topic: wanted[s.topic] for s in rest}))
     finally:
         reader.close()
 
     for stream in streams:
-        if counts[stream.topic] == 0:
-            raise GslamError(f"{stream.where}: no messages")
-        stream.finish()
+        if stream not in done:
+            _finish(stream, counts)
     firsts = [s.first_ns() for s in streams if s.first_ns() is not None]
     t0_ns = min(firsts) if firsts else 0
     built = {s.name: s.build(t0_ns) for s in streams}
@@ -285,9 +302,15 @@ def read_rosbag(path: str | Path, config: InputConfig) -> Recording:
     return rec
 
 
+def _finish(stream: _Stream, counts: dict[str, int]) -> None:
+    if counts[stream.topic] == 0:
+        raise GslamError(f"{stream.where}: no messages")
+    stream.finish()
+
+
 class RosbagReader:
     """The ``rosbag`` format of :mod:`slam.io.readers`."""
 
-    def read(self, path: Path, config: InputConfig) -> Recording:
+    def read(self, path: Path, config: InputConfig, on_scans: ScansHook | None = None) -> Recording:
         """See :func:`read_rosbag`."""
-        return read_rosbag(path, config)
+        return read_rosbag(path, config, on_scans)

@@ -1,0 +1,125 @@
+"""Work on the second core: a function run in a forked child process.
+
+``gslam map`` spends most of its time in KISS-ICP, which holds Python's
+GIL for the whole registration, so a thread cannot work beside it. A child
+process forked from the pipeline can: it starts in a few milliseconds,
+inherits what the parent has read and imported, and sends its result back
+through a pipe. :class:`Forked` runs ``fn(inbox, *args)`` in such a child;
+the parent may :meth:`~Forked.send` it objects that ``inbox()`` returns
+there, in order, and :meth:`~Forked.result` waits for the return value (or
+raises the child's exception). :class:`Inline` has the same interface and
+runs the function in the calling process when its result is asked for:
+where fork is not available, inside a daemonic process (an ablation
+worker), or when the caller asks for the plain path. Both give the same
+result; only the time differs.
+
+The child is forked, not spawned: a spawned interpreter would import
+numpy, pydantic and the rest again (half a second) before it could start.
+Fork is safe here because the pipeline forks before it starts threads of
+its own (numpy's BLAS pool is fork-aware); the child only computes and
+writes files, and ends with ``os._exit``.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import pickle
+import signal
+from collections.abc import Callable
+from typing import Any
+
+from slam.errors import GslamError
+
+Inbox = Callable[[], Any]
+
+
+def can_fork() -> bool:
+    """True where a child process can be forked from this one."""
+    return "fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon
+
+
+def start(what: str, fn: Callable[..., Any], *args: Any, concurrent: bool = True) -> "Forked | Inline":
+    """``fn(inbox, *args)`` in a forked child if ``concurrent`` and
+    possible, else inline; ``what`` names the work in error messages."""
+    if concurrent and can_fork():
+        return Forked(what, fn, *args)
+    return Inline(what, fn, *args)
+
+
+class Inline:
+    """:class:`Forked`'s interface, run in this process by :meth:`result`."""
+
+    def __init__(self, what: str, fn: Callable[..., Any], *args: Any):
+        self.what, self.fn, self.args = what, fn, args
+        self.sent: list[Any] = []
+
+    def send(self, obj: Any) -> None:
+        self.sent.append(obj)
+
+    def result(self) -> Any:
+        return self.fn(lambda: self.sent.pop(0), *self.args)
+
+    def close(self) -> None:
+        self.sent.clear()
+
+
+def _child(conn, fn: Callable[..., Any], args: tuple) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it ends the child
+    try:
+        value = ("ok", fn(conn.recv, *args))
+    except BaseException as e:  # noqa: BLE001 - every failure goes back to the parent
+        value = ("error", e)
+    try:
+        conn.send(value)
+    except (pickle.PicklingError, TypeError, AttributeError):  # an exception that does not pickle
+        conn.send(("error", GslamError(f"{type(value[1]).__name__}: {value[1]}")))
+    except (BrokenPipeError, EOFError):  # the parent is gone
+        pass
+
+
+class Forked:
+    """``fn(inbox, *args)`` in a forked child process; see the module docstring."""
+
+    def __init__(self, what: str, fn: Callable[..., Any], *args: Any):
+        self.what = what
+        ctx = multiprocessing.get_context("fork")
+        self.conn, child_conn = ctx.Pipe()
+        self.process = ctx.Process(target=_child, args=(child_conn, fn, args), name=f"gslam {what}", daemon=True)
+        self.process.start()
+        child_conn.close()
+
+    def send(self, obj: Any) -> None:
+        try:
+            self.conn.send(obj)
+        except (BrokenPipeError, EOFError):
+            self._died()
+
+    def result(self) -> Any:
+        try:
+            status, value = self.conn.recv()
+        except (EOFError, ConnectionResetError):
+            self._died()
+        finally:
+            self.close()
+        if status == "error":
+            raise value
+        return value
+
+    def _died(self) -> None:
+        self.process.join(timeout=5.0)
+        code = self.process.exitcode
+        how = f"signal {-code}" if code is not None and code < 0 else f"exit code {code}"
+        raise GslamError(f"{self.what}: its process ended without a result ({how})")
+
+    def close(self) -> None:
+        """End the child if it still runs (an error elsewhere) and reap it."""
+        if self.process.is_alive():
+            self.conn.close()
+            self.process.join(timeout=0.05)
+        if self.process.is_alive():
+            os.kill(self.process.pid, signal.SIGTERM)
+            self.process.join()
+        elif self.process.exitcode is None:
+            self.process.join()
+        self.conn.close()

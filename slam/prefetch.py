@@ -1,0 +1,78 @@
+"""Scan matching beside reading: KISS-ICP in a second process.
+
+KISS-ICP is the largest part of mapping a run, and it needs nothing but the
+laser scans (and, with ``frontend.initial_guess: odometry``, the odometry).
+:class:`BackgroundScanMatching` starts a child process (see
+:mod:`slam.background`) before the run is read; the child imports KISS-ICP
+and waits. The reader hands it the scans as soon as they are decoded (a ROS
+bag's scan topic is read first), and the child registers them while the
+parent reads the other topics, imports the back-end and validation, and
+writes what does not depend on the estimate. :meth:`result` then waits for
+the poses. The poses are the same as :func:`slam.frontend.run_frontend`'s in
+the parent: the same code runs on the same scans.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+
+from slam.background import Inbox, start
+from slam.config import FrontendConfig
+from slam.frontend import FrontendResult, run_frontend
+from slam.recording import Scans, Trajectory
+
+# What the steps after scan matching import, loaded while it runs.
+NEXT_STEPS = (
+    "slam.backend", "slam.truth", "slam.evaluation", "slam.selfcal", "slam.recheck", "validation.validator",
+    "slam.io.tum",
+)
+
+
+def _register(inbox: Inbox, config: FrontendConfig, progress: bool) -> FrontendResult | None:
+    import kiss_icp.kiss_icp  # noqa: F401 - while the parent reads the scans
+
+    sent = inbox()
+    if sent is None:  # no scans after all
+        return None
+    scans, odometry = sent
+    return run_frontend(scans, config, progress=progress, odometry=odometry)
+
+
+class BackgroundScanMatching:
+    """KISS-ICP on the scans it is given (:meth:`give`), in a second process
+    when ``concurrent`` (else when :meth:`result` is asked for)."""
+
+    def __init__(self, config: FrontendConfig, progress: bool = False, concurrent: bool = True):
+        self.needs_odometry = config.initial_guess == "odometry"
+        self.worker = start("scan matching", _register, config, progress, concurrent=concurrent)
+        self.given = False
+
+    def give(self, scans: Scans | None, odometry: Trajectory | None = None) -> None:
+        """The scans to register (and the odometry for the guesses), once."""
+        if not self.given:
+            self.worker.send(None if scans is None else (scans, odometry if self.needs_odometry else None))
+            self.given = True
+
+    def result(self, scans: Scans) -> tuple[FrontendResult | None, float]:
+        """The registration of ``scans`` (the recording's, whose times the
+        poses get) and the seconds spent waiting for it here."""
+        start_wait = time.perf_counter()
+        found = self.worker.result()
+        waited = time.perf_counter() - start_wait
+        if found is None:
+            return None, waited
+        p = found.poses
+        poses = Trajectory(t=scans.t.copy(), x=p.x, y=p.y, yaw=p.yaw)
+        return FrontendResult(poses=poses, n_points=found.n_points, time_s=found.time_s), waited
+
+    def close(self) -> None:
+        self.worker.close()
+
+
+def import_next_steps() -> float:
+    """Import the modules of the steps after scan matching; seconds spent."""
+    t = time.perf_counter()
+    for name in NEXT_STEPS:
+        importlib.import_module(name)
+    return time.perf_counter() - t
