@@ -143,17 +143,19 @@ def _centred_level(t: np.ndarray, d: np.ndarray, window_s: float, tolerance: flo
     drag the level along; a slow drift, such as a gyro's bias, is followed).
     The window is centred on the step, shifted inside the run within half a
     window of its ends (the whole run when it is shorter), so the level at
-    the ends is read off the same full window, not a half one."""
+    the ends is read off the same full window, not a half one. The line is
+    fitted every ``window_s / 60`` and interpolated between."""
     eps = _TOL * window_s
     span = t[-1] - t[0]
     lo = np.clip(t - 0.5 * window_s, t[0], max(t[0], t[-1] - window_s))
     hi = np.minimum(lo + window_s, t[-1]) if span >= window_s else np.full(len(t), t[-1])
     a = np.searchsorted(t, lo - eps, side="left")
     b = np.searchsorted(t, hi + eps, side="right")
-    level = np.empty(len(t))
-    for k, (i, j) in enumerate(zip(a, b)):
-        level[k] = _robust_line(t[i:j] - t[k], d[i:j], tolerance)
-    return level
+    # The level is a line over a window of a minute: fitted at one step per
+    # 1/60 of the window (1 s for 60 s) and interpolated between.
+    knots = np.unique(np.r_[np.searchsorted(t, np.arange(t[0], t[-1], window_s / 60.0)), len(t) - 1])
+    level = np.array([_robust_line(t[a[k]:b[k]] - t[k], d[a[k]:b[k]], tolerance) for k in knots])
+    return np.interp(t, t[knots], level)
 
 
 def _robust_line(x: np.ndarray, y: np.ndarray, tolerance: float) -> float:
