@@ -317,7 +317,7 @@ def optimise(
     if progress:
         from tqdm import tqdm
 
-        steps = tqdm(steps, desc="graph", unit="kf", leave=False)
+        steps = tqdm(steps, desc="graph", unit="kf", leave=False, disable=None)  # none when stderr is not a terminal
 
     if config.optimizer == "isam2":
         params = isam2_params if isam2_params is not None else gtsam.ISAM2Params()

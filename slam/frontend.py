@@ -172,7 +172,7 @@ def run_frontend(
     if progress:
         from tqdm import tqdm
 
-        iterator = tqdm(iterator, desc="scan matching", unit="scan", leave=False)
+        iterator = tqdm(iterator, desc="scan matching", unit="scan", leave=False, disable=None)  # none when stderr is not a terminal
     project = ScanProjector(scans.angles, config.min_range_m, matcher.max_range)
     for i in iterator:
         pts = project(scans.ranges[i])
