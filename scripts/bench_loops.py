@@ -165,7 +165,7 @@ def bench_telemax(report: Report, cache: Path, seeds: list[int]) -> None:
 
 def bench_false_loops(report: Report, cache: Path, seeds: list[int], root: Path, fraction: float) -> None:
     rows = []
-    cases = [(f"telemax_lab s{s}", simulated(cache, s), TELEMAX, ["validation.mode=on"]) for s in seeds]
+    cases = [(f"telemax_lab s{s}", simulated(cache, s), TELEMAX, ["validation.mode=on", "loops.enabled=true"]) for s in seeds]
     for name in CARMEN_LOGS:
         path = root / "carmen" / f"{name}-corrected.log.gz"
         if path.is_file():
