@@ -64,7 +64,23 @@ class Inline:
         self.sent.clear()
 
 
-def _child(conn, fn: Callable[..., Any], args: tuple) -> None:
+def _end_with_parent(parent: int) -> None:
+    """On Linux, have the kernel end this child when the parent dies (a
+    killed ``gslam map`` leaves no orphans: a sibling forked later holds
+    the parent's end of this child's pipe, so no EOF would arrive)."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: the pipe's EOF ends the child where it can
+        return
+    if os.getppid() != parent:  # the parent died before prctl took effect
+        os._exit(1)
+
+
+def _child(conn, fn: Callable[..., Any], args: tuple, parent: int) -> None:
+    _end_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it ends the child
     try:
         value = ("ok", fn(conn.recv, *args))
@@ -85,7 +101,7 @@ class Forked:
         self.what = what
         ctx = multiprocessing.get_context("fork")
         self.conn, child_conn = ctx.Pipe()
-        self.process = ctx.Process(target=_child, args=(child_conn, fn, args), name=f"gslam {what}", daemon=True)
+        self.process = ctx.Process(target=_child, args=(child_conn, fn, args, os.getpid()), name=f"gslam {what}", daemon=True)
         self.process.start()
         child_conn.close()
 

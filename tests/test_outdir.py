@@ -175,6 +175,20 @@ def test_containers_are_marked_first_and_reopened(tmp_path):
 # --- a killed run --------------------------------------------------------------------
 
 
+def _processes_naming(path) -> list[int]:
+    """Live processes whose command line names ``path`` (Linux /proc)."""
+    found = []
+    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+        try:
+            text = cmdline.read_bytes().decode(errors="replace")
+            state = (cmdline.parent / "stat").read_text().split(")")[-1].split()[0]
+        except OSError:
+            continue
+        if str(path) in text and state != "Z":
+            found.append(int(cmdline.parent.name))
+    return found
+
+
 def test_a_killed_map_leaves_a_temp_folder_the_next_run_removes(short_run, tmp_path, capsys):
     out = tmp_path / "map"
     argv = ["map", str(short_run.run_dir), "--config", str(TELEMAX_CONFIG), "--out", str(out)]
@@ -183,10 +197,16 @@ def test_a_killed_map_leaves_a_temp_folder_the_next_run_removes(short_run, tmp_p
     deadline = time.monotonic() + 60
     while not list(tmp_path.glob(".map.gslam-tmp-*")) and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)
+    while len(_processes_naming(out)) < 2 and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)  # the scan matcher's process has started
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     left = list(tmp_path.glob(".map.gslam-tmp-*"))
     assert left and not out.exists()  # killed mid-run: no result, a marked temporary folder
+    deadline = time.monotonic() + 10
+    while _processes_naming(out) and time.monotonic() < deadline:  # its helper processes end with it
+        time.sleep(0.05)
+    assert not _processes_naming(out)
     assert main(["-q", *argv]) == 0
     capsys.readouterr()
     assert listing(tmp_path) == {"map"}
