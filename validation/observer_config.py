@@ -164,8 +164,15 @@ class GpsCheckConfig(_Strict):
 
 
 class ObserversConfig(_Strict):
-    """All observers; ``max_gap_s`` is the largest gap (s) between samples a
-    step may be interpolated across, ``stream_max_gap_s`` overrides it.
+    """All observers. ``max_gap_s`` is the largest gap (s) between samples a
+    step may be interpolated across; a sparse stream may bridge up to
+    ``gap_periods`` of its own median sample period instead (null: never),
+    and ``stream_max_gap_s`` sets a stream's gap outright
+    (:func:`validation.streams.stream_max_gap`).
+
+    ``min_coverage``: an observer with a valid observation on a smaller
+    share of the steps is reported with a warning that says why
+    (:mod:`validation.coverage`).
 
     ``window``: the trend windows of Algorithm 2, ``centred`` on each sample
     (the paper's; it needs the samples after it, so offline validation only)
@@ -180,7 +187,9 @@ class ObserversConfig(_Strict):
     magnetometer: MagnetometerCheckConfig = MagnetometerCheckConfig()
     gps: GpsCheckConfig = GpsCheckConfig()
     max_gap_s: float = Field(0.5, gt=0.0)
+    gap_periods: float | None = Field(3.0, gt=0.0)
     stream_max_gap_s: dict[str, float] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
+    min_coverage: float = Field(0.25, ge=0.0, le=1.0)
     gps_speed_window_s: float = Field(5.0, gt=0.0)
 
     @model_validator(mode="after")

@@ -291,9 +291,11 @@ def run_observers(
     window: Window = "trailing",
     rule: Rule = "paper",
     offline: bool = False,
+    gap_periods: float | None = None,
 ) -> ObserverLog:
-    """Resample ``streams`` onto ``step_times`` (s) and run every observer."""
-    steps = resample_streams(streams, step_times, max_gap_s, stream_max_gap_s)
+    """Resample ``streams`` onto ``step_times`` (s) and run every observer;
+    the gaps as :func:`validation.streams.resample_streams` judges them."""
+    steps = resample_streams(streams, step_times, max_gap_s, stream_max_gap_s, gap_periods)
     return observe_steps(steps, relations, unary, window, rule, offline)
 
 
