@@ -198,6 +198,8 @@ def read_recording(path: str | Path, config: InputConfig) -> Recording:
     fmt = guess_format(path) if config.format == "auto" else config.format
     if fmt not in READERS:
         raise GslamError(f"unknown input format '{fmt}'; known: {', '.join(READERS)}")
+    if fmt != "rosbag" and not config.frames.is_default():
+        raise GslamError(f"input.frames: a {fmt} recording has fixed frame conventions; frames apply to ROS bags")
     if not is_run_folder(path):
         return READERS[fmt].read(path, config)
 
