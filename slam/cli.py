@@ -26,6 +26,7 @@ examples:
   gslam map runs/lab --config configs/telemax.yaml --out runs/lab_isam2 --set backend.optimizer=isam2
   gslam map recording.bag --config my_robot.yaml --out runs/real --set input.topics.scan=/base_scan
   gslam compare runs/lab --config configs/telemax.yaml --out runs/lab_compare
+  gslam inject recording.bag --config my_robot.yaml --fault dipole@100:120 --out runs/with_dipole
   gslam ablate configs/ablations/gating_policy.yaml --out runs/ablate_gating --workers 2
 
 paths starting with configs/ that do not exist in the working folder name
@@ -35,7 +36,7 @@ the configs shipped with gslam, so these examples work from any folder.
 INPUTS = """\
 recording to read; its format is recognised from the path: a ROS 1 .bag
 file, a ROS 2 bag (folder with metadata.yaml, or a .db3 or .mcap file), a
-simulated run folder (truth.json + bag/, from gslam simulate), a CARMEN
+run folder (truth.json + bag/, from gslam simulate or inject), a CARMEN
 .log or .log.gz, a BROAD trial .mat, or a libRSF *_Input.txt"""
 
 OUTPUT_RULE = """\
@@ -61,6 +62,21 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         if intervals:
             spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals)
             print(f"  true faults {comp}: {spans}")
+    return 0
+
+
+def _cmd_inject(args: argparse.Namespace) -> int:
+    from slam.config import load_config
+    from slam.inject import inject
+
+    config_path = _config_path(args.config)
+    config = load_config(config_path)
+    res = inject(args.input, args.fault or [], args.out, config.input,
+                 inputs=[config_path] if config_path is not None else [], force=args.force)
+    print(f"wrote {res.run_dir} ({res.duration_s:.1f} s, the input with the faults added; truth.json beside it)")
+    for comp, intervals in sorted(res.injected.items()):
+        spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals) or "none beyond the nominal noise"
+        print(f"  injected faults {comp}: {spans}")
     return 0
 
 
@@ -216,6 +232,23 @@ def build_parser() -> argparse.ArgumentParser:
     _add_out(s, "run folder to create (bag/, truth.json, scenario.yaml)", required=True)
     s.add_argument("--seed", type=_seed, default=None, help="random seed (default: the scenario's)")
     s.set_defaults(func=_cmd_simulate)
+
+    j = _sub(sub, "inject", "add physically modelled faults to a recording; write it with its true fault intervals",
+             "examples:\n  gslam inject $GSLAM_DATA/carmen/aces-corrected.log.gz --fault laser_cut@300:500,range_m=4 "
+             "--out runs/aces_cut\n  gslam inject $GSLAM_DATA/rosbag/test1_husky_2015.bag --config configs/datasets/husky.yaml "
+             "--fault dipole@100:120,moment_A_m2=2000,distance_m=3 --out runs/husky_dipole\n"
+             "  gslam map runs/aces_cut --config configs/datasets/carmen.yaml --out runs/aces_cut_map --gating on\n\n"
+             "fault kinds (times in s from the recording's start; parameters in slam/inject/spec.py):\n"
+             "  dipole@T0:T1[,moment_A_m2=500,distance_m=2,side=left,height_m=0,azimuth_deg=90,target=auto,label_deg=5]\n"
+             "  laser_cut@T0:T1[,range_m=4]   gyro_bias@T0:T1[,bias_deg_s=2]   slip@T0:T1[,scale=1.5,yaw_scale=1]\n"
+             "  multipath@T0:T1[,bias_m=8,azimuth_deg=0]\n\n" + OUTPUT_RULE, common)
+    j.add_argument("input", help="recording to add faults to: a ROS 1 .bag or ROS 2 bag, a run folder "
+                   "(truth.json + bag/), a CARMEN .log or .log.gz, or a BROAD trial .mat")
+    j.add_argument("--config", default=None, help="pipeline config YAML whose input section reads the recording "
+                   "(topics, frames; default: the built-in defaults)")
+    j.add_argument("--fault", action="append", metavar="KIND@T0:T1[,param=value]", help="a fault to add (repeatable)")
+    _add_out(j, "run folder to create (bag/ with the recording, truth.json)", required=True)
+    j.set_defaults(func=_cmd_inject)
 
     i = _sub(sub, "inspect", "list what a recording holds (topics, types, counts, rates, time span); "
              "write a starter config for gslam map",

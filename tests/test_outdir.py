@@ -217,10 +217,11 @@ def commands(short_run, short_scenario_yaml, tmp_path):
         "compare": ["compare", short_run.run_dir, "--config", TELEMAX_CONFIG, "--only", "ungated", *quick, "--out"],
         "demo": ["demo", "--scenario", short_scenario_yaml, "--only", "ungated", "--out"],
         "ablate": ["ablate", spec, "--workers", "1", "--out"],
+        "inject": ["inject", short_run.run_dir, "--fault", "gyro_bias@2:4", "--out"],
     }
 
 
-@pytest.mark.parametrize("command", ["simulate", "map", "compare", "demo", "ablate"])
+@pytest.mark.parametrize("command", ["simulate", "map", "compare", "demo", "ablate", "inject"])
 def test_out_rule_for_every_command(command, commands, tmp_path, capsys):
     argv = commands[command]
     out = tmp_path / "out"
