@@ -9,8 +9,9 @@ Each (scenario, seed) is simulated once into ``OUT/inputs/`` and mapped with
 every variant of ``configs/variants.yaml`` (the recording read and
 scan-matched once, as ``gslam compare`` does). One row per run and variant
 goes to ``OUT/results.csv``; finished (scenario, seed) pairs are skipped when
-the command runs again with the same config, variants and overrides.
-``OUT/summary.md`` has, per faulty scenario, the median and worst ATE of
+the command runs again with the same config, variants, overrides and code.
+Each variant's result folder is ``OUT/maps-KEY/<scenario>-seed<N>/<variant>/``,
+KEY naming the config, variants and overrides. ``OUT/summary.md`` has, per faulty scenario, the median and worst ATE of
 each variant, the ratio of gated to the best robust kernel (the kernel with
 the lowest median ATE on that scenario; per seed against that kernel's run
 on the same seed) and to the tight oracle; per twin, gated against ungated
@@ -82,7 +83,9 @@ def _flat(metrics: dict) -> dict:
     return row
 
 
-def run_one(scenario: str, seed: int, config: str, variants: dict[str, list[str]], overrides: list[str], out: str) -> list[dict]:
+def run_one(
+    scenario: str, seed: int, config: str, variants: dict[str, list[str]], overrides: list[str], out: str, key: str
+) -> list[dict]:
     """Simulate (if needed) and map one seed of one scenario with every variant."""
     from slam.sim import simulate
 
@@ -96,7 +99,7 @@ def run_one(scenario: str, seed: int, config: str, variants: dict[str, list[str]
         cfg = load_config(config, [*overrides, *ov, "output.plots=false"])
         if frontend_cfg is not None and cfg.frontend != frontend_cfg:
             frontend = None
-        pipe = MappingPipeline(run_dir, cfg, out_dir / "maps" / f"{scenario}-seed{seed}" / name,
+        pipe = MappingPipeline(run_dir, cfg, out_dir / f"maps-{key}" / f"{scenario}-seed{seed}" / name,
                                recording=recording, frontend=frontend)
         res = pipe.run()
         recording, frontend, frontend_cfg = pipe.recording, pipe.frontend, cfg.frontend
@@ -105,7 +108,12 @@ def run_one(scenario: str, seed: int, config: str, variants: dict[str, list[str]
 
 
 def _key(config: str, variants: dict, overrides: list[str]) -> str:
+    """Names the results: the config, the variants, the overrides and the
+    code (every module and config of the package), so a change of any
+    gives new runs."""
     text = Path(config).read_text() + json.dumps(variants, sort_keys=True) + json.dumps(overrides)
+    for path in sorted([*REPO.glob("slam/**/*.py"), *REPO.glob("validation/*.py"), *REPO.glob("configs/**/*.yaml")]):
+        text += path.read_text()
     return hashlib.sha1(text.encode()).hexdigest()[:10]
 
 
@@ -222,7 +230,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(todo)} runs to do, {len(done)} done ({results})", flush=True)
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        futures = {pool.submit(run_one, s, i, args.config, variants, args.set, str(out)): (s, i) for s, i in todo}
+        futures = {pool.submit(run_one, s, i, args.config, variants, args.set, str(out), key): (s, i) for s, i in todo}
         for fut in as_completed(futures):
             s, i = futures[fut]
             try:

@@ -8,6 +8,10 @@ solves once; iSAM2 adds one step at a time as it would run on the robot.
 Each factor's noise is scaled per step by a *weight* (a sigma multiplier)
 that sensor validation decides: 1 keeps the configured noise, k > 1
 inflates it, ``inf`` excludes the factor.
+
+Loop closures (slam.loops) join the step of their later keyframe as
+between factors to the earlier one. With loops, GNC can serve as the
+optimiser-level fallback: every factor but the loops is a known inlier.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from slam.factors import (
     yaw_only_noise,
     yaw_prior_factor,
 )
+from slam.loops.factors import LoopFactors, loop_factor
 from slam.measurements import FACTOR_DOFS, FACTOR_TYPES, Measurements, RelativeConstraint
 from slam.recording import Trajectory
 
@@ -114,6 +119,7 @@ class GraphBuilder:
         weights: FactorWeights,
         config: BackendConfig,
         constraints: Sequence[RelativeConstraint] = (),
+        loops: LoopFactors | None = None,
     ):
         self.meas = meas
         self.weights = {f: dof_weights(w, f) for f, w in weights.items()}
@@ -126,6 +132,10 @@ class GraphBuilder:
             if not 0 <= c.i < len(meas) or not 0 <= c.j < len(meas) or c.i == c.j:
                 raise ValueError(f"constraint {c.label} {c.i}->{c.j}: keyframes out of range or equal")
             self.constraints.setdefault(max(c.i, c.j), []).append(c)
+        self.loops = loops
+        self._loops_at = loops.by_keyframe() if loops is not None else {}
+        if loops is not None:
+            self.counts["loop"] = 0
 
     def _weight(self, factor: str, k: int) -> np.ndarray:
         w = self.weights.get(factor)
@@ -178,6 +188,19 @@ class GraphBuilder:
             noise = gaussian(c.sigma, self.robust.get(c.kind))
             out.append(gtsam.BetweenFactorPose2(pose_key(c.i), pose_key(c.j), gtsam.Pose2(*c.delta), noise))
             self.counts[c.label] = self.counts.get(c.label, 0) + 1
+        return out + self.loop_factors(k)
+
+    def loops_at(self, k: int) -> list:
+        """The loop constraints whose later keyframe is ``k``."""
+        return self._loops_at.get(k, [])
+
+    def loop_factors(self, k: int) -> list[gtsam.NonlinearFactor]:
+        """The loop factors that end at keyframe ``k``."""
+        lf = self.loops
+        out = []
+        for lp in self.loops_at(k):
+            out.append(loop_factor(lp, lf.robust, lf.inflation.get(lp.id, 1.0)))
+            self.counts["loop"] += 1
         return out
 
     def _patched(self, factor: str, k: int, w: np.ndarray, relative: dict[str, np.ndarray]) -> np.ndarray:
@@ -243,6 +266,28 @@ def _optimise_batch(graph, initial, config: BackendConfig, anchor_index: int):
     return result, optimizer.iterations()
 
 
+def _closed_at(start: gtsam.Pose2, loop, predicted: gtsam.Pose2) -> gtsam.Pose2:
+    """Where ``loop`` puts its later keyframe, seen from its earlier one at
+    ``start``. A loop that says nothing of the yaw leaves the ``predicted``
+    pose: moving the position alone would break the dead reckoning that
+    follows (measured on libRSF Corridor: ATE 2.1 m from the prediction,
+    9.6 m with the positions moved)."""
+    if loop.information[2, 2] == 0.0:
+        return predicted
+    return start.compose(gtsam.Pose2(*loop.delta))
+
+
+def _optimise_gnc_loops(graph, initial, loop_indices: list[int]):
+    """GNC (truncated least squares) where only loop factors may be outliers:
+    every other factor, the anchor included, is a known inlier."""
+    params = gtsam.GncLMParams()
+    params.setLossType(gtsam.GncLossType.TLS)
+    loops = set(loop_indices)
+    params.setKnownInliers([k for k in range(graph.size()) if k not in loops])
+    optimizer = gtsam.GncLMOptimizer(graph, initial, params)
+    return optimizer.optimize(), 0
+
+
 def optimise(
     meas: Measurements,
     initial_pose: np.ndarray,
@@ -252,6 +297,7 @@ def optimise(
     isam2_params: gtsam.ISAM2Params | None = None,
     constraints: Sequence[RelativeConstraint] = (),
     marginals: bool = False,
+    loops: LoopFactors | None = None,
 ) -> BackendResult:
     """Build the keyframe graph and optimise it (batch, GNC or iSAM2).
 
@@ -261,9 +307,12 @@ def optimise(
     ``constraints``: between factors over any two keyframes, added at the
     later one. ``marginals``: also return the estimate's marginal
     covariances (:class:`gtsam.Marginals`; batch optimisers only).
+    ``loops``: loop closures to add. A keyframe that closes a loop starts
+    where the loop puts it, not where dead reckoning does (far off after a
+    long drift, too far for Levenberg-Marquardt).
     """
     n = len(meas)
-    builder = GraphBuilder(meas, weights if weights is not None else unit_weights(n), config, constraints)
+    builder = GraphBuilder(meas, weights if weights is not None else unit_weights(n), config, constraints, loops)
     steps = range(n)
     if progress:
         from tqdm import tqdm
@@ -278,14 +327,24 @@ def optimise(
     graph, initial = gtsam.NonlinearFactorGraph(), gtsam.Values()
     graph.add(builder.anchor(initial_pose))
     pose = gtsam.Pose2(*initial_pose)
+    loop_indices = []
     for k in steps:
         if k > 0:
             pose = builder.predict(k, pose)
+            if closing := builder.loops_at(k):
+                pose = _closed_at(initial.atPose2(pose_key(closing[0].i)), closing[0], pose)
         initial.insert(pose_key(k), pose)
-        for factor in builder.step(k):
+        n_loops = len(builder.loops_at(k))
+        factors = builder.step(k)
+        for factor in factors:
             graph.add(factor)
+        # The loop factors are the last ones of their step.
+        loop_indices.extend(range(graph.size() - n_loops, graph.size()))
     built = time.perf_counter()
-    result, iterations = _optimise_batch(graph, initial, config, anchor_index=0)
+    if loops is not None and loops.gnc and loop_indices and config.optimizer == "batch":
+        result, iterations = _optimise_gnc_loops(graph, initial, loop_indices)
+    else:
+        result, iterations = _optimise_batch(graph, initial, config, anchor_index=0)
     done = time.perf_counter()
     if builder.fallback_steps:
         log.info("%d steps had every relative factor of a degree of freedom excluded; kept one inflated",
@@ -333,6 +392,10 @@ def _optimise_isam2(
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         if k == 0:
             graph.add(builder.anchor(initial_pose))
+        elif loops_here := builder.loops_at(k):
+            # A loop says where k is: start it there, from the current
+            # estimate of the keyframe it closes on.
+            latest = _closed_at(isam.calculateEstimatePose2(pose_key(loops_here[0].i)), loops_here[0], builder.predict(k, latest))
         else:
             latest = builder.predict(k, latest)
         values.insert(pose_key(k), latest)

@@ -171,7 +171,7 @@ def _run_variants(
 
 def _figures(out: Path, results: dict[str, MapResult], recording) -> None:
     from slam.plots import fault_shading, plot_trajectories
-    from validation.figures import plot_observer_alarms, plot_yaw_trends
+    from slam.validation_figures import plot_observer_alarms, plot_yaw_trends
 
     shaded = fault_shading(recording.faults)
     trajectories = {name: r.trajectory for name, r in results.items()}

@@ -24,6 +24,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from slam.errors import GslamError
+from slam.loops.config import LoopsConfig
 from slam.io.yamlfile import check_finite, load_yaml, non_finite, read_text_file, yaml_number
 
 __all__ = [  # the YAML helpers are used through this module too
@@ -186,8 +187,14 @@ class FactorConfig(Strict):
 
 
 class OdometryFactorConfig(FactorConfig):
-    """Between factor from track odometry; sigma grows with the step length."""
+    """Between factor from track odometry; sigma grows with the step length.
 
+    ``learn_scale``: with validation on (or an oracle), where the scan
+    matcher's forward motion is gated, the odometry's distance is corrected
+    by its scale against scan matching, learnt over the stretches where
+    validation keeps both; see :mod:`slam.selfcal`."""
+
+    learn_scale: bool = False
     sigma_xy_m: float = Field(0.01, gt=0.0)
     sigma_xy_per_m: float = Field(0.05, ge=0.0)
     sigma_yaw_deg: float = Field(0.5, gt=0.0)
@@ -303,6 +310,7 @@ class PipelineConfig(Strict):
     backend: BackendConfig = BackendConfig()
     evaluation: EvaluationConfig = EvaluationConfig()
     output: OutputConfig = OutputConfig()
+    loops: LoopsConfig = LoopsConfig()
     validation: dict[str, Any] = Field(default_factory=lambda: _section_defaults()[0])
     gating: dict[str, Any] = Field(default_factory=lambda: _section_defaults()[1])
 
@@ -417,6 +425,10 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
         raise GslamError(describe_validation_error(who, e)) from None
     try:
         vcfg, gcfg = _parse_sections(config.validation, config.gating)
+        if config.loops.enabled and vcfg.mode == "on":
+            from validation.loop_gating import check_model
+
+            check_model(vcfg.model)
     except SectionError as e:
         raise GslamError(f"{_blame(source, applied, _section_error_key(str(e)))}: {e}") from None
     # The checked sections, every default spelled out (validate_assignment

@@ -1,5 +1,6 @@
 """One recorded run, end to end: read, scan matching, keyframes,
-measurements, validation, graph optimisation, evaluation, results.
+measurements, validation, loop closing, graph optimisation, evaluation,
+results.
 
 :class:`MappingPipeline.run` reads like the table of contents; every step is
 a method. The result folder follows :mod:`slam.io.outdir`: ``--out`` is
@@ -20,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from slam.backend import BackendResult, FactorWeights, optimise, unit_weights
+from slam.backend import BackendResult, FactorWeights, dof_weights, optimise, unit_weights
 from slam.config import PipelineConfig, dump_config
 from slam.errors import GslamError
 from slam.frontend import FrontendResult, ScanProjector, run_frontend
@@ -47,6 +48,7 @@ class _Timings:
     read_s: float = 0.0
     frontend_s: float = 0.0
     validation_s: float = 0.0
+    loops_s: float = 0.0
     graph_build_s: float = 0.0
     optimise_s: float = 0.0
     write_s: float = 0.0
@@ -89,6 +91,9 @@ class MappingPipeline:
         self.weights: FactorWeights | None = None
         self.constraints: list = []
         self.backend: BackendResult | None = None
+        self.loop_search = None
+        self.loop_observation = None
+        self.loop_factors = None
         self.metrics: dict[str, Any] = {}
         self.extra_metrics: dict[str, Any] = {}
         self.extra_outputs: dict[str, str] = {}
@@ -102,6 +107,9 @@ class MappingPipeline:
             self.match_scans()
             self.build_measurements()
             self.validate()
+            self.learn_odometry_scale()
+            self.second_pass()
+            self.close_loops()
             self.optimise()
             self.evaluate()
             self.write(tmp)
@@ -162,8 +170,7 @@ class MappingPipeline:
 
     def validate(self) -> None:
         """Gate the factors per keyframe and degree of freedom
-        (``validation.mode``: on, oracle or interval_oracle); offline, also
-        the second pass (:mod:`slam.recheck`)."""
+        (``validation.mode``: on, oracle or interval_oracle)."""
         from slam.config import validation_sections
         from slam.measurements import FACTOR_DOFS
 
@@ -188,13 +195,40 @@ class MappingPipeline:
         self.timings.validation_s = self.validation.time_s
         self.extra_metrics.update(self.validation.metrics)
         self.extra_outputs["validation.csv"] = self.validation.csv_text()
-        if vcfg.mode == "on" and vcfg.offline:
-            self.second_pass(gcfg)
 
-    def second_pass(self, gating) -> None:
-        """Keep the blamed measurements that agree with the other sensors."""
+    def learn_odometry_scale(self) -> None:
+        """With ``backend.factors.odometry.learn_scale`` and validation on
+        (or an oracle), the odometry stands in for the scan matcher with the
+        scan matcher's scale: its distance is corrected by the scale learnt
+        where validation keeps both (:mod:`slam.selfcal`), on the steps where
+        the scan matcher's forward motion is gated. Elsewhere the graph fuses
+        the two as they are. Without validation nothing says where the scan
+        matcher can be trusted, and nothing is learnt."""
+        from slam.config import validation_sections
+        from slam.selfcal import odometry_scale
+
+        odo, sm = self.measurements.odometry, self.measurements.scan_matching
+        if not self.config.backend.factors.odometry.learn_scale or odo is None or sm is None:
+            return
+        if validation_sections(self.config)[0].mode == "off":
+            return
+        est = odometry_scale(self.measurements, self.weights)
+        stand_in = dof_weights(self.weights["scan_matching"], "scan_matching")[:, 0] > 1.0
+        odo.delta[stand_in, :2] *= est.scale
+        self.extra_metrics["odometry_scale"] = {
+            "scale": round(est.scale, 5), "windows": est.windows, "spread": round(est.spread, 5),
+            "steps_corrected": int(stand_in.sum()),
+        }
+
+    def second_pass(self) -> None:
+        """Offline validation's second pass: keep the blamed measurements
+        that agree with the other sensors (:mod:`slam.recheck`)."""
+        from slam.config import validation_sections
         from slam.recheck import recheck
 
+        vcfg, gating = validation_sections(self.config)
+        if vcfg.mode != "on" or not vcfg.offline:
+            return
         t = time.perf_counter()
         result = recheck(self.measurements, self.weights, self._initial_pose(), self.config.backend, gating)
         self.weights = result.weights
@@ -214,6 +248,76 @@ class MappingPipeline:
         self.extra_metrics.update(oracle.metrics())
         self.extra_outputs["validation.csv"] = oracle.csv_text()
 
+    def close_loops(self) -> None:
+        """Find loop closures, check them (loop observer, LOOP in the
+        diagnosis with validation on, ground truth in oracle mode) and keep
+        the ones that pass; see slam.loops and validation.loops."""
+        cfg = self.config.loops
+        if not cfg.enabled:
+            return
+        from slam.backend import _robust_kernel
+        from slam.loops.factors import LoopFactors
+        from validation.loops import observe_loops
+
+        start = time.perf_counter()
+        self.loop_search = search = self.find_loops()
+        obs = observe_loops(search.chain, search.loops, cfg.observer)
+        self._gate_loops(obs)
+        self.loop_observation = obs
+        kernel = cfg.robust_kernel if cfg.robust_kernel is not None else self.config.backend.robust_kernel
+        param = cfg.robust_param if cfg.robust_param is not None else self.config.backend.robust_param
+        self.loop_factors = LoopFactors(obs.accepted, _robust_kernel(kernel, param), cfg.gnc, obs.inflation)
+        self.timings.loops_s = time.perf_counter() - start
+        self.extra_outputs["loops.csv"] = self._loops_csv()
+        if self.validation is not None:
+            self.extra_outputs["validation.csv"] = self.validation.csv_text()
+
+    def find_loops(self):
+        """The loops of this run before they are checked (slam.loops.search)."""
+        from slam.loops.search import find_loops
+
+        return find_loops(self.recording, self.measurements, self.weights, self.config, self._initial_pose())
+
+    def _gate_loops(self, obs) -> None:
+        from slam.config import validation_sections
+        from validation.loop_gating import gate_loops, oracle_loops
+
+        vcfg, gcfg = validation_sections(self.config)
+        if vcfg.mode == "oracle":
+            truth = self._keyframe_truth()
+            if truth is None:
+                log.info("oracle gating without ground truth: loops are kept as the loop observer decided")
+                return
+            ev = self.config.evaluation
+            oracle_loops(obs, truth, ev.sm_fault_trans_m, np.radians(ev.sm_fault_yaw_deg))
+        elif vcfg.mode == "on":
+            step_t = self.validation.step_t
+            gated = gate_loops(obs, step_t, self.measurements.t, vcfg.model, gcfg, vcfg.offline)
+            self.validation.extra_columns.update(gated.columns())
+
+    def _keyframe_truth(self) -> np.ndarray | None:
+        rec = self.recording
+        return None if rec.groundtruth is None else interpolate_poses(rec.groundtruth, self.measurements.t)
+
+    def _loops_csv(self) -> str:
+        """One row per loop: where, what, how well verified, and the decision."""
+        import csv
+        import io
+
+        t = self.measurements.t
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(["id", "i", "j", "t_i", "t_j", "source", "dx_m", "dy_m", "dyaw_deg", "quality", "chain_chi2", "decision", "reason"])
+        for v in self.loop_observation.verdicts:
+            lp = v.loop
+            quality = " ".join(f"{k}={val}" for k, val in lp.quality.items())
+            w.writerow([
+                lp.id, lp.i, lp.j, round(float(t[lp.i]), 4), round(float(t[lp.j]), 4), lp.source,
+                round(float(lp.delta[0]), 4), round(float(lp.delta[1]), 4), round(float(np.degrees(lp.delta[2])), 3),
+                quality, v.chain_chi2, "accepted" if v.accepted else "rejected", v.reason,
+            ])
+        return buf.getvalue()
+
     def optimise(self) -> None:
         pose0 = self._initial_pose()
         # Building the batch graph takes milliseconds: a bar would only ever
@@ -221,7 +325,7 @@ class MappingPipeline:
         progress = self.progress and self.config.backend.optimizer == "isam2"
         self.backend = optimise(
             self.measurements, pose0, self.config.backend, self.weights, progress=progress,
-            constraints=self.constraints,
+            constraints=self.constraints, loops=self.loop_factors,
         )
         self.timings.graph_build_s = self.backend.build_time_s
         self.timings.optimise_s = self.backend.optimise_time_s
@@ -236,8 +340,32 @@ class MappingPipeline:
             m.update(evaluate(est, rec.groundtruth, ev.rpe_deltas_m, ev.max_time_offset_s))
         m["factor_counts"] = self.backend.factor_counts
         m["fallback_steps"] = self.backend.fallback_steps
+        if self.loop_observation is not None:
+            m["loops"] = self._loop_metrics()
         m.update(self.extra_metrics)
         self.metrics = m
+
+    def _loop_metrics(self) -> dict[str, Any]:
+        """Counts of loops by decision, detection's work, and, with ground
+        truth, how many kept loops are wrong and rejected ones right."""
+        search, obs = self.loop_search, self.loop_observation
+        out: dict[str, Any] = {"source": search.source, **obs.counts}
+        det = search.detection
+        if det is not None:
+            out.update(places=len(det.places), candidates=det.candidates, registrations=det.registrations)
+            out["verification_rejected"] = dict(sorted(det.rejected.items()))
+        out["clique_proven"] = obs.clique_proven
+        out["chain_scale"] = round(obs.chain_scale, 3)
+        truth = self._keyframe_truth()
+        if truth is not None:
+            from validation.loop_gating import loop_is_true
+
+            ev = self.config.evaluation
+            ok = [loop_is_true(v.loop, truth, ev.sm_fault_trans_m, np.radians(ev.sm_fault_yaw_deg)) for v in obs.verdicts]
+            out["true_found"] = int(sum(ok))
+            out["wrong_accepted"] = int(sum(1 for v, good in zip(obs.verdicts, ok) if v.accepted and not good))
+            out["true_rejected"] = int(sum(1 for v, good in zip(obs.verdicts, ok) if not v.accepted and good))
+        return out
 
     def write(self, folder: Path) -> None:
         """Write the results into ``folder`` (the temporary folder that is
@@ -288,6 +416,7 @@ class MappingPipeline:
             "read": round(tm.read_s, 4),
             "frontend": round(tm.frontend_s, 4),
             "validation": round(tm.validation_s, 4),
+            "loops": round(tm.loops_s, 4),
             "graph_build": round(tm.graph_build_s, 4),
             "optimise": round(tm.optimise_s, 4),
             "write": round(tm.write_s, 4),

@@ -139,13 +139,25 @@ class MagneticReference:
 
 
 @dataclass
+class PlaceMatches:
+    """Loop closures a recording lists (e.g. libRSF ``loop`` lines): at
+    ``t`` the robot is back where it was at ``t_other`` (n,) s, with a
+    place-recognition ``weight`` (n,) (similarity, higher is surer)."""
+
+    t: np.ndarray
+    t_other: np.ndarray
+    weight: np.ndarray
+
+
+@dataclass
 class Recording:
     """One run: every stream is optional, since real robots differ.
 
     ``odometry`` is the pose integrated by the robot's odometry in its own
     ``odom`` frame. ``faults`` maps a component name to the intervals (s, in
     the recording's time) where its output is physically wrong beyond its
-    nominal noise; it is known only for simulated runs.
+    nominal noise; it is known only for simulated runs. ``place_matches``:
+    loop closures the recording lists, if any.
     """
 
     name: str
@@ -158,6 +170,7 @@ class Recording:
     groundtruth: Trajectory | None = None
     faults: dict[str, list[Interval]] = field(default_factory=dict)
     magnetic_reference: MagneticReference | None = None
+    place_matches: PlaceMatches | None = None
 
     @property
     def duration(self) -> float:

@@ -116,7 +116,7 @@ def test_list_overrides_reach_load_config():
     cfg = load_config(TELEMAX_CONFIG, strings)
     rel = {r["name"]: r["threshold"] for r in cfg.validation["observers"]["relations"]}
     assert rel["yaw_compass_gyro"] == rel["yaw_odo_gyro"] == 4
-    assert rel["distance_odo_sm"] == rel["speed_gps_odo"] == 10
+    assert rel["speed_gps_odo"] == 10 and rel["distance_odo_sm_res"] == 5
     assert cfg.gating["inflation"] == 3.5
 
 

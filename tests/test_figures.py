@@ -9,9 +9,9 @@ import numpy as np
 from matplotlib.colors import to_hex
 
 import slam.plots
-import validation.figures
+import slam.validation_figures
 from slam.plots import fault_shading, plot_trajectories
-from validation.figures import plot_observer_alarms
+from slam.validation_figures import plot_observer_alarms
 
 
 def capture(monkeypatch) -> list:
@@ -19,7 +19,7 @@ def capture(monkeypatch) -> list:
     the session's maps are made: they must write their figures.)"""
     figures: list = []
     monkeypatch.setattr(slam.plots, "save_figure", lambda fig, path: figures.append(fig))
-    monkeypatch.setattr(validation.figures, "save_figure", lambda fig, path: figures.append(fig))
+    monkeypatch.setattr(slam.validation_figures, "save_figure", lambda fig, path: figures.append(fig))
     return figures
 
 

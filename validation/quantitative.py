@@ -24,9 +24,9 @@ that changes slowly (the gyro's bias). The difference ``d = b - gain * a``
 is compared with its own level, learnt from the steps that agree with it
 (a disturbance does not drag the level along): offline, the median of
 ``d`` over a window of ``level_window_s`` centred on the step (a steady
-drift has no lag there; near the ends of the data the window is shifted
-inwards, not cut), taken again over the steps within ``k_sigma *
-sigma_floor`` of the first median; causal, over the agreeing steps of the
+drift has no lag there), taken again over the steps within ``k_sigma *
+sigma_floor`` of the first, and within half a window of the ends of the
+data continued along the slope of the levels inside; causal, over the agreeing steps of the
 trailing window, the median of its recent half extrapolated to the step
 with the slope between the medians of its two halves (a steady drift would
 lag by half a window otherwise), held while no step agrees. Windows do not
@@ -131,18 +131,37 @@ def running_level(
             if valid[k]:
                 out[k] = level.update(t[k], d[k])
         return out
-    eps = _TOL * window_s
-    for k in np.flatnonzero(valid):
-        same = run == run[k]
-        # A full-length window also near the ends of the data: shifted
-        # inwards, not truncated, so a disturbance never fills half of it.
-        lo, hi = t[same][0], t[same][-1]
-        start = min(max(t[k] - 0.5 * window_s, lo), max(hi - window_s, lo))
-        sel = same & (t >= start - eps) & (t <= start + window_s + eps)
-        first = float(np.median(d[sel]))
-        agree = sel & (np.abs(d - first) <= tolerance)
-        out[k] = float(np.median(d[agree])) if agree.any() else first
+    for r in np.unique(run[valid]):
+        idx = np.flatnonzero((run == r) & valid)
+        out[idx] = _centred_level(t[idx], d[idx], window_s, tolerance)
     return out
+
+
+def _centred_level(t: np.ndarray, d: np.ndarray, window_s: float, tolerance: float) -> np.ndarray:
+    """Level of one unbroken run: the median over each step's centred window,
+    again over the steps within ``tolerance`` of it. Within half a window of
+    the run's ends a centred window would be cut short, and a disturbance
+    could fill half of it: there the level goes on along the slope the
+    interior levels had over the last half window."""
+    half = 0.5 * window_s
+    eps = _TOL * window_s
+    a = np.searchsorted(t, t - half - eps, side="left")
+    b = np.searchsorted(t, t + half + eps, side="right")
+    level = np.empty(len(t))
+    for k, (i, j) in enumerate(zip(a, b)):
+        first = float(np.median(d[i:j]))
+        near = d[i:j][np.abs(d[i:j] - first) <= tolerance]
+        level[k] = float(np.median(near)) if len(near) else first
+    interior = (t - t[0] >= half - eps) & (t[-1] - t >= half - eps)
+    if not interior.any():
+        return np.full(len(t), float(np.median(d)))
+    inner = np.flatnonzero(interior)
+    for edge, sign in ((inner[0], 1.0), (inner[-1], -1.0)):
+        ref = int(np.clip(np.searchsorted(t, t[edge] + sign * half), inner[0], inner[-1]))
+        slope = (level[ref] - level[edge]) / (t[ref] - t[edge]) if t[ref] != t[edge] else 0.0
+        outside = t < t[edge] if sign > 0 else t > t[edge]
+        level[outside] = level[edge] + slope * (t[outside] - t[edge])
+    return level
 
 
 def offset_test(rel: RelationConfig, d: np.ndarray, level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -18,7 +18,7 @@ import io
 import logging
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -40,7 +40,8 @@ Interval = tuple[float, float]
 class ValidationOutcome:
     """Everything validation decided, per validation step, and the weights
     per keyframe, factor type and degree of freedom (sigma multipliers,
-    (K, dofs); ``inf`` excludes)."""
+    (K, dofs); ``inf`` excludes). ``extra_columns``: more per-step columns
+    for the log (the loop observer's, validation.loops)."""
 
     step_t: np.ndarray
     observer_log: ObserverLog | None
@@ -52,6 +53,7 @@ class ValidationOutcome:
     metrics: dict
     time_s: float
     sm_poses: PoseSeries | None = None
+    extra_columns: dict[str, list] = field(default_factory=dict)
 
     def csv_text(self) -> str:
         """The per-step log: trends, counters, observations, diagnoses, decisions."""
@@ -66,6 +68,7 @@ class ValidationOutcome:
         for factor in sorted(self.step_scales):
             for i, dof in enumerate(self.factor_dofs[factor]):
                 cols[f"gate.{factor}.{dof}"] = [_action_name(s) for s in self.step_scales[factor][:, i]]
+        cols.update(self.extra_columns)
         out = io.StringIO()
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(cols)

@@ -4,7 +4,7 @@ A data set is a pair of text files with one measurement per line, first
 word the type, second the time (s)::
 
     NAME_Input.txt   odom2 t vx vy wz var_vx var_vy var_wz (10 Hz; m/s, rad/s; variances)
-                     loop t t_other weight           (ignored)
+                     loop t t_other weight           (place recognition)
     NAME_GT.txt      point2 t x y c_xx c_xy c_yx c_yy (m)
                      angle t yaw c                    (rad; optional)
 
@@ -16,6 +16,9 @@ Other types are ignored. What becomes of them:
   move the robot over ``(t_{k-1}, t_k]``, as libRSF's odometry factors use a
   measurement for the interval that ends at its stamp.
 * ``Recording.gyro``: ``wz``, the yaw rate about the body z axis (rad/s).
+* ``Recording.place_matches``: the ``loop`` lines, every one of them
+  (false matches included): at ``t`` the robot is where it was at
+  ``t_other``, with the similarity ``weight``.
 * ``Recording.groundtruth``: the ``point2`` positions; yaw from the ``angle``
   lines at the same stamps when present, else the direction of motion
   (``atan2`` of the position change over ``HEADING_BASELINE_M`` of path),
@@ -36,7 +39,7 @@ from slam.config import InputConfig
 from slam.errors import GslamError
 from slam.geometry import wrap_angle
 from slam.io.carmen import chain_steps
-from slam.recording import Gyro, Recording, Trajectory
+from slam.recording import Gyro, PlaceMatches, Recording, Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +50,7 @@ HEADING_BASELINE_M = 0.2
 _ODOM2 = "odom2 t vx vy wz var_vx var_vy var_wz"
 _POINT2 = "point2 t x y c_xx c_xy c_yx c_yy"
 _ANGLE = "angle t yaw c"
+_LOOP = "loop t t_other weight"
 
 
 def dataset_files(path: str | Path) -> tuple[Path, Path | None]:
@@ -149,10 +153,11 @@ def _heading_from_motion(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def read_librsf(path: str | Path, config: InputConfig | None = None) -> Recording:
     """Read a libRSF data set into a :class:`Recording` with ``odometry``,
-    ``gyro`` and (when the ``*_GT.txt`` exists) ``groundtruth``; see the
-    module docstring. ``config`` is accepted for the reader interface."""
+    ``gyro``, ``place_matches`` (when there are ``loop`` lines) and (when the
+    ``*_GT.txt`` exists) ``groundtruth``; see the module docstring. ``config`` is accepted for the reader interface."""
     inp, gt_path = dataset_files(path)
-    rows = _read_rows(inp, {"odom2": (7, _ODOM2)})["odom2"]
+    read = _read_rows(inp, {"odom2": (7, _ODOM2), "loop": (3, _LOOP)})
+    rows, loops = read["odom2"], read["loop"]
     if len(rows) < 2:
         raise GslamError(f"{inp}: expected at least 2 '{_ODOM2}' lines, found {len(rows)}")
     t, vx, vy, wz = rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
@@ -178,6 +183,12 @@ def read_librsf(path: str | Path, config: InputConfig | None = None) -> Recordin
         groundtruth = Trajectory(t=pts[:, 0].copy(), x=pts[:, 1].copy(), y=pts[:, 2].copy(), yaw=yaw)
 
     name = inp.name[: -len(INPUT_SUFFIX)]
-    rec = Recording(name=name, t0=0.0, odometry=odometry, gyro=Gyro(t=t.copy(), rate=wz.copy()), groundtruth=groundtruth)
-    log.info("%s: %d odometry samples over %.1f s", inp, len(t), rec.duration)
+    matches = None
+    if len(loops):
+        matches = PlaceMatches(t=loops[:, 0].copy(), t_other=loops[:, 1].copy(), weight=loops[:, 2].copy())
+    rec = Recording(
+        name=name, t0=0.0, odometry=odometry, gyro=Gyro(t=t.copy(), rate=wz.copy()), groundtruth=groundtruth,
+        place_matches=matches,
+    )
+    log.info("%s: %d odometry samples, %d loop lines over %.1f s", inp, len(t), len(loops), rec.duration)
     return rec
