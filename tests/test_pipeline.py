@@ -134,9 +134,9 @@ def test_gating_writes_validation_csv_and_metrics(mapped, mode):
     lines = (res.out_dir / "validation.csv").read_text().splitlines()
     assert len(lines) - 1 == m["validation_steps"] > 0
     header = lines[0].split(",")
-    # With validation on, the loop observer's columns come last
-    # (configs/telemax.yaml closes loops); the oracle judges loops by truth.
-    loop_columns = ["loop_consistency", "loop_diagnosis", "gate.loop", "loops"] if mode == "on" else []
+    # configs/telemax.yaml closes no loops (loops.enabled false): no loop
+    # observer's columns after the gates.
+    loop_columns: list[str] = []
     gates = header[len(header) - len(loop_columns) - len(GATE_COLUMNS) : len(header) - len(loop_columns)]
     assert header[0] == "t" and gates == GATE_COLUMNS
     assert header[len(header) - len(loop_columns) :] == loop_columns
