@@ -419,6 +419,21 @@ CASES: list[Case] = [
          copy_run()),
     Case("inject-out-foreign", ("inject", "{run}", "--fault", "gyro_bias@1:2", "--out", "{d}/mine"),
          "not a gslam inject result", foreign("mine")),
+    # -- calibrate --
+    Case("calibrate-out-exists", ("calibrate", "{run}", "--config", "{cfg}", "--out", "{d}/c.yaml"),
+         "not a gslam calibrate result", text("c.yaml", "mine\n")),
+    Case("calibrate-out-is-the-config", ("calibrate", "{run}", "--config", "{d}/c.yaml", "--out", "{d}/c.yaml"), "is the input",
+         lambda d, w: shutil.copy(TELEMAX_CONFIG, d / "c.yaml")),
+    Case("calibrate-out-is-a-folder", ("calibrate", "{run}", "--config", "{cfg}", "--out", "{d}"), "is a folder"),
+    Case("calibrate-out-no-folder", ("calibrate", "{run}", "--config", "{cfg}", "--out", "{d}/none/c.yaml"), "no folder"),
+    Case("calibrate-clean-reversed", ("calibrate", "{run}", "--config", "{cfg}", "--clean", "9:3", "--out", "{d}/c.yaml"),
+         "--clean 9:3"),
+    Case("calibrate-clean-outside", ("calibrate", "{run}", "--config", "{cfg}", "--clean", "900:end", "--out", "{d}/c.yaml"),
+         "holds no validation step"),
+    Case("calibrate-false-alarm-nan", ("calibrate", "{run}", "--config", "{cfg}", "--false-alarm", "nan", "--out", "{d}/c.yaml"),
+         "--false-alarm"),
+    Case("calibrate-random-bag", ("calibrate", "{d}/r.bag", "--config", "{cfg}", "--out", "{d}/c.yaml"),
+         "not a readable ROS bag", data("r.bag", RANDOM)),
     # -- inspect --
     Case("inspect-random-bag", ("inspect", "{d}/r.bag"), "not a readable ROS bag", data("r.bag", RANDOM)),
     Case("inspect-junk-folder", ("inspect", "{d}/junk"), "unknown recording format", data("junk/a.bin", RANDOM)),
@@ -520,7 +535,7 @@ def test_malformed_input_gives_one_clean_error(case: Case, world: World, tmp_pat
 def test_corpus_size():
     assert len(CASES) >= 60
     commands = {c.argv[0] for c in CASES}
-    assert {"simulate", "map", "compare", "demo", "ablate", "inspect", "inject"} <= commands
+    assert {"simulate", "map", "compare", "demo", "ablate", "inspect", "inject", "calibrate"} <= commands
 
 
 # --- real processes: nothing but the error line reaches stderr ---------------------

@@ -73,7 +73,7 @@ def _relation_reason(rel: RelationConfig, steps: StepStreams, streams: Mapping[s
         return "; ".join(found)
     if rel.kind == "trend":
         return f"the warm-up of {rel.warmup:g} s after each start or gap of its streams"
-    if rel.kind == "residual":
+    if rel.kind in ("residual", "cusum"):
         return f"its window of {rel.window_s:g} s rarely fits between the gaps of its streams"
     return "its streams rarely have data at the same steps"
 
