@@ -31,12 +31,12 @@ from slam.calibrate.propose import Proposal, propose
 from slam.calibrate.runs import CalibrationRun, load_run, parse_clean
 from slam.calibrate.select import CheckChoice, Choice, calibrate_magnetometer, calibrate_relation
 from slam.calibrate.write import calibrated_config
-from slam.config import load_config, validation_sections
+from slam.config import PipelineConfig, load_config, validation_sections
 from slam.errors import GslamError
 from slam.io.atomic import write_text
 from slam.io.outdir import check_new_file
 
-__all__ = ["CalibrationResult", "calibrate", "parse_clean"]
+__all__ = ["CalibrationResult", "calibrate", "learn", "load_run", "parse_clean"]
 
 log = logging.getLogger(__name__)
 
@@ -48,7 +48,7 @@ DEFAULT_FALSE_ALARM = 0.005
 class CalibrationResult:
     """What ``gslam calibrate`` learnt and where it wrote it."""
 
-    out: Path
+    out: Path | None
     choices: dict[str, Choice | None]
     magnetometer: CheckChoice | None
     proposals: list[Proposal]
@@ -82,11 +82,25 @@ def calibrate(
     if vcfg.model is None:
         raise GslamError(f"{config_path}: validation.model: calibration needs the system model the observers belong to")
     loaded: list[CalibrationRun] = [load_run(r, config, vcfg, stretch, progress) for r in runs]
+    header = [f"Learnt from {len(runs)} run{'s' if len(runs) > 1 else ''} ({', '.join(Path(r).name for r in runs)}) "
+              f"{_learnt_from(stretch)}, starting from {Path(config_path).name}."]
+    res = learn(loaded, config, false_alarm, header)
+    write_text(out, res.text)
+    res.out = Path(out)
+    return res
+
+
+def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm: float = DEFAULT_FALSE_ALARM,
+          header: Sequence[str] = ()) -> CalibrationResult:
+    """Steps 2-4 of the module docstring on runs already loaded
+    (:func:`slam.calibrate.runs.load_run`); the text is not written
+    (``out`` is None)."""
+    vcfg, _ = validation_sections(config)
     relations = vcfg.observers.relations
     has_mag = vcfg.observers.magnetometer.enabled and any("mag_strength" in r.streams for r in loaded)
     observers = len(relations) + int(has_mag)
     if observers == 0:
-        raise GslamError(f"{config_path}: validation.observers: no relation or check to calibrate")
+        raise GslamError("validation.observers: no relation or check to calibrate")
     target = false_alarm / observers
     choices = {rel.name: calibrate_relation(loaded, rel, vcfg, target) for rel in relations}
     for name, choice in choices.items():
@@ -100,18 +114,20 @@ def calibrate(
                         choice.relation.stream_b, choice.relation.stream_a, choice.fit.gain)
     mag = calibrate_magnetometer(loaded, vcfg.observers.magnetometer, target) if has_mag else None
     proposals = propose(loaded, relations, vcfg.model, vcfg, target)
-    header = _header(runs, stretch, false_alarm, target, observers, vcfg.offline, config_path)
+    header = [*header, *_header(false_alarm, target, observers, vcfg.offline)]
     text = calibrated_config(config, choices, mag, proposals, header, target, len(loaded))
-    write_text(out, text)
-    return CalibrationResult(Path(out), choices, mag, proposals, target, text)
+    return CalibrationResult(None, choices, mag, proposals, target, text)
 
 
-def _header(runs, stretch, false_alarm: float, target: float, observers: int, offline: bool, config_path) -> list[str]:
-    learnt = ("over " + (f"{stretch[0]:g}-{stretch[1]:g} s" if stretch[1] != float("inf") else f"{stretch[0]:g} s to the end")
-              + " of each run, declared clean") if stretch else "over whole runs, with robust statistics"
-    names = ", ".join(Path(r).name for r in runs)
+def _learnt_from(stretch) -> str:
+    if stretch is None:
+        return "over whole runs, with robust statistics"
+    span = f"{stretch[0]:g}-{stretch[1]:g} s" if stretch[1] != float("inf") else f"{stretch[0]:g} s to the end"
+    return f"over {span} of each run, declared clean"
+
+
+def _header(false_alarm: float, target: float, observers: int, offline: bool) -> list[str]:
     return [
-        f"Learnt from {len(runs)} run{'s' if len(runs) > 1 else ''} ({names}) {learnt}, starting from {Path(config_path).name}.",
         f"Target: at most {100 * false_alarm:.2f} % of a run's validation steps with a false alarm, "
         f"{100 * target:.3f} % for each of the {observers} observers.",
         "Chosen for the " + ("offline pass (centred windows, alarms dated by their evidence): map with pass offline."
