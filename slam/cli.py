@@ -26,6 +26,8 @@ examples:
   gslam map runs/lab --config configs/telemax.yaml --out runs/lab_isam2 --set backend.optimizer=isam2
   gslam map recording.bag --config my_robot.yaml --out runs/real --set input.topics.scan=/base_scan
   gslam compare runs/lab --config configs/telemax.yaml --out runs/lab_compare
+  gslam inject recording.bag --config my_robot.yaml --fault dipole@100:120 --out runs/with_dipole
+  gslam calibrate recording.bag --config my_robot.yaml --out my_robot_calibrated.yaml
   gslam ablate configs/ablations/gating_policy.yaml --out runs/ablate_gating --workers 2
 
 paths starting with configs/ that do not exist in the working folder name
@@ -35,7 +37,7 @@ the configs shipped with gslam, so these examples work from any folder.
 INPUTS = """\
 recording to read; its format is recognised from the path: a ROS 1 .bag
 file, a ROS 2 bag (folder with metadata.yaml, or a .db3 or .mcap file), a
-simulated run folder (truth.json + bag/, from gslam simulate), a CARMEN
+run folder (a simulated run folder or a gslam inject result: truth.json + bag/), a CARMEN
 .log or .log.gz, a BROAD trial .mat, or a libRSF *_Input.txt"""
 
 OUTPUT_RULE = """\
@@ -61,6 +63,42 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         if intervals:
             spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals)
             print(f"  true faults {comp}: {spans}")
+    return 0
+
+
+def _cmd_inject(args: argparse.Namespace) -> int:
+    from slam.config import load_config
+    from slam.inject import inject
+
+    config_path = _config_path(args.config)
+    config = load_config(config_path)
+    res = inject(args.input, args.fault or [], args.out, config.input,
+                 inputs=[config_path] if config_path is not None else [], force=args.force)
+    print(f"wrote {res.run_dir} ({res.duration_s:.1f} s, the input with the faults added; truth.json beside it)")
+    for comp, intervals in sorted(res.injected.items()):
+        spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals) or "none beyond the nominal noise"
+        print(f"  injected faults {comp}: {spans}")
+    return 0
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from slam.calibrate import calibrate
+
+    res = calibrate(args.runs, _config_path(args.config), args.out, clean=args.clean, false_alarm=args.false_alarm,
+                    force=args.force, progress=not args.quiet, overrides=args.set or [])
+    for name, choice in res.choices.items():
+        if choice is None:
+            print(f"  {name}: kept as configured (no run has both its streams)")
+            continue
+        r = choice.relation
+        what = f"b {r.boundary:.3g}" if r.kind == "trend" else f"sigma_floor {r.sigma_floor:.3g} x {r.k_sigma:g}"
+        alarm = f"{100 * choice.alarm:.2f} %" if choice.met else "target not met"
+        print(f"  {name} ({r.kind}): gain {choice.fit.gain:.3f}, {what}, w {r.window_s:g} s, th {r.threshold}: "
+              f"alarms on {alarm} of the learning steps")
+    for p in res.proposals:
+        print(f"  proposed {p.choice.relation.name}: rates correlate {p.choice.fit.corr:.3f} (commented out in the file)")
+    print(f"wrote {res.out} (target {100 * res.target_per_observer:.3f} % of steps per observer): "
+          f"gslam map RUN --config {res.out} --out DIR --gating on")
     return 0
 
 
@@ -216,6 +254,41 @@ def build_parser() -> argparse.ArgumentParser:
     _add_out(s, "run folder to create (bag/, truth.json, scenario.yaml)", required=True)
     s.add_argument("--seed", type=_seed, default=None, help="random seed (default: the scenario's)")
     s.set_defaults(func=_cmd_simulate)
+
+    j = _sub(sub, "inject", "add physically modelled faults to a recording; write it with its true fault intervals",
+             "examples:\n  gslam inject $GSLAM_DATA/carmen/aces-corrected.log.gz --fault laser_cut@300:500,range_m=4 "
+             "--out runs/aces_cut\n  gslam inject $GSLAM_DATA/rosbag/test1_husky_2015.bag --config configs/datasets/husky.yaml "
+             "--fault dipole@100:120,moment_A_m2=2000,distance_m=3 --out runs/husky_dipole\n"
+             "  gslam map runs/aces_cut --config configs/datasets/carmen.yaml --out runs/aces_cut_map --gating on\n\n"
+             "fault kinds (times in s from the recording's start; parameters in slam/inject/spec.py):\n"
+             "  dipole@T0:T1[,moment_A_m2=500,distance_m=2,side=left,height_m=0,azimuth_deg=90,target=auto,label_deg=5]\n"
+             "  laser_cut@T0:T1[,range_m=4]   gyro_bias@T0:T1[,bias_deg_s=2]   slip@T0:T1[,scale=1.5,yaw_scale=1]\n"
+             "  multipath@T0:T1[,bias_m=8,azimuth_deg=0]\n\n" + OUTPUT_RULE, common)
+    j.add_argument("input", help="recording to add faults to: a ROS 1 .bag or ROS 2 bag, a run folder "
+                   "(truth.json + bag/), a CARMEN .log or .log.gz, or a BROAD trial .mat")
+    j.add_argument("--config", default=None, help="pipeline config YAML whose input section reads the recording "
+                   "(topics, frames; default: the built-in defaults)")
+    j.add_argument("--fault", action="append", metavar="KIND@T0:T1[,param=value]", help="a fault to add (repeatable)")
+    _add_out(j, "run folder to create (bag/ with the recording, truth.json)", required=True)
+    j.set_defaults(func=_cmd_inject)
+
+    k = _sub(sub, "calibrate", "learn the observers' relation models and parameters from recorded runs",
+             "examples:\n  gslam calibrate runs/lab_clean --config configs/telemax.yaml --out calibrated.yaml\n"
+             "  gslam calibrate robot.bag --config my_robot.yaml --clean 0:120 --out my_robot_calibrated.yaml\n"
+             "  gslam map other.bag --config my_robot_calibrated.yaml --out runs/other --gating on\n\n"
+             "--out must be a new file, or an earlier calibrate result (its first line says so), which is\n"
+             "replaced; --force replaces any other file. Never a run or the config.", common)
+    k.add_argument("runs", nargs="+", metavar="RUN", help="recorded runs to learn from (any input gslam map reads)")
+    k.add_argument("--config", required=True, help="pipeline config whose observers are calibrated (its input "
+                   "section reads the runs, its validation section names the relations and the pass)")
+    k.add_argument("--clean", default=None, metavar="START:END",
+                   help="seconds of every run declared clean (END may be 'end'); default: whole runs, robust statistics")
+    k.add_argument("--false-alarm", type=float, default=0.005, metavar="SHARE",
+                   help="target share of a run's validation steps with a false alarm (default 0.005)")
+    k.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (repeatable)")
+    k.add_argument("--out", required=True, metavar="MODEL.yaml", help="the calibrated config to write")
+    k.add_argument("--force", action="store_true", help="replace --out even if it is not an earlier calibrate result")
+    k.set_defaults(func=_cmd_calibrate)
 
     i = _sub(sub, "inspect", "list what a recording holds (topics, types, counts, rates, time span); "
              "write a starter config for gslam map",

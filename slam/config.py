@@ -75,25 +75,62 @@ class GpsInputConfig(Strict):
 class GyroInputConfig(Strict):
     """Which rate of a sensor_msgs/Imu is the yaw rate.
 
-    ``z``: ``angular_velocity.z``, for an IMU mounted level (body z up).
-    ``world_z``: the angular velocity rotated into the world by the message's
-    orientation quaternion, its vertical component: the yaw rate of an IMU
-    mounted tilted or rolled (the orientation must be valid).
+    ``z``: ``angular_velocity.z``, for an IMU mounted level (body z vertical).
+    ``x``, ``y``: that body axis's rate, for an IMU mounted on its side (the
+    sign as ``input.frames.gyro`` says). ``world_z``: the angular velocity
+    rotated into the world by the message's orientation quaternion, its
+    vertical component: the yaw rate of an IMU mounted tilted or rolled (the
+    orientation must be valid).
     """
 
-    axis: Literal["z", "world_z"] = "z"
+    axis: Literal["z", "x", "y", "world_z"] = "z"
+
+
+class StreamFrameConfig(Strict):
+    """The frame conventions of one stream of a bag; the reader turns them
+    into the project's (ENU world, REP-103 body; :mod:`slam.recording`).
+
+    ``world``: ``enu`` (REP-103: x east, y north, z up; headings
+    counter-clockwise from east) or ``ned`` (x north, y east, z down;
+    headings clockwise from north). A planar frame with x north and y east
+    is ``ned``. ``body``: ``flu`` (REP-103: x forward, y left, z up) or
+    ``frd`` (x forward, y right, z down): the sign of a rate about the body
+    axis, and of a magnetometer's y and z. ``yaw_sign``: -1 mirrors the
+    stream once more (headings and yaw rates the other way round, y of a
+    pose negated), for a source whose turns come out reversed in the frame
+    stated. Details in :mod:`slam.io.frames`.
+    """
+
+    world: Literal["enu", "ned"] = "enu"
+    body: Literal["flu", "frd"] = "flu"
+    yaw_sign: Literal[1, -1] = 1
+
+
+class FramesConfig(Strict):
+    """Frame conventions per stream of a bag (``input.frames``). GPS fixes
+    are latitude and longitude: they always become ENU and need no entry."""
+
+    odometry: StreamFrameConfig = StreamFrameConfig()
+    gyro: StreamFrameConfig = StreamFrameConfig()
+    compass: StreamFrameConfig = StreamFrameConfig()
+    groundtruth: StreamFrameConfig = StreamFrameConfig()
+
+    def is_default(self) -> bool:
+        return self == FramesConfig()
 
 
 class InputConfig(Strict):
     """``format``: ``auto`` guesses the reader from the path (ROS 1 ``.bag``,
     ROS 2 bag folder, simulated run folder, CARMEN ``.log``/``.log.gz``,
-    BROAD ``.mat``, libRSF ``*_Input.txt``)."""
+    BROAD ``.mat``, libRSF ``*_Input.txt``). ``frames``: the frame
+    conventions of a bag's streams (the other formats have fixed ones)."""
 
     format: Literal["auto", "rosbag", "carmen", "broad", "librsf"] = "auto"
     topics: TopicsConfig = TopicsConfig()
     gyro: GyroInputConfig = GyroInputConfig()
     compass: CompassInputConfig = CompassInputConfig()
     gps: GpsInputConfig = GpsInputConfig()
+    frames: FramesConfig = FramesConfig()
 
 
 # --- front-end -----------------------------------------------------------

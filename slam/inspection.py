@@ -16,7 +16,7 @@ from pathlib import Path
 
 from slam.config import InputConfig
 from slam.errors import GslamError
-from slam.io.readers import RUN_BAG, SIDECAR, guess_format, is_run_folder, load_sidecar, read_recording
+from slam.io.readers import SIDECAR, guess_format, is_run_folder, load_sidecar, read_recording, run_recording
 from slam.io.rosbag import open_bag
 from slam.io.rosbag_streams import IMU, LASER_SCAN, MAGNETIC_FIELD, NAV_SAT_FIX, ODOMETRY, POSE_STAMPED
 from slam.recording import Recording
@@ -75,12 +75,12 @@ def inspect_recording(path: str | Path) -> Inspection:
     fmt = guess_format(path)
     if fmt != "rosbag":
         return _inspect_other(path, fmt)
-    bag = path / RUN_BAG if is_run_folder(path) else path
+    bag = run_recording(path) if is_run_folder(path) else path
     found = _inspect_bag(path, bag)
     if is_run_folder(path):
         sidecar = load_sidecar(path / SIDECAR)
         faults = ", ".join(f"{c} {len(iv)}" for c, iv in sidecar.faults.items() if iv) or "none"
-        found.format = "simulated run folder (ROS 2 bag + truth.json)"
+        found.format = f"run folder ({found.format} + truth.json)"
         found.notes.append(f"scenario '{sidecar.scenario}', seed {sidecar.seed}; true fault intervals: {faults}")
     return found
 

@@ -114,6 +114,10 @@ def plot_trajectories(
     others thinner in the default colours.
     """
     fig, ax = _new_axes(title)
+    reference, trajectories, origin = relative_to_reference(reference, trajectories)
+    if origin is not None:
+        ax.set_xlabel(f"x east [m] from the reference's start ({origin[0]:.1f})")
+        ax.set_ylabel(f"y north [m] from the reference's start ({origin[1]:.1f})")
     base = reference if reference is not None else next(iter(trajectories.values()), None)
     if base is not None and shaded:
         _draw_shaded(ax, base, shaded)
@@ -144,6 +148,30 @@ def plot_trajectories(
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.legend(loc="best", fontsize="small")
     save_figure(fig, path)
+
+
+LARGE_COORDINATE_M = 1e4
+"""Beyond this a reference is in a global frame (UTM, a national grid)."""
+
+
+def relative_to_reference(
+    reference: Trajectory | None, trajectories: Mapping[str, Trajectory]
+) -> tuple[Trajectory | None, dict[str, Trajectory], np.ndarray | None]:
+    """A reference with large (UTM) coordinates, and every trajectory as far
+    out as it, moved to start at the origin; a trajectory near the origin
+    already (an estimate started there) stays. Returns the moved ones and
+    the offset taken off (None if nothing moved)."""
+    out = dict(trajectories)
+    if reference is None or not len(reference) or np.max(np.abs(reference.xy())) < LARGE_COORDINATE_M:
+        return reference, out, None
+    origin = reference.xy()[0].copy()
+
+    def moved(traj: Trajectory) -> Trajectory:
+        if not len(traj) or np.max(np.abs(traj.xy())) < LARGE_COORDINATE_M:
+            return traj
+        return Trajectory(traj.t, traj.x - origin[0], traj.y - origin[1], traj.yaw)
+
+    return moved(reference), {k: moved(v) for k, v in out.items()}, origin
 
 
 def _named(color: str) -> str:

@@ -271,3 +271,50 @@ def driving_bag(
         lat, lon = geodetic_from_enu(d * c, d * s, *datum)
         bag.fix("/gps/fix", t, float(lat), float(lon))
     return bag
+
+
+def ned_driving_bag(
+    t0: float = 1_700_000_000.0,
+    duration_s: float = 90.0,
+    datum: tuple[float, float] = (48.0, 11.0),
+    seed: int = 0,
+) -> tuple[BagBuilder, dict[str, np.ndarray]]:
+    """A ROS 1 bag of a robot driving left and right turns, recorded with
+    aerospace conventions: the Imu's rates in an x-forward, y-right, z-down
+    body (a left turn is a negative ``angular_velocity.z``) and its
+    orientation's yaw a heading clockwise from north (NED), odometry and
+    ground truth with x north and y east (NED). GPS fixes are geodetic.
+    Topics: ``/imu/data`` 50 Hz, ``/odom`` 10 Hz, ``/fix`` 2 Hz,
+    ``/ground_truth`` 50 Hz. Sensor noise is seeded: gyro 0.2 deg/s, heading
+    1 deg, odometry 2 % of distance and turn. Returns the bag and the true
+    ENU path (``t`` s from ``t0``, ``x``, ``y``, ``yaw``)."""
+    from slam.geometry import geodetic_from_enu
+
+    rng = np.random.default_rng(seed)
+    dt = 0.02
+    t = np.arange(0.0, duration_s, dt)
+    # Left and right turns between straight legs, at 1 m/s.
+    rate = np.zeros_like(t)
+    for start, end, r in ((10, 16, 0.26), (30, 40, -0.31), (52, 58, 0.52), (70, 80, -0.16)):
+        rate[(t >= start) & (t < end)] = r
+    yaw = 0.4 + np.concatenate([[0.0], np.cumsum(rate[:-1] * dt)])
+    x = np.concatenate([[0.0], np.cumsum(np.cos(yaw[:-1]) * dt)])
+    y = np.concatenate([[0.0], np.cumsum(np.sin(yaw[:-1]) * dt)])
+    # Odometry: integrated with its own errors.
+    odo_yaw = 0.4 + np.concatenate([[0.0], np.cumsum(1.02 * rate[:-1] * dt)])
+    odo_x = np.concatenate([[0.0], np.cumsum(0.98 * np.cos(odo_yaw[:-1]) * dt)])
+    odo_y = np.concatenate([[0.0], np.cumsum(0.98 * np.sin(odo_yaw[:-1]) * dt)])
+    bag = BagBuilder(ros=1)
+    gyro_noise = np.radians(0.2) * rng.standard_normal(len(t))
+    heading_noise = np.radians(1.0) * rng.standard_normal(len(t))
+    for k, tk in enumerate(t):
+        stamp = t0 + tk
+        # NED heading of an FRD body: clockwise from north.
+        bag.imu("/imu/data", stamp, rate_z=-(rate[k] + gyro_noise[k]), yaw=np.pi / 2 - (yaw[k] + heading_noise[k]))
+        bag.odom("/ground_truth", stamp, y[k], x[k], np.pi / 2 - yaw[k])
+        if k % 5 == 0:
+            bag.odom("/odom", stamp, odo_y[k], odo_x[k], np.pi / 2 - odo_yaw[k])
+        if k % 25 == 0:
+            lat, lon = geodetic_from_enu(x[k] + rng.normal(0, 0.5), y[k] + rng.normal(0, 0.5), *datum)
+            bag.fix("/fix", stamp, float(lat), float(lon), variance_m2=(0.25, 0.25))
+    return bag, {"t": t, "x": x, "y": y, "yaw": yaw}

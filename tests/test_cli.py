@@ -216,7 +216,7 @@ def test_inspect_lists_topics_and_its_starter_config_maps_the_run(capsys, short_
     code, stdout, stderr = run_cli(capsys, "inspect", short_run.run_dir, "--config-out", starter)
     assert code == 0, stderr
     lines = stdout.splitlines()
-    assert "simulated run folder" in lines[0] and "24.0 s" in lines[0] and "6 topics" in lines[0]
+    assert "run folder (ROS 2 bag + truth.json)" in lines[0] and "24.0 s" in lines[0] and "6 topics" in lines[0]
     scan = next(ln.split() for ln in lines if ln.strip().startswith("/scan"))
     assert scan[1:4] == ["sensor_msgs/msg/LaserScan", "240", "10.00"]
     tree = yaml.safe_load(starter.read_text())

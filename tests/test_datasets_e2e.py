@@ -35,7 +35,24 @@ def test_carmen_intel_graph_and_validation(tmp_path):
     assert m["factor_counts"]["scan_matching"] == 909
     # Measured: 8.0 % over 1 m and 9.2 % over 10 m of the corrected path.
     assert m["rpe_trans_pct_1m"] < 12.0 and m["rpe_trans_pct_10m"] < 14.0
-    assert m["false_alarm_fraction"] < 0.02
+    # One scan every 2.9 s: each stream is judged by its own sample period,
+    # so every observer observes (measured: 99.2 % of the steps) and the
+    # hand-set observers alarm on 7.1 % of them (README, "Real recordings").
+    assert min(m["observer_coverage"].values()) > 0.95
+    assert 0.0 < m["alarm_fraction"] < 0.1
+
+
+def test_carmen_intel_judged_by_a_fixed_gap_observes_nothing_and_says_so(tmp_path, capsys):
+    """With every gap judged against 0.5 s (no observers.gap_periods), no
+    observer of the thinned log ever observes: --gating on is an error
+    naming the relation and why, not a silently ungated map."""
+    out = tmp_path / "o"
+    code = main(["-q", "map", str(real_data("carmen/intel-corrected.log.gz")), "--config",
+                 str(ROOT / "configs/datasets/carmen.yaml"), "--out", str(out), "--gating", "on",
+                 "--set", "output.plots=false", "--set", "validation.observers.gap_periods=null"])
+    err = capsys.readouterr().err
+    assert code == 1 and not out.exists()
+    assert "gslam: error:" in err and "yaw_odo_sm" in err and "gaps longer than the 0.5 s" in err
 
 
 def test_husky_bag_gated(tmp_path):

@@ -398,6 +398,42 @@ CASES: list[Case] = [
     Case("ablate-out-holds-the-spec", ("ablate", "{d}/spec.yaml", "--out", "{d}"), "holds the input", spec()),
     Case("ablate-out-foreign", ("ablate", "{spec}", "--out", "{d}/mine"), "not a gslam ablate result", foreign("mine")),
     Case("ablate-out-proc", ("ablate", "{spec}", "--out", "/proc/gslam-x"), "cannot be written"),
+    # -- inject --
+    Case("inject-unknown-kind", ("inject", "{run}", "--fault", "magnet@1:2", "--out", "{d}/o"), "unknown fault kind 'magnet'"),
+    Case("inject-no-fault", ("inject", "{run}", "--out", "{d}/o"), "no fault given"),
+    Case("inject-unknown-param", ("inject", "{run}", "--fault", "gyro_bias@1:2,bias=3", "--out", "{d}/o"),
+         "unknown parameter 'bias' of gyro_bias"),
+    Case("inject-nan-time", ("inject", "{run}", "--fault", "gyro_bias@nan:2", "--out", "{d}/o"), "start_s"),
+    Case("inject-reversed", ("inject", "{run}", "--fault", "slip@5:2", "--out", "{d}/o"), "must end after it starts"),
+    Case("inject-after-the-end", ("inject", "{run}", "--fault", "gyro_bias@1000:1001", "--out", "{d}/o"),
+         "starts after the recording ends"),
+    Case("inject-no-such-sensor", ("inject", "{d}/c.log.gz", "--fault", "dipole@10:20", "--out", "{d}/o"),
+         "a CARMEN log has a laser and odometry only", carmen_gz),
+    Case("inject-librsf", ("inject", "{d}/X_Input.txt", "--fault", "slip@0:1", "--out", "{d}/o"), "not libRSF",
+         text("X_Input.txt", "odom2 0 0 0 0 1 1 1\nodom2 0.1 0 0 0 1 1 1\n")),
+    Case("inject-random-bag", ("inject", "{d}/r.bag", "--fault", "gyro_bias@1:2", "--out", "{d}/o"),
+         "not a readable ROS bag", data("r.bag", RANDOM)),
+    Case("inject-bad-config", ("inject", "{run}", "--config", "{d}/c.yaml", "--fault", "gyro_bias@1:2", "--out", "{d}/o"),
+         "unknown config key 'input.topic'", text("c.yaml", "input: {topic: {}}\n")),
+    Case("inject-out-is-the-input", ("inject", "{d}/run", "--fault", "gyro_bias@1:2", "--out", "{d}/run"), "is the input",
+         copy_run()),
+    Case("inject-out-foreign", ("inject", "{run}", "--fault", "gyro_bias@1:2", "--out", "{d}/mine"),
+         "not a gslam inject result", foreign("mine")),
+    # -- calibrate --
+    Case("calibrate-out-exists", ("calibrate", "{run}", "--config", "{cfg}", "--out", "{d}/c.yaml"),
+         "not a gslam calibrate result", text("c.yaml", "mine\n")),
+    Case("calibrate-out-is-the-config", ("calibrate", "{run}", "--config", "{d}/c.yaml", "--out", "{d}/c.yaml"), "is the input",
+         lambda d, w: shutil.copy(TELEMAX_CONFIG, d / "c.yaml")),
+    Case("calibrate-out-is-a-folder", ("calibrate", "{run}", "--config", "{cfg}", "--out", "{d}"), "is a folder"),
+    Case("calibrate-out-no-folder", ("calibrate", "{run}", "--config", "{cfg}", "--out", "{d}/none/c.yaml"), "no folder"),
+    Case("calibrate-clean-reversed", ("calibrate", "{run}", "--config", "{cfg}", "--clean", "9:3", "--out", "{d}/c.yaml"),
+         "--clean 9:3"),
+    Case("calibrate-clean-outside", ("calibrate", "{run}", "--config", "{cfg}", "--clean", "900:end", "--out", "{d}/c.yaml"),
+         "holds no validation step"),
+    Case("calibrate-false-alarm-nan", ("calibrate", "{run}", "--config", "{cfg}", "--false-alarm", "nan", "--out", "{d}/c.yaml"),
+         "--false-alarm"),
+    Case("calibrate-random-bag", ("calibrate", "{d}/r.bag", "--config", "{cfg}", "--out", "{d}/c.yaml"),
+         "not a readable ROS bag", data("r.bag", RANDOM)),
     # -- inspect --
     Case("inspect-random-bag", ("inspect", "{d}/r.bag"), "not a readable ROS bag", data("r.bag", RANDOM)),
     Case("inspect-junk-folder", ("inspect", "{d}/junk"), "unknown recording format", data("junk/a.bin", RANDOM)),
@@ -499,7 +535,7 @@ def test_malformed_input_gives_one_clean_error(case: Case, world: World, tmp_pat
 def test_corpus_size():
     assert len(CASES) >= 60
     commands = {c.argv[0] for c in CASES}
-    assert {"simulate", "map", "compare", "demo", "ablate", "inspect"} <= commands
+    assert {"simulate", "map", "compare", "demo", "ablate", "inspect", "inject", "calibrate"} <= commands
 
 
 # --- real processes: nothing but the error line reaches stderr ---------------------

@@ -276,6 +276,8 @@ def test_batch_and_online_agree(rule):
                        window_s=2.0, sigma_floor=0.03, threshold=3, max_counter=10),
         RelationConfig(name="off", kind="offset", stream_a="gyro_yaw", stream_b="compass_yaw",
                        window_s=2.0, sigma_floor=0.02, level_window_s=20.0, threshold=3, max_counter=10),
+        RelationConfig(name="cus", kind="cusum", stream_a="gyro_yaw", stream_b="compass_yaw",
+                       window_s=2.0, sigma_floor=0.03, k_sigma=20.0, threshold=2, max_counter=10),
     ]
     checks = [MagnetometerCheck("mag", "IMU_YAW", ref.strength_T, ref.dip_rad, 5e-6, 0.1, 1.0)]
 
@@ -292,6 +294,7 @@ def test_batch_and_online_agree(rule):
         assert out.observations["mag"] == log.unary["mag"].plausibility(k)
     assert log.relations["capped"].no_match.any() and log.unary["mag"].implausible.any()
     assert log.relations["res"].no_match.any() and log.relations["off"].no_match.any()
+    assert log.relations["cus"].no_match.any()
     cols = log.columns()
     assert cols["capped.counter"] is log.relations["capped"].counter and len(cols["t"]) == len(steps.t)
 
@@ -390,3 +393,39 @@ def test_offset_observer_sees_a_standing_offset_that_changes_miss():
     assert log.relations["res"].no_match[inside].mean() < 0.2  # only around the steps
     assert log.relations["off"].no_match[inside].all()
     assert not log.relations["off"].no_match[(t < 49) | (t > 81)].any()
+
+
+def test_cusum_observer_sees_a_standing_error_below_the_residual_band():
+    """A scan matcher 6 % short for 30 s: each window's residual is 0.5 sd,
+    under any residual band; the CUSUM adds it up and sees it within a few
+    seconds, and lets go once it ends."""
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 120.0, 0.1)
+    odo = 0.4 * t
+    scale = np.where((t >= 50) & (t < 80), 0.94, 1.0)
+    sm = np.concatenate(([0.0], np.cumsum(np.diff(odo) * scale[1:]))) + rng.normal(0.0, 0.01, len(t))
+    streams = {"odo_distance": Stream(t, odo), "sm_distance": Stream(t, sm)}
+    common = dict(stream_a="odo_distance", stream_b="sm_distance", window_s=2.0, sigma_floor=0.1, threshold=1,
+                  max_counter=5)
+    res = RelationConfig(name="res", kind="residual", k_sigma=3.0, **common)
+    cus = RelationConfig(name="cus", kind="cusum", k_sigma=10.0, cusum_drift=0.25, **common)
+    log = run_observers(streams, [res, cus], t, window="trailing")
+    inside, outside = (t > 56) & (t < 80), (t < 50) | (t > 88)
+    assert not log.relations["res"].no_match.any()
+    assert log.relations["cus"].no_match[inside].all()
+    assert not log.relations["cus"].no_match[outside].any()
+    first = t[log.relations["cus"].no_match][0]
+    assert 50.0 < first < 56.0
+
+
+def test_cusum_starts_again_after_a_gap():
+    from validation.sequential import cusum
+
+    z = np.full(10, 2.0)
+    valid = np.ones(10, dtype=bool)
+    valid[4] = False
+    stat, mismatch = cusum(z, valid, drift=0.5, limit=4.0)
+    np.testing.assert_allclose(stat, [1.5, 3.0, 4.5, 6.0, 0.0, 1.5, 3.0, 4.5, 6.0, 7.5])
+    assert mismatch.tolist() == [False, False, True, True, False, False, False, True, True, True]
+    stat, _ = cusum(np.concatenate([z, -np.ones(3)]), np.ones(13, dtype=bool), drift=0.5, limit=4.0)
+    np.testing.assert_allclose(stat[8:], [8.0, 8.0, 6.5, 5.0, 3.5])  # capped at twice the limit

@@ -237,10 +237,11 @@ def commands(short_run, short_scenario_yaml, tmp_path):
         "compare": ["compare", short_run.run_dir, "--config", TELEMAX_CONFIG, "--only", "ungated", *quick, "--out"],
         "demo": ["demo", "--scenario", short_scenario_yaml, "--only", "ungated", "--out"],
         "ablate": ["ablate", spec, "--workers", "1", "--out"],
+        "inject": ["inject", short_run.run_dir, "--fault", "gyro_bias@2:4", "--out"],
     }
 
 
-@pytest.mark.parametrize("command", ["simulate", "map", "compare", "demo", "ablate"])
+@pytest.mark.parametrize("command", ["simulate", "map", "compare", "demo", "ablate", "inject"])
 def test_out_rule_for_every_command(command, commands, tmp_path, capsys):
     argv = commands[command]
     out = tmp_path / "out"
@@ -289,3 +290,27 @@ def test_inspect_config_out(short_run, tmp_path, capsys):
     assert target.read_text() == "mine\n"
     code, err = run(capsys, "inspect", short_run.run_dir, "--config-out", target, "--force")
     assert code == 0 and target.read_text().startswith("# Starter config")
+
+
+def test_calibrate_out_rule(short_run, tmp_path, capsys):
+    """calibrate's --out is one file: new, or an earlier calibrate result
+    (its first line), replaced; any other file only with --force; never a
+    folder, a symbolic link or the config."""
+    argv = ["calibrate", short_run.run_dir, "--config", TELEMAX_CONFIG, "--clean", "0:10", "--out"]
+    out = tmp_path / "cal.yaml"
+    code, err = run(capsys, *argv, out)
+    assert code == 0, err
+    first = out.read_bytes()
+    code, err = run(capsys, *argv, out)
+    assert code == 0 and out.read_bytes() == first, err
+    mine = tmp_path / "mine.yaml"
+    mine.write_text("precious\n")
+    link = tmp_path / "link.yaml"
+    link.symlink_to(out)
+    for target, says in ((mine, "is not a gslam calibrate result"), (link, "symbolic link"), (tmp_path, "is a folder")):
+        code, err = run(capsys, *argv, target)
+        assert code == 1 and err.count("\n") == 1 and says in err, err
+    assert mine.read_text() == "precious\n" and out.read_bytes() == first
+    code, err = run(capsys, *argv[:-1], "--force", "--out", mine)
+    assert code == 0 and mine.read_bytes() == first, err
+    assert not [p for p in tmp_path.rglob("*") if ".gslam-tmp-" in p.name]

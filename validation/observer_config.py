@@ -44,11 +44,18 @@ class RelationConfig(_Strict):
 
     ``kind: residual`` is quantitative: over a window of ``window_s``
     (centred or trailing, as the trends') stream b should change by ``gain``
-    times stream a's change; a step is a mismatch where the residual
-    ``db - gain * da`` exceeds ``k_sigma`` times ``sqrt(sigma_floor^2 +
-    (sigma_rel * da)^2)`` (stream b's units). It sees what trend symbols
+    times stream a's change plus ``rate_offset`` (stream b's units per
+    second) times the window; a step is a mismatch where the residual
+    ``db - gain * da - rate_offset * window_s`` exceeds ``k_sigma`` times
+    ``sqrt(sigma_floor^2 + (sigma_rel * da)^2)`` (stream b's units). It sees what trend symbols
     cannot: a scan matcher reporting 20 m/s while the odometry says 0.4 m/s
     has the same ``+`` trend.
+
+    ``kind: cusum`` takes the residual relation's normalised residual and
+    accumulates it in a two-sided CUSUM that forgets ``cusum_drift`` sds a
+    step; a step is a mismatch while the sum exceeds ``k_sigma`` (its
+    decision limit, in sds; :mod:`validation.sequential`). It sees a
+    standing error smaller than a residual relation's band.
 
     ``kind: offset`` compares the streams themselves: ``b - gain * a`` must
     stay within ``k_sigma * sigma_floor`` of its median over
@@ -67,15 +74,17 @@ class RelationConfig(_Strict):
     """
 
     name: str
-    kind: Literal["trend", "residual", "offset"] = "trend"
+    kind: Literal["trend", "residual", "cusum", "offset"] = "trend"
     stream_a: StreamName
     stream_b: StreamName
     boundary: float | None = Field(None, gt=0.0)
     window_s: float = Field(gt=0.0)
     gain: float = 1.0
+    rate_offset: float = 0.0
     sigma_floor: float | None = Field(None, gt=0.0)
     sigma_rel: float = Field(0.0, ge=0.0)
     k_sigma: float = Field(3.0, gt=0.0)
+    cusum_drift: float = Field(0.5, ge=0.0)
     level_window_s: float = Field(60.0, gt=0.0)
     threshold: int = Field(ge=0)
     max_counter: int | None = Field(None, ge=1)
@@ -164,8 +173,15 @@ class GpsCheckConfig(_Strict):
 
 
 class ObserversConfig(_Strict):
-    """All observers; ``max_gap_s`` is the largest gap (s) between samples a
-    step may be interpolated across, ``stream_max_gap_s`` overrides it.
+    """All observers. ``max_gap_s`` is the largest gap (s) between samples a
+    step may be interpolated across; a sparse stream may bridge up to
+    ``gap_periods`` of its own median sample period instead (null: never),
+    and ``stream_max_gap_s`` sets a stream's gap outright
+    (:func:`validation.streams.stream_max_gap`).
+
+    ``min_coverage``: an observer with a valid observation on a smaller
+    share of the steps is reported with a warning that says why
+    (:mod:`validation.coverage`).
 
     ``window``: the trend windows of Algorithm 2, ``centred`` on each sample
     (the paper's; it needs the samples after it, so offline validation only)
@@ -180,7 +196,9 @@ class ObserversConfig(_Strict):
     magnetometer: MagnetometerCheckConfig = MagnetometerCheckConfig()
     gps: GpsCheckConfig = GpsCheckConfig()
     max_gap_s: float = Field(0.5, gt=0.0)
+    gap_periods: float | None = Field(3.0, gt=0.0)
     stream_max_gap_s: dict[str, float] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
+    min_coverage: float = Field(0.25, ge=0.0, le=1.0)
     gps_speed_window_s: float = Field(5.0, gt=0.0)
 
     @model_validator(mode="after")

@@ -70,6 +70,7 @@ from validation.quantitative import (
     running_level,
     window_changes,
 )
+from validation.sequential import Cusum, cusum
 from validation.streams import ANGULAR_STREAMS, STREAM_NAMES, StepStreams, Stream, resample_streams
 from validation.trends import Rule, Trend, TrendEstimator, Window, abstract_stream
 
@@ -240,7 +241,9 @@ def observe_steps(
     rel_traces: dict[str, RelationTrace] = {}
     for rel in relations:
         if rel.kind != "trend":
-            z, mismatch, valid = residual(rel) if rel.kind == "residual" else offset(rel)
+            z, mismatch, valid = offset(rel) if rel.kind == "offset" else residual(rel)
+            if rel.kind == "cusum":
+                z, mismatch = cusum(z, valid, rel.cusum_drift, rel.k_sigma)
             sym_a, sym_b = mismatch.astype(np.int8), np.zeros(m, dtype=np.int8)
         else:
             z = None
@@ -291,9 +294,11 @@ def run_observers(
     window: Window = "trailing",
     rule: Rule = "paper",
     offline: bool = False,
+    gap_periods: float | None = None,
 ) -> ObserverLog:
-    """Resample ``streams`` onto ``step_times`` (s) and run every observer."""
-    steps = resample_streams(streams, step_times, max_gap_s, stream_max_gap_s)
+    """Resample ``streams`` onto ``step_times`` (s) and run every observer;
+    the gaps as :func:`validation.streams.resample_streams` judges them."""
+    steps = resample_streams(streams, step_times, max_gap_s, stream_max_gap_s, gap_periods)
     return observe_steps(steps, relations, unary, window, rule, offline)
 
 
@@ -336,6 +341,7 @@ class ObserverBank:
         self._changes: dict[tuple[str, float], WindowChange] = {}
         self._levels: dict[str, RunningLevel] = {}
         self._last_offset: dict[str, float] = {}
+        self._cusums: dict[str, Cusum] = {}
 
     def _unwrap_offset(self, name: str, d: float) -> float:
         """An angular difference made continuous from step to step."""
@@ -360,7 +366,7 @@ class ObserverBank:
         for rel in self.relations:
             if rel.kind == "offset":
                 continue
-            if rel.kind == "residual":
+            if rel.kind in ("residual", "cusum"):
                 for name in rel.streams:
                     key = (name, rel.window_s)
                     if key not in changes:
@@ -390,10 +396,14 @@ class ObserverBank:
 
         symbols, counters, observations = {}, {}, {}
         for rel in self.relations:
-            if rel.kind == "residual":
+            if rel.kind in ("residual", "cusum"):
                 da, db = (changes[(name, rel.window_s)] for name in rel.streams)
                 valid = da is not None and db is not None
-                mismatch = bool(residual_test(rel, np.array(da), np.array(db))[1]) if valid else False
+                z, mismatch = residual_test(rel, np.array(da), np.array(db)) if valid else (None, False)
+                if rel.kind == "cusum":
+                    test = self._cusums.setdefault(rel.name, Cusum(rel.cusum_drift, rel.k_sigma))
+                    mismatch = test.update(None if z is None else float(z))[1]
+                mismatch = bool(mismatch)
                 sym = (Trend.PLUS if mismatch else Trend.ZERO, Trend.ZERO)
             elif rel.kind == "offset":
                 a, b = rel.streams

@@ -8,7 +8,7 @@ residual``) compares the sizes. Over a window of ``w`` seconds, centred on
 the step (offline) or ending at it (causal), each stream changes by ``da``
 and ``db``; their residual and its expected spread are
 
-    r = db - gain * da,        sigma = sqrt(sigma_floor^2 + (sigma_rel * da)^2),
+    r = db - gain * da - rate_offset * w,   sigma = sqrt(sigma_floor^2 + (sigma_rel * da)^2),
 
 and the step is a mismatch where ``|r| > k_sigma * sigma``. The mismatches
 feed Algorithm 3 like differing trend symbols do, so a residual observer's
@@ -70,7 +70,7 @@ def window_changes(t: np.ndarray, v: np.ndarray, valid: np.ndarray, window_s: fl
 def residual_test(rel: RelationConfig, da: np.ndarray, db: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(z, mismatch)``: the normalised residual of each step and whether it
     exceeds ``k_sigma``."""
-    r = db - rel.gain * da
+    r = db - rel.gain * da - rel.rate_offset * rel.window_s
     sigma = np.sqrt(rel.sigma_floor**2 + (rel.sigma_rel * da) ** 2)
     z = r / sigma
     return z, np.abs(z) > rel.k_sigma

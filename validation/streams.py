@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal, Protocol, get_args
 
 import numpy as np
@@ -257,12 +257,40 @@ def resample(stream: Stream, step_t: np.ndarray, max_gap_s: float) -> tuple[np.n
 
 @dataclass(frozen=True)
 class StepStreams:
-    """Streams resampled onto the validation steps ``t`` (m,) s."""
+    """Streams resampled onto the validation steps ``t`` (m,) s; ``max_gap``
+    is the largest gap (s) each stream was interpolated across and
+    ``period`` its median sample period (s)."""
 
     t: np.ndarray
     values: dict[str, np.ndarray]
     valid: dict[str, np.ndarray]
     angular: dict[str, bool]
+    max_gap: dict[str, float] = field(default_factory=dict)
+    period: dict[str, float] = field(default_factory=dict)
+
+
+def sample_period(stream: Stream) -> float:
+    """Median time (s) between a stream's samples; inf with fewer than two."""
+    return float(np.median(np.diff(stream.t))) if len(stream.t) > 1 else float("inf")
+
+
+def stream_max_gap(
+    name: str,
+    stream: Stream,
+    max_gap_s: float,
+    stream_max_gap_s: Mapping[str, float] | None = None,
+    gap_periods: float | None = None,
+) -> float:
+    """The largest gap (s) between two samples of ``stream`` that a step may
+    be interpolated across: the stream's own entry of ``stream_max_gap_s``,
+    else ``max_gap_s`` or, for a sparse stream, ``gap_periods`` times its
+    median sample period, whichever is longer. A log thinned to one scan
+    every 1-3 s is then judged by its own rhythm, not by a 10 Hz sensor's."""
+    if stream_max_gap_s and name in stream_max_gap_s:
+        return float(stream_max_gap_s[name])
+    if gap_periods is None or len(stream.t) < 2:
+        return max_gap_s
+    return max(max_gap_s, gap_periods * sample_period(stream))
 
 
 def resample_streams(
@@ -270,17 +298,21 @@ def resample_streams(
     step_t: np.ndarray,
     max_gap_s: float = 0.5,
     stream_max_gap_s: Mapping[str, float] | None = None,
+    gap_periods: float | None = None,
 ) -> StepStreams:
-    """Resample every stream; ``stream_max_gap_s`` overrides the gap per name."""
+    """Resample every stream; the gap each one may be interpolated across is
+    :func:`stream_max_gap`'s (``gap_periods`` None: ``max_gap_s`` unless
+    ``stream_max_gap_s`` names the stream)."""
     step_t = np.asarray(step_t, dtype=float)
     if step_t.ndim != 1 or (len(step_t) > 1 and not np.all(np.diff(step_t) > 0.0)):
         raise ValidationError("step times must be a strictly increasing 1-D array")
-    gaps = stream_max_gap_s or {}
-    values, valid, angular = {}, {}, {}
+    values, valid, angular, gaps, periods = {}, {}, {}, {}, {}
     for name, s in streams.items():
-        values[name], valid[name] = resample(s, step_t, gaps.get(name, max_gap_s))
+        gaps[name] = stream_max_gap(name, s, max_gap_s, stream_max_gap_s, gap_periods)
+        periods[name] = sample_period(s)
+        values[name], valid[name] = resample(s, step_t, gaps[name])
         angular[name] = s.angular
-    return StepStreams(step_t, values, valid, angular)
+    return StepStreams(step_t, values, valid, angular, gaps, periods)
 
 
 def fixed_rate_steps(start_s: float, end_s: float, rate_hz: float) -> np.ndarray:

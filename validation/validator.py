@@ -27,8 +27,9 @@ from validation.config import GatingConfig, ValidationConfig
 from validation.diagnosis import Diagnoser, DiagnosisResult
 from validation.gating import Actions, Gate, factor_scales, offline_actions, oracle_actions
 from validation.metrics import validation_metrics
-from validation.observers import ObserverLog, run_observers, unary_checks
-from validation.streams import PoseSeries, SensorSet, fixed_rate_steps, validation_streams
+from validation.coverage import observer_coverage, require_observations, warn_low_coverage
+from validation.observers import ObserverLog, observe_steps, unary_checks
+from validation.streams import PoseSeries, SensorSet, fixed_rate_steps, resample_streams, validation_streams
 
 log = logging.getLogger(__name__)
 
@@ -145,7 +146,7 @@ def run_validation(
     start = time.perf_counter()
     faults = dict(faults or {})
     step_t = fixed_rate_steps(float(keyframe_t[0]), float(keyframe_t[-1]), config.rate_hz)
-    observer_log, results = None, None
+    observer_log, results, coverage = None, None, None
     if config.mode == "interval_oracle":
         actions = oracle_actions(gating, step_t, faults)
     else:
@@ -153,10 +154,11 @@ def run_validation(
         window = config.window
         streams = validation_streams(sensors, sm_poses, obs.gps_speed_window_s, window)
         checks = unary_checks(obs, magnetic_reference)
-        observer_log = run_observers(
-            streams, obs.relations, step_t, checks, obs.max_gap_s, obs.stream_max_gap_s,
-            window, obs.rule, config.offline,
-        )
+        steps = resample_streams(streams, step_t, obs.max_gap_s, obs.stream_max_gap_s, obs.gap_periods)
+        observer_log = observe_steps(steps, obs.relations, checks, window, obs.rule, config.offline)
+        coverage = observer_coverage(observer_log, steps, streams, obs.relations, {c.name: c.streams for c in checks})
+        warn_low_coverage(coverage, obs.min_coverage)
+        require_observations(coverage)
         diagnoser = Diagnoser(config.model)
         results = [diagnoser.diagnose(observer_log.observations(k)) for k in range(len(step_t))]
         if config.offline:
@@ -174,6 +176,8 @@ def run_validation(
     elapsed = time.perf_counter() - start
     expand = config.model.sensors if config.model is not None else {}
     metrics = validation_metrics(step_t, results, actions, faults, expand)
+    if coverage is not None:
+        metrics["observer_coverage"] = {name: round(c.fraction, 4) for name, c in coverage.items()}
     metrics["validation_time_s"] = round(elapsed, 4)
     metrics["keyframes_excluded"] = {f: int(np.sum(np.all(~np.isfinite(w), axis=1))) for f, w in weights.items()}
     metrics["keyframes_gated"] = {f: int(np.sum(np.any(w > 1, axis=1))) for f, w in weights.items()}

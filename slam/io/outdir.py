@@ -346,18 +346,37 @@ def open_container(out: str | Path, command: str, inputs: Iterable[str | Path] =
     return out
 
 
-def check_new_file(path: str | Path, inputs: Iterable[str | Path] = (), force: bool = False) -> Path:
-    """A single output file (``--config-out``): new, or replaced with ``force``;
-    never an input or a folder."""
+def result_file_mark(command: str) -> str:
+    """The first line of a text file ``command`` wrote as its result."""
+    return f"# gslam {command} result"
+
+
+def _marked(path: Path, command: str) -> bool:
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            return f.readline().startswith(result_file_mark(command))
+    except OSError:
+        return False
+
+
+def check_new_file(path: str | Path, inputs: Iterable[str | Path] = (), force: bool = False,
+                   command: str | None = None) -> Path:
+    """A single output file (``--config-out``, calibrate's ``--out``): new,
+    an earlier result of ``command`` (its first line is
+    :func:`result_file_mark`), or replaced with ``force``; never an input, a
+    folder or a symbolic link."""
     path = Path(path)
     target = path.resolve()
     for given in inputs:
         if Path(given).exists() and Path(given).resolve() == target:
             raise GslamError(f"{path}: is the input; give a new file name")
+    if path.is_symlink():
+        raise GslamError(f"{path}: is a symbolic link; give the file it points to, or a new name")
     if path.is_dir():
         raise GslamError(f"{path}: is a folder; give a file name")
-    if path.exists() and not force:
-        raise GslamError(f"{path}: exists; give a new file name, or --force to replace it")
+    if path.exists() and not force and not (command is not None and _marked(path, command)):
+        what = f" and is not a gslam {command} result" if command is not None else ""
+        raise GslamError(f"{path}: exists{what}; give a new file name, or --force to replace it")
     if not target.parent.is_dir():
         raise GslamError(f"{path}: no folder {target.parent}")
     return path

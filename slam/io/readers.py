@@ -1,8 +1,11 @@
 """Readers of recorded runs: one small interface, a registry keyed by format,
-and the simulator's run folders.
+and run folders.
 
-A *run folder* (written by the simulator) is a directory holding ``bag/``
-and a ``truth.json`` sidecar::
+A *run folder* (written by ``gslam simulate`` and ``gslam inject``) is a
+directory holding ``bag/`` and a ``truth.json`` sidecar. ``bag/`` is the
+recording: a ROS 2 bag folder (the simulator's), or a folder holding one
+recording file of any format (``gslam inject`` keeps the input's: a ROS 1
+``.bag``, a CARMEN log, a BROAD trial). The sidecar::
 
     {"scenario": str, "seed": int, "t0": <absolute s>, "duration_s": float,
      "faults": {"ODO_DIST": [[start, end], ...], "IMU_GYRO": ..., ...},
@@ -73,19 +76,31 @@ _GUESSERS: tuple[tuple[str, Callable[[Path], bool]], ...] = (
 
 
 def is_run_folder(path: Path) -> bool:
-    """A simulator run folder: a directory with ``truth.json`` and ``bag/``."""
+    """A run folder: a directory with ``truth.json`` and ``bag/``."""
     return path.is_dir() and (path / SIDECAR).is_file() and (path / RUN_BAG).exists()
 
 
+def run_recording(path: Path) -> Path:
+    """The recording of a run folder: ``bag/`` when it is a ROS 2 bag folder,
+    else the one file in it (a folder holding several is left to the bag
+    reader, which names them)."""
+    bag = path / RUN_BAG
+    if bag.is_dir() and not is_rosbag(bag):
+        inside = [p for p in bag.iterdir() if not p.name.startswith(".")]
+        if len(inside) == 1 and inside[0].is_file():
+            return inside[0]
+    return bag
+
+
 def guess_format(path: str | Path) -> str:
-    """The registry key of the reader for ``path`` (a run folder's bag)."""
+    """The registry key of the reader for ``path`` (a run folder's recording)."""
     path = Path(path)
     if not path.exists():
         raise GslamError(f"{path}: no such file or directory")
     if is_run_folder(path):
-        path = path / RUN_BAG
+        path = run_recording(path)
         if path.is_dir() and not is_rosbag(path):
-            return "rosbag"  # a folder holding one bag file; the reader resolves it
+            return "rosbag"  # a folder of bag files; the reader says what is wrong
     if is_rosbag(path) or (path.is_dir() and len([p for p in path.iterdir() if p.suffix in BAG_SUFFIXES]) == 1):
         return "rosbag"
     for fmt, looks_like in _GUESSERS:
@@ -203,6 +218,8 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
     fmt = guess_format(path) if config.format == "auto" else config.format
     if fmt not in READERS:
         raise GslamError(f"unknown input format '{fmt}'; known: {', '.join(READERS)}")
+    if fmt != "rosbag" and not config.frames.is_default():
+        raise GslamError(f"input.frames: a {fmt} recording has fixed frame conventions; frames apply to ROS bags")
     if not is_run_folder(path):
         return _read(fmt, path, config, on_scans)
 
@@ -212,7 +229,7 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
         lat, lon = sidecar.gps_datum.lat_deg, sidecar.gps_datum.lon_deg
         datum = GpsInputConfig(datum_lat_deg=lat, datum_lon_deg=lon)
         config = config.model_copy(update={"gps": datum})
-    rec = _read(fmt, path / RUN_BAG, config, on_scans)
+    rec = _read(fmt, run_recording(path), config, on_scans)
     rec.name = path.name
     attach_sidecar(rec, sidecar)
     log.info("%s: run '%s' with faults in %s", path, sidecar.scenario, ", ".join(rec.faults) or "none")

@@ -19,6 +19,9 @@ Message -> stream mapping (all times are header stamps):
   geometry_msgs/PoseStamped) -> :class:`Trajectory` from the planar pose.
 * ``gps``: sensor_msgs/NavSatFix -> :class:`Gps` in metres about a datum.
 
+Each stream but GPS is turned from its own frame conventions into the
+project's (``input.frames``, :mod:`slam.io.frames`).
+
 This module opens the bag, checks the topics and feeds the messages to the
 streams; the streams are in :mod:`slam.io.rosbag_streams` (base class and
 message types), :mod:`slam.io.rosbag_scans`, :mod:`slam.io.rosbag_imu` and
@@ -97,22 +100,22 @@ def open_bag(path: Path) -> Any:
 
 
 def _make_streams(path: Path, config: InputConfig) -> list[_Stream]:
-    topics, compass = config.topics, config.compass
+    topics, compass, frames = config.topics, config.compass, config.frames
     streams: list[_Stream] = []
     if topics.scan is not None:
         streams.append(_ScanStream("scan", topics.scan, path))
     if topics.gyro is not None:
-        streams.append(_GyroStream("gyro", topics.gyro, path, config.gyro))
+        streams.append(_GyroStream("gyro", topics.gyro, path, config.gyro, frames.gyro))
     if topics.compass is not None:
         cls = _CompassMagStream if compass.source == "magnetic_field" else _CompassImuStream
-        streams.append(cls("compass", topics.compass, path, compass))
+        streams.append(cls("compass", topics.compass, path, compass, frames.compass))
     if topics.odometry is not None:
-        streams.append(_PoseStream("odometry", topics.odometry, path))
+        streams.append(_PoseStream("odometry", topics.odometry, path, frame=frames.odometry))
     if topics.gps is not None:
         streams.append(_GpsStream("gps", topics.gps, path, config.gps))
     if topics.groundtruth is not None:
         gt_types = (ODOMETRY, POSE_STAMPED)
-        streams.append(_PoseStream("groundtruth", topics.groundtruth, path, gt_types))
+        streams.append(_PoseStream("groundtruth", topics.groundtruth, path, gt_types, frames.groundtruth))
     return streams
 
 

@@ -15,9 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from slam.config import CompassInputConfig, GyroInputConfig
+from slam.config import CompassInputConfig, GyroInputConfig, StreamFrameConfig
 from slam.errors import GslamError
 from slam.geometry import heading_from_magnetometer, wrap_angle, yaw_from_quaternion
+from slam.io import frames
 from slam.io.rosbag_streams import IMU, MAGNETIC_FIELD, _stamp, _Stream
 from slam.recording import Compass, Gyro
 
@@ -34,9 +35,13 @@ class _GyroStream(_Stream):
 
     msgtypes = (IMU,)
 
-    def __init__(self, name: str, topic: str, bag: Path, config: GyroInputConfig) -> None:
+    def __init__(
+        self, name: str, topic: str, bag: Path, config: GyroInputConfig, frame: StreamFrameConfig = StreamFrameConfig()
+    ) -> None:
         super().__init__(name, topic, bag)
         self.world = config.axis == "world_z"
+        self.axis = "xyz".index(config.axis) if not self.world else 2
+        self.frame = frame
         self.rates: list[tuple[float, ...]] = []
 
     def add(self, msg: Any) -> None:
@@ -50,7 +55,7 @@ class _GyroStream(_Stream):
             q = msg.orientation
             self.rates.append((w.x, w.y, w.z, q.x, q.y, q.z, q.w))
         else:
-            self.rates.append((w.z,))
+            self.rates.append(((w.x, w.y, w.z)[self.axis],))
         self.stamps.append(_stamp(msg))
 
     def bulk_fields(self) -> tuple[str, ...]:
@@ -68,17 +73,18 @@ class _GyroStream(_Stream):
         elif self.world:
             rows = np.column_stack([cols["angular_velocity"], cols["orientation"]])
         else:
-            rows = cols["angular_velocity"][:, 2:3]
+            rows = cols["angular_velocity"][:, self.axis : self.axis + 1]
         self.blocks = []
         if self.world:
             self._finite("angular_velocity/orientation", rows)
             self.rate = world_yaw_rate(rows[:, :3], rows[:, 3:])
         else:
             self.rate = rows[:, 0] if rows.size else np.zeros(0)
-            self._finite("angular_velocity.z", self.rate)
+            self._finite(f"angular_velocity.{'xyz'[self.axis]}", self.rate)
 
     def build(self, t0_ns: int) -> Gyro:
-        return Gyro(t=self.t(t0_ns), rate=self.rate)
+        rate = frames.yaw_rate(self.rate, self.frame, "world" if self.world else "body")
+        return Gyro(t=self.t(t0_ns), rate=rate)
 
 
 def _no_orientation(where: str, cols: dict[str, np.ndarray], offset: int, hint: str) -> None:
@@ -115,10 +121,13 @@ class _CompassMagStream(_Stream):
 
     msgtypes = (MAGNETIC_FIELD,)
 
-    def __init__(self, name: str, topic: str, bag: Path, config: CompassInputConfig) -> None:
+    def __init__(
+        self, name: str, topic: str, bag: Path, config: CompassInputConfig, frame: StreamFrameConfig = StreamFrameConfig()
+    ) -> None:
         super().__init__(name, topic, bag)
         self.declination = np.radians(config.declination_deg)
         self.mounting = np.radians(config.mounting_yaw_deg)
+        self.frame = frame
         self.fields: list[tuple[float, float, float]] = []
 
     def add(self, msg: Any) -> None:
@@ -138,8 +147,11 @@ class _CompassMagStream(_Stream):
         self._finite("magnetic_field", self.field)
 
     def build(self, t0_ns: int) -> Compass:
-        yaw = wrap_angle(heading_from_magnetometer(self.field, self.declination) - self.mounting)
-        return Compass(t=self.t(t0_ns), yaw=yaw, field=self.field)
+        field = frames.body_vector(self.field, self.frame)
+        yaw = heading_from_magnetometer(field, self.declination)
+        if self.frame.yaw_sign == -1:  # mirrored about east, as frames.heading does
+            yaw = -yaw
+        return Compass(t=self.t(t0_ns), yaw=wrap_angle(yaw - self.mounting), field=field)
 
 
 class _CompassImuStream(_Stream):
@@ -159,9 +171,12 @@ class _CompassImuStream(_Stream):
 
     msgtypes = (IMU,)
 
-    def __init__(self, name: str, topic: str, bag: Path, config: CompassInputConfig) -> None:
+    def __init__(
+        self, name: str, topic: str, bag: Path, config: CompassInputConfig, frame: StreamFrameConfig = StreamFrameConfig()
+    ) -> None:
         super().__init__(name, topic, bag)
         self.offset = np.radians(config.declination_deg + config.mounting_yaw_deg)
+        self.frame = frame
         self.quats: list[tuple[float, float, float, float]] = []
 
     def add(self, msg: Any) -> None:
@@ -189,5 +204,5 @@ class _CompassImuStream(_Stream):
 
     def build(self, t0_ns: int) -> Compass:
         q = self.quat
-        yaw = wrap_angle(yaw_from_quaternion(q[:, 0], q[:, 1], q[:, 2], q[:, 3]) - self.offset)
-        return Compass(t=self.t(t0_ns), yaw=yaw, field=None)
+        reported = frames.heading(yaw_from_quaternion(q[:, 0], q[:, 1], q[:, 2], q[:, 3]), self.frame)
+        return Compass(t=self.t(t0_ns), yaw=wrap_angle(reported - self.offset), field=None)

@@ -13,9 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from slam.config import GpsInputConfig
+from slam.config import GpsInputConfig, StreamFrameConfig
 from slam.errors import GslamError
-from slam.geometry import enu_from_geodetic, wrap_angle, yaw_from_quaternion
+from slam.geometry import enu_from_geodetic, yaw_from_quaternion
+from slam.io import frames
 from slam.io.rosbag_streams import NAV_SAT_FIX, ODOMETRY, _stamp, _Stream
 from slam.recording import Gps, Trajectory
 
@@ -30,10 +31,16 @@ class _PoseStream(_Stream):
     msgtypes = (ODOMETRY,)
 
     def __init__(
-        self, name: str, topic: str, bag: Path, msgtypes: tuple[str, ...] = (ODOMETRY,)
+        self,
+        name: str,
+        topic: str,
+        bag: Path,
+        msgtypes: tuple[str, ...] = (ODOMETRY,),
+        frame: StreamFrameConfig = StreamFrameConfig(),
     ) -> None:
         self.msgtypes = msgtypes
         super().__init__(name, topic, bag)
+        self.frame = frame
         self.poses: list[tuple[float, ...]] = []
 
     def add(self, msg: Any) -> None:
@@ -58,9 +65,9 @@ class _PoseStream(_Stream):
 
     def build(self, t0_ns: int) -> Trajectory:
         p = self.pose
-        yaw = wrap_angle(yaw_from_quaternion(p[:, 2], p[:, 3], p[:, 4], p[:, 5]))
-        x, y = p[:, 0].copy(), p[:, 1].copy()
-        return Trajectory(t=self.t(t0_ns), x=x, y=y, yaw=np.asarray(yaw))
+        yaw = yaw_from_quaternion(p[:, 2], p[:, 3], p[:, 4], p[:, 5])
+        x, y, yaw = frames.planar_poses(p[:, 0], p[:, 1], yaw, self.frame)
+        return Trajectory(t=self.t(t0_ns), x=x, y=y, yaw=yaw)
 
 
 class _GpsStream(_Stream):

@@ -1,0 +1,136 @@
+"""``gslam calibrate``: relation models and observer parameters learnt
+from recorded runs instead of typed in by hand.
+
+1. Every run is read, scan-matched and put on the validation steps as
+   ``gslam map`` would (:mod:`slam.calibrate.runs`), over a stretch
+   declared clean or whole.
+2. Each relation of the config gets the gain and offset between its two
+   streams' rates and the noise of their residual
+   (:mod:`slam.calibrate.fit`), then its boundary, window and threshold
+   from that noise and the target false-alarm rate
+   (:mod:`slam.calibrate.select`): the run's target share of steps with a
+   false alarm, split evenly over the observers. The magnetometer check
+   gets its tolerances the same way.
+3. Streams of different sensors whose rates correlate and which no
+   relation compares yet are proposed as new relations
+   (:mod:`slam.calibrate.propose`).
+4. The result is the input config with the learnt observers and the
+   measured figures as comments (:mod:`slam.calibrate.write`), for the
+   pass (offline or causal) the config names. Learnt on some runs, it is
+   used on others.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from slam.calibrate.propose import Proposal, propose
+from slam.calibrate.runs import CalibrationRun, load_run, parse_clean
+from slam.calibrate.select import CheckChoice, Choice, calibrate_magnetometer, calibrate_relation
+from slam.calibrate.write import calibrated_config
+from slam.config import PipelineConfig, load_config, validation_sections
+from slam.errors import GslamError
+from slam.io.atomic import write_text
+from slam.io.outdir import check_new_file
+
+__all__ = ["CalibrationResult", "calibrate", "learn", "load_run", "parse_clean"]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_FALSE_ALARM = 0.005
+"""Share of a run's validation steps with a false alarm that calibration aims at."""
+
+
+@dataclass
+class CalibrationResult:
+    """What ``gslam calibrate`` learnt and where it wrote it."""
+
+    out: Path | None
+    choices: dict[str, Choice | None]
+    magnetometer: CheckChoice | None
+    proposals: list[Proposal]
+    target_per_observer: float
+    text: str
+
+
+def calibrate(
+    runs: Sequence[str | Path],
+    config_path: str | Path,
+    out: str | Path,
+    clean: str | None = None,
+    false_alarm: float = DEFAULT_FALSE_ALARM,
+    force: bool = False,
+    progress: bool = False,
+    overrides: Sequence[str] = (),
+) -> CalibrationResult:
+    """Learn the observers of ``config_path`` from ``runs`` (module
+    docstring) and write the calibrated config to ``out`` (a new file, an
+    earlier calibrate result, or any file with ``force``). ``clean``:
+    ``START:END`` seconds of every run declared clean; None learns from
+    whole runs with robust statistics."""
+    if not runs:
+        raise GslamError("gslam calibrate: no run given")
+    if not 0.0 < false_alarm < 1.0:
+        raise GslamError(f"--false-alarm {false_alarm:g}: expected a share of steps between 0 and 1, e.g. 0.005")
+    out = check_new_file(out, [*runs, config_path], force, command="calibrate")
+    stretch = parse_clean(clean)
+    config = load_config(config_path, list(overrides))
+    vcfg, _ = validation_sections(config)
+    if vcfg.model is None:
+        raise GslamError(f"{config_path}: validation.model: calibration needs the system model the observers belong to")
+    loaded: list[CalibrationRun] = [load_run(r, config, vcfg, stretch, progress) for r in runs]
+    header = [f"Learnt from {len(runs)} run{'s' if len(runs) > 1 else ''} ({', '.join(Path(r).name for r in runs)}) "
+              f"{_learnt_from(stretch)}, starting from {Path(config_path).name}."]
+    res = learn(loaded, config, false_alarm, header)
+    write_text(out, res.text)
+    res.out = Path(out)
+    return res
+
+
+def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm: float = DEFAULT_FALSE_ALARM,
+          header: Sequence[str] = ()) -> CalibrationResult:
+    """Steps 2-4 of the module docstring on runs already loaded
+    (:func:`slam.calibrate.runs.load_run`); the text is not written
+    (``out`` is None)."""
+    vcfg, _ = validation_sections(config)
+    relations = vcfg.observers.relations
+    has_mag = vcfg.observers.magnetometer.enabled and any("mag_strength" in r.streams for r in loaded)
+    observers = len(relations) + int(has_mag)
+    if observers == 0:
+        raise GslamError("validation.observers: no relation or check to calibrate")
+    target = false_alarm / observers
+    choices = {rel.name: calibrate_relation(loaded, rel, vcfg, target) for rel in relations}
+    for name, choice in choices.items():
+        if choice is None:
+            log.warning("relation %s: no run has both its streams; kept as configured", name)
+        elif not choice.met:
+            log.warning("relation %s: no candidate keeps its alarms below %.3f %% of the learning steps",
+                        name, 100 * target)
+        elif choice.fit.gain < 0:
+            log.warning("relation %s: %s turns against %s (gain %.2f): check input.frames", name,
+                        choice.relation.stream_b, choice.relation.stream_a, choice.fit.gain)
+    mag = calibrate_magnetometer(loaded, vcfg.observers.magnetometer, target) if has_mag else None
+    proposals = propose(loaded, relations, vcfg.model, vcfg, target)
+    header = [*header, *_header(false_alarm, target, observers, vcfg.offline)]
+    text = calibrated_config(config, choices, mag, proposals, header, target, len(loaded))
+    return CalibrationResult(None, choices, mag, proposals, target, text)
+
+
+def _learnt_from(stretch) -> str:
+    if stretch is None:
+        return "over whole runs, with robust statistics"
+    span = f"{stretch[0]:g}-{stretch[1]:g} s" if stretch[1] != float("inf") else f"{stretch[0]:g} s to the end"
+    return f"over {span} of each run, declared clean"
+
+
+def _header(false_alarm: float, target: float, observers: int, offline: bool) -> list[str]:
+    return [
+        f"Target: at most {100 * false_alarm:.2f} % of a run's validation steps with a false alarm, "
+        f"{100 * target:.3f} % for each of the {observers} observers.",
+        "Chosen for the " + ("offline pass (centred windows, alarms dated by their evidence): map with pass offline."
+                             if offline else "causal pass (trailing windows): map with pass causal."),
+        "Use it on other runs: gslam map RUN --config THIS_FILE --out DIR --gating on",
+    ]

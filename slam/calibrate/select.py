@@ -1,0 +1,218 @@
+"""Each observer's parameters from the measured noise and a target
+false-alarm rate.
+
+For a relation, the noise it must stand above is measured first
+(:mod:`slam.calibrate.fit`): the spread of the two slopes' difference for
+a trend relation, of the windowed residual for a residual relation, of
+the difference about its running level for an offset relation. The
+boundary is then a multiple of that noise (``b = c * noise`` for a trend,
+``k_sigma`` for the others) and Algorithm 3's threshold ``th`` a number of
+steps; the observer itself (:func:`validation.observers.observe_steps`,
+with the pass the config names) runs on the learning steps for each
+candidate, smallest multiple first and, for each, smallest ``th`` first.
+The first candidate whose ``NO_MATCH`` steps are at most the target share
+of the learning steps, on every run, is taken: the smallest error, then
+the shortest one, the observer can see at that false-alarm rate.
+
+A trend or residual relation tries windows of half, once and twice the
+configured ``window_s`` (none shorter than four samples of its sparser
+stream, each a whole number of step pairs) and keeps the one whose smallest visible change over a window is
+least (``b * w`` for a trend, ``k_sigma * sigma_floor`` for a residual).
+An offset relation keeps its window and ``level_window_s``: how long a
+standing offset may last and still be seen is the user's choice.
+``th`` is first sought no longer than the configured one (how long an
+error must last to count is the user's choice, and a short one is missed
+with a long ``th``), then longer. ``max_counter`` is ``th + 20``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from slam.calibrate.fit import RateFit, fit_offset, fit_rates, fit_slopes, robust_sd
+from slam.calibrate.runs import CalibrationRun
+from validation.config import ValidationConfig
+from validation.observer_config import MagnetometerCheckConfig, RelationConfig
+from validation.observers import evidence, observe, observe_steps
+
+log = logging.getLogger(__name__)
+
+THRESHOLDS = (1, 2, 3, 5, 8, 12, 20, 30)
+"""Candidate ``th``, steps."""
+MULTIPLES = (3.0, 4.0, 5.0, 6.0, 8.0, 12.0)
+"""Candidate boundaries in units of the measured noise."""
+CUSUM_LIMITS = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0)
+"""Candidate decision limits of a cusum relation, in sds (its sums add up
+overlapping windows' residuals, which move together)."""
+COUNTER_HEADROOM = 20
+TIE = 1.05
+"""Windows whose smallest visible change is within this factor count as equal (the shorter wins)."""
+
+
+def sig(x: float, digits: int = 4) -> float:
+    """``x`` to ``digits`` significant digits: what the config shows is what ran."""
+    return float(f"{x:.{digits}g}")
+
+
+@dataclass
+class Choice:
+    """A calibrated relation and what it was chosen from."""
+
+    relation: RelationConfig
+    fit: RateFit
+    noise: float
+    multiple: float
+    alarm: float
+    visible: float
+    met: bool
+
+
+def _traces(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg: ValidationConfig):
+    for run in runs:
+        trace = observe_steps(run.steps, [rel], (), vcfg.window, vcfg.observers.rule, False).relations[rel.name]
+        yield trace.symbol_a, trace.symbol_b, trace.valid
+
+
+def _first_threshold(runs, rel: RelationConfig, vcfg: ValidationConfig, inliers, target: float,
+                     longest: int) -> tuple[int, float] | None:
+    """The smallest th up to ``longest`` whose NO_MATCH share of the inlier
+    steps is at most ``target`` on every run, and that share; None if none is."""
+    traces = list(_traces(runs, rel, vcfg))
+    for th in (t for t in THRESHOLDS if t <= longest):
+        worst = 0.0
+        for (a, b, valid), good in zip(traces, inliers):
+            cap = th + COUNTER_HEADROOM
+            no_match = evidence(a, b, th, valid, cap) if vcfg.offline else observe(a, b, th, valid, cap)[1]
+            judged = valid & good
+            if judged.any():
+                worst = max(worst, float(no_match[judged].mean()))
+        if worst <= target:
+            return th, worst
+    return None
+
+
+def _search(runs, make: Callable[[float, int], RelationConfig], vcfg, inliers, target,
+            longest: int, multiples: Sequence[float] = MULTIPLES) -> tuple[RelationConfig, float, float, bool]:
+    """``(relation, multiple, alarm, met)``: the first multiple and th (no
+    longer than ``longest`` steps, then any) that meet ``target``; the last
+    candidate (largest both) if none does."""
+    for limit in (longest, THRESHOLDS[-1]):
+        for multiple in multiples:
+            found = _first_threshold(runs, make(multiple, THRESHOLDS[0]), vcfg, inliers, target, limit)
+            if found is not None:
+                th, alarm = found
+                return make(multiple, th), multiple, alarm, True
+    rel = make(multiples[-1], THRESHOLDS[-1])
+    return rel, multiples[-1], float("nan"), False
+
+
+def _updated(rel: RelationConfig, **changes) -> RelationConfig:
+    """``rel`` with ``changes``, checked as a config is."""
+    return RelationConfig.model_validate({**rel.model_dump(), **changes})
+
+
+def candidate_windows(runs: Sequence[CalibrationRun], rel: RelationConfig, rate_hz: float) -> list[float]:
+    """Half, once and twice ``rel.window_s``, none shorter than four samples
+    of the sparser stream, each a whole number of step pairs (a centred
+    window reaches the same whole number of steps either side)."""
+    period = max((run.steps.period.get(s, 0.0) for run in runs for s in rel.streams if s in run.streams), default=0.0)
+    shortest = 4.0 * period if np.isfinite(period) else rel.window_s
+    pair = 2.0 / rate_hz
+    return sorted({round(max(pair, np.ceil(max(w, shortest) / pair - 1e-9) * pair), 6)
+                   for w in (0.5 * rel.window_s, rel.window_s, 2.0 * rel.window_s)})
+
+
+def calibrate_relation(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg: ValidationConfig,
+                       target: float) -> Choice | None:
+    """``rel`` with its parameters learnt from ``runs`` (module docstring);
+    None when no run has both its streams."""
+    a, b = rel.streams
+    best: Choice | None = None
+    windows = candidate_windows(runs, rel, vcfg.rate_hz) if rel.kind != "offset" else [rel.window_s]
+    for w in windows:
+        fit = fit_rates(runs, a, b, w, vcfg.window, vcfg.rate_hz, rel.gain)
+        if fit is None:
+            return None
+        base = dict(window_s=w, warmup_s=None)
+        if rel.kind == "trend":
+            noise = fit_slopes(runs, a, b, w, vcfg.window, fit.inliers)
+
+            def make(m: float, th: int) -> RelationConfig:
+                return _updated(rel, **base, boundary=sig(m * noise), boundary_a=None, boundary_b=None,
+                                threshold=th, max_counter=th + COUNTER_HEADROOM)
+
+        elif rel.kind in ("residual", "cusum"):
+            noise = fit.noise
+
+            def make(m: float, th: int) -> RelationConfig:
+                return _updated(rel, **base, gain=sig(fit.gain), rate_offset=sig(fit.rate_offset),
+                                sigma_floor=sig(noise), sigma_rel=sig(fit.sigma_rel), k_sigma=m,
+                                threshold=th, max_counter=th + COUNTER_HEADROOM)
+
+        else:
+            noise = fit_offset(runs, a, b, fit.gain, rel.level_window_s, vcfg.window, fit.inliers)
+
+            def make(m: float, th: int) -> RelationConfig:
+                return _updated(rel, gain=sig(fit.gain), sigma_floor=sig(noise), k_sigma=m,
+                                threshold=th, max_counter=th + COUNTER_HEADROOM)
+
+        if not noise > 0.0:  # no step to learn from in this window
+            continue
+        multiples = CUSUM_LIMITS if rel.kind == "cusum" else MULTIPLES
+        chosen, multiple, alarm, met = _search(runs, make, vcfg, fit.inliers, target, max(rel.threshold, 1), multiples)
+        visible = multiple * noise * (w if rel.kind == "trend" else 1.0)
+        choice = Choice(chosen, fit, noise, multiple, alarm, visible, met)
+        if best is None or (met and not best.met) or (met == best.met and visible < best.visible / TIE):
+            best = choice
+    if best is not None:
+        log.info("%s: %s", rel.name, best.relation.model_dump(exclude_none=True))
+    return best
+
+
+@dataclass
+class CheckChoice:
+    """The magnetometer check's tolerances and the deviations they came from."""
+
+    config: MagnetometerCheckConfig
+    strength_T: float
+    dip_rad: float
+    steps: int
+
+
+def calibrate_magnetometer(runs: Sequence[CalibrationRun], cfg: MagnetometerCheckConfig, target: float) -> CheckChoice | None:
+    """Tolerances of field strength and dip at the ``1 - target / 2``
+    quantile of their deviations on the learning steps of the worst run
+    (over a whole run, no further than 6 robust sds above the median, so
+    faults do not widen them); no hold. None without magnetometer data."""
+    if not cfg.enabled:
+        return None
+    worst_b = worst_d = 0.0
+    steps = 0
+    for run in runs:
+        check = next((c for c in run.checks if c.name == cfg.name), None)
+        if check is None or not all(s in run.streams for s in check.streams):
+            continue
+        s = run.steps
+        ok = s.valid["mag_strength"] & s.valid["mag_dip"] & run.clean
+        if not ok.any():
+            continue
+        db = np.abs(s.values["mag_strength"][ok] - check.strength_T)
+        dd = np.abs(s.values["mag_dip"][ok] - check.dip_rad)
+        q = 100.0 * (1.0 - 0.5 * target)
+        tb, td = float(np.percentile(db, q)), float(np.percentile(dd, q))
+        if not run.declared:
+            tb = min(tb, float(np.median(db)) + 6.0 * robust_sd(db))
+            td = min(td, float(np.median(dd)) + 6.0 * robust_sd(dd))
+        worst_b, worst_d, steps = max(worst_b, tb), max(worst_d, td), steps + int(ok.sum())
+    if not steps:
+        return None
+    new = cfg.model_copy(update={"tolerance_T": sig(max(worst_b, 1e-9), 3),
+                                 "tolerance_dip_deg": sig(max(np.degrees(worst_d), 1e-3), 3), "hold_s": 0.0})
+    return CheckChoice(new, worst_b, worst_d, steps)
+
+
+__all__ = ["Choice", "CheckChoice", "calibrate_magnetometer", "calibrate_relation", "fit_rates"]

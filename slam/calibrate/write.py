@@ -1,0 +1,119 @@
+"""The calibrated config as YAML: the input config, every default spelled
+out, with its observers replaced by the learnt ones and the measured
+figures beside each as comments. ``gslam map OTHER --config MODEL.yaml``
+uses it as it is; :func:`slam.config.load_config` reads it back."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import yaml
+
+from slam.calibrate.propose import Proposal
+from slam.calibrate.select import CheckChoice, Choice
+from slam.config import PipelineConfig
+from slam.io.outdir import result_file_mark
+from validation.observer_config import RelationConfig
+
+_PLACEHOLDER = "__relations__"
+_INDENT = "    "
+_KEEP = ("name", "kind", "stream_a", "stream_b")
+
+
+def _flow(rel: RelationConfig) -> str:
+    """One relation as a YAML flow mapping: its name, kind and streams, then
+    every value that differs from the default."""
+    data = rel.model_dump(mode="json")
+    default = {k: f.default for k, f in RelationConfig.model_fields.items()}
+    shown = {k: v for k, v in data.items() if k in _KEEP or (v is not None and v != default.get(k))}
+    return yaml.safe_dump([shown], default_flow_style=None, width=10_000, sort_keys=False).strip()
+
+
+def _pct(x: float) -> str:
+    return "not met" if not np.isfinite(x) else f"{100 * x:.2f} %"
+
+
+def _relation_comment(c: Choice, target: float, runs: int) -> list[str]:
+    rel, fit = c.relation, c.fit
+    unit = "rad" if "yaw" in rel.stream_b else "m"
+    lines = [
+        f"{rel.name} ({rel.kind}): {rel.stream_b} against {rel.stream_a} over {fit.window_s:g} s windows: "
+        f"gain {fit.gain:.4f}, offset {fit.rate_offset:.3g} {unit}/s, residual noise {fit.noise:.3g} {unit} "
+        f"(robust sd over {fit.steps} steps of {runs} run{'s' if runs > 1 else ''}, correlation {fit.corr:.3f})",
+    ]
+    if rel.kind == "trend":
+        lines.append(f"slopes differ by {c.noise:.3g} {unit}/s (robust sd): b = {c.multiple:g} x that; "
+                     f"smallest visible change {c.visible:.3g} {unit} over the window")
+    elif rel.kind == "residual":
+        lines.append(f"band k_sigma = {c.multiple:g} sds, growing by sigma_rel {rel.sigma_rel:.3g} of the motion")
+    elif rel.kind == "cusum":
+        lines.append(f"CUSUM of the residual in sds, forgetting {rel.cusum_drift:g} a step: limit k_sigma = {c.multiple:g}; "
+                     f"sds grow by sigma_rel {rel.sigma_rel:.3g} of the motion")
+    else:
+        lines.append(f"difference about its {rel.level_window_s:g} s running level: {c.noise:.3g} {unit} "
+                     f"(robust sd); band k_sigma = {c.multiple:g} sds")
+    if fit.gain < 0:
+        lines.append("WARNING: the streams turn opposite ways (negative gain): check input.frames")
+    met = "" if c.met else f"; the target of {_pct(target)} could not be met with any candidate"
+    lines.append(f"th {rel.threshold} steps: NO_MATCH on {_pct(c.alarm)} of the learning steps "
+                 f"(worst run; target {_pct(target)}){met}")
+    return lines
+
+
+def calibrated_config(
+    config: PipelineConfig,
+    choices: dict[str, Choice | None],
+    magnetometer: CheckChoice | None,
+    proposals: Sequence[Proposal],
+    header: Sequence[str],
+    target: float,
+    runs: int,
+) -> str:
+    """The YAML text of the module docstring. ``choices`` maps every
+    configured relation to its calibration (None: no run had its streams,
+    kept as it was)."""
+    validation = dict(config.validation)
+    validation["mode"] = "off"
+    observers = dict(validation["observers"])
+    if magnetometer is not None:
+        observers["magnetometer"] = magnetometer.config.model_dump(mode="json")
+    observers["relations"] = _PLACEHOLDER
+    validation["observers"] = observers
+    sections = config.model_dump(mode="json")
+    sections["validation"] = validation
+    text = yaml.safe_dump(sections, sort_keys=False, allow_unicode=True, width=120, default_flow_style=None)
+
+    block = [f"{_INDENT}relations:"]
+    for rel_data in config.validation["observers"]["relations"]:
+        name = rel_data["name"]
+        choice = choices.get(name)
+        if choice is None:
+            block.append(f"{_INDENT}# {name}: not calibrated, no run has both its streams; kept as configured")
+            block.append(_INDENT + _flow(RelationConfig.model_validate(rel_data)))
+            continue
+        block += [f"{_INDENT}# {line}" for line in _relation_comment(choice, target, runs)]
+        block.append(_INDENT + _flow(choice.relation))
+    if proposals:
+        block.append(f"{_INDENT}# Proposed: streams of different sensors whose rates correlate. To use one, uncomment")
+        block.append(f"{_INDENT}# it and add its line under validation.model.relations.")
+        for p in proposals:
+            block += [f"{_INDENT}# {line}" for line in _relation_comment(p.choice, target, runs)]
+            block.append(f"{_INDENT}# model: {p.choice.relation.name}: [{p.components[0]}, {p.components[1]}]")
+            block.append(f"{_INDENT}# {_flow(p.choice.relation)}")
+    mag_note = []
+    if magnetometer is not None:
+        mag_note = [f"{_INDENT}# magnetometer check: field strength within {magnetometer.strength_T * 1e6:.3g} uT and dip within "
+                    f"{np.degrees(magnetometer.dip_rad):.3g} deg of the reference on all but {_pct(0.5 * target)} "
+                    f"each of {magnetometer.steps} learning steps (worst run)"]
+    lines = []
+    for line in text.splitlines():
+        if line.strip() == f"relations: {_PLACEHOLDER}":
+            lines += block
+        elif line.strip().startswith("magnetometer:") and line.startswith(_INDENT) and mag_note:
+            lines += mag_note + [line]
+        else:
+            lines.append(line)
+    head = [result_file_mark("calibrate") + ": a pipeline config whose observers were learnt from data"]
+    head += [f"# {h}" for h in header]
+    return "\n".join(head + lines) + "\n"

@@ -1,0 +1,136 @@
+"""``gslam calibrate``: relation models and observer parameters learnt from
+data (slam/calibrate)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from conftest import TELEMAX_CONFIG
+from slam.calibrate import calibrate, parse_clean
+from slam.calibrate.fit import fit_rates
+from slam.calibrate.runs import CalibrationRun
+from slam.calibrate.select import calibrate_relation
+from slam.cli import main
+from slam.config import load_config
+from slam.errors import GslamError
+from slam.pipeline import run_map
+from validation.config import ValidationConfig
+from validation.observer_config import RelationConfig
+from validation.observers import observe_steps
+from validation.streams import Stream, fixed_rate_steps, resample_streams
+
+RATE_HZ = 10.0
+
+
+def distance_run(seed: int, faults: list[tuple[float, float]] = (), duration_s: float = 300.0,
+                 clean: tuple[float, float] | None = None) -> CalibrationRun:
+    """Odometry and scan-matched path lengths at 10 Hz: the scan matcher
+    reads 0.9 x the odometry plus 2 mm/s, with 1 cm of noise per sample;
+    inside ``faults`` it reads 1.5 x."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration_s, 0.1)
+    speed = 0.5 + 0.3 * np.sin(t / 7.0) + 0.2 * np.sin(t / 2.3)
+    odo = np.concatenate(([0.0], np.cumsum(speed[1:] * 0.1)))
+    factor = np.full(len(t), 0.9)
+    for a, b in faults:
+        factor[(t >= a) & (t < b)] = 1.5
+    sm = np.concatenate(([0.0], np.cumsum(factor[1:] * np.diff(odo)))) + 0.002 * t + rng.normal(0.0, 0.01, len(t))
+    streams = {"odo_distance": Stream(t, odo), "sm_distance": Stream(t, sm)}
+    step_t = fixed_rate_steps(t[0], t[-1], RATE_HZ)
+    steps = resample_streams(streams, step_t, 0.5)
+    mask = np.ones(len(step_t), dtype=bool) if clean is None else (step_t >= clean[0]) & (step_t <= clean[1])
+    return CalibrationRun(f"run{seed}", streams, steps, [], mask, clean is not None)
+
+
+def vcfg(relation: RelationConfig, **extra) -> ValidationConfig:
+    return ValidationConfig.model_validate({"mode": "on", "rate_hz": RATE_HZ, "pass": "causal",
+                                            "observers": {"relations": [relation.model_dump()]}, **extra})
+
+
+RESIDUAL = RelationConfig(name="d", kind="residual", stream_a="odo_distance", stream_b="sm_distance",
+                          window_s=2.0, sigma_floor=1.0, threshold=5, max_counter=25)
+
+
+def test_fit_recovers_gain_offset_and_noise_through_faults():
+    faults = [(40.0 + 60.0 * i, 46.0 + 60.0 * i) for i in range(4)]  # 8 % of the run faulty
+    runs = [distance_run(1, faults), distance_run(2)]
+    fit = fit_rates(runs, "odo_distance", "sm_distance", 2.0, "trailing", RATE_HZ)
+    assert fit.gain == pytest.approx(0.9, abs=0.01)
+    assert fit.rate_offset == pytest.approx(0.002, abs=0.001)
+    # Two samples of 1 cm noise differ by 1.41 cm.
+    assert fit.noise == pytest.approx(0.0141, rel=0.15)
+    # The faulty steps, and half a window either side, are not learnt from.
+    t = runs[0].steps.t
+    for a, b in faults:
+        assert not fit.inliers[0][(t > a + 1.0) & (t < b)].any()
+    assert fit.inliers[1].mean() > 0.97
+
+
+def test_calibrated_relation_meets_its_target_and_sees_a_fault_elsewhere():
+    learn = [distance_run(3), distance_run(4)]
+    choice = calibrate_relation(learn, RESIDUAL, vcfg(RESIDUAL), target=0.002)
+    rel = choice.relation
+    assert choice.met and choice.alarm <= 0.002
+    assert rel.gain == pytest.approx(0.9, abs=0.01) and rel.sigma_floor < 0.05
+    # Another run, not learnt from, with a fault: seen there and nowhere else.
+    test = distance_run(5, [(100.0, 110.0)])
+    log = observe_steps(test.steps, [rel], (), "trailing", "project", False).relations[rel.name]
+    t = test.steps.t
+    assert log.no_match[(t > 102.0) & (t < 110.0)].all()
+    assert log.no_match[(t < 99.0) | (t > 115.0)].mean() < 0.005
+
+
+def test_cusum_relation_is_calibrated_like_a_residual_one():
+    cus = RESIDUAL.model_copy(update={"name": "c", "kind": "cusum"})
+    choice = calibrate_relation([distance_run(3), distance_run(4)], cus, vcfg(cus), target=0.002)
+    assert choice.met and choice.relation.kind == "cusum" and choice.relation.k_sigma >= 5.0
+
+
+def test_parse_clean():
+    assert parse_clean(None) is None
+    assert parse_clean("0:120") == (0.0, 120.0)
+    assert parse_clean("30:end") == (30.0, float("inf"))
+    for bad in ("120", "5:2", "a:b", "-1:3", "nan:4"):
+        with pytest.raises(GslamError, match="--clean"):
+            parse_clean(bad)
+
+
+def test_calibrate_writes_a_config_that_maps_other_runs(short_run, tmp_path, capsys):
+    out = tmp_path / "calibrated.yaml"
+    # The compass is disturbed from 10.85 s: learn from the first 10 s.
+    assert main(["-q", "calibrate", str(short_run.run_dir), "--config", str(TELEMAX_CONFIG), "--clean", "0:10",
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "yaw_gyro_sm_res (residual): gain" in printed and f"wrote {out}" in printed
+    text = out.read_text()
+    assert text.startswith("# gslam calibrate result")
+    assert "# yaw_compass_gyro_res (residual): compass_yaw against gyro_yaw" in text
+    config = load_config(out)
+    given = {r["name"]: r for r in load_config(TELEMAX_CONFIG).validation["observers"]["relations"]}
+    learnt = {r["name"]: r for r in config.validation["observers"]["relations"]}
+    assert learnt.keys() == given.keys()
+    assert learnt["yaw_gyro_sm_res"]["sigma_floor"] != given["yaw_gyro_sm_res"]["sigma_floor"]
+    assert learnt["speed_gps_odo"] == given["speed_gps_odo"]  # no GPS in the run: kept, and said so
+    assert "speed_gps_odo: not calibrated" in text
+    # An earlier result is replaced; the config it maps with is the one written.
+    assert main(["-q", "calibrate", str(short_run.run_dir), "--config", str(TELEMAX_CONFIG), "--clean", "0:10",
+                 "--out", str(out)]) == 0
+    assert out.read_text() == text  # deterministic
+    res = run_map(short_run.run_dir, load_config(out, ["validation.mode=on", "output.plots=false"]), tmp_path / "m")
+    assert res.metrics["validation_steps"] > 0 and "IMU_YAW" in res.metrics["blamed_steps"]
+
+
+def test_calibrate_refuses_what_it_cannot_learn_from(short_run, tmp_path):
+    with pytest.raises(GslamError, match="holds no validation step"):
+        calibrate([short_run.run_dir], TELEMAX_CONFIG, tmp_path / "a.yaml", clean="500:600")
+    with pytest.raises(GslamError, match="--false-alarm"):
+        calibrate([short_run.run_dir], TELEMAX_CONFIG, tmp_path / "a.yaml", false_alarm=1.5)
+    assert not (tmp_path / "a.yaml").exists()
+    no_model = tmp_path / "c.yaml"
+    tree = yaml.safe_load(TELEMAX_CONFIG.read_text())
+    tree["validation"]["model"] = None
+    no_model.write_text(yaml.safe_dump(tree))
+    with pytest.raises(GslamError, match="validation.model"):
+        calibrate([short_run.run_dir], no_model, tmp_path / "a.yaml")
