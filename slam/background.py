@@ -139,3 +139,41 @@ class Forked:
         elif self.process.exitcode is None:
             self.process.join()
         self.conn.close()
+
+
+class Subforked:
+    """``fn(*args)`` in a child forked with ``os.fork`` from a process that
+    :mod:`multiprocessing` will not let have children (a :class:`Forked`
+    child is daemonic). :meth:`result` waits for it and raises a
+    :class:`GslamError` with the child's error; the child ends with this
+    process, as a :class:`Forked` one does."""
+
+    def __init__(self, what: str, fn: Callable[..., Any], *args: Any):
+        self.what = what
+        parent = os.getpid()
+        read_end, write_end = os.pipe()
+        self.pid = os.fork()
+        if self.pid == 0:  # the child: no return from here
+            os.close(read_end)
+            status = 0
+            try:
+                _end_with_parent(parent)
+                fn(*args)
+                message = b""
+            except BaseException as e:  # noqa: BLE001 - every failure goes back to the parent
+                message, status = f"{type(e).__name__}: {e}".encode(), 1
+            try:
+                os.write(write_end, message)
+            finally:
+                os._exit(status)
+        os.close(write_end)
+        self.read_end = read_end
+
+    def result(self) -> None:
+        with os.fdopen(self.read_end, "rb") as f:
+            message = f.read()
+        _, status = os.waitpid(self.pid, 0)
+        if message:
+            raise GslamError(f"{self.what}: {message.decode(errors='replace')}")
+        if status != 0:
+            raise GslamError(f"{self.what}: its process ended without a result (status {status})")

@@ -67,7 +67,7 @@ class ValidationOutcome:
             cols["diagnoses"] = [_format_diagnoses(r) for r in self.results]
         for factor in sorted(self.step_scales):
             for i, dof in enumerate(self.factor_dofs[factor]):
-                cols[f"gate.{factor}.{dof}"] = [_action_name(s) for s in self.step_scales[factor][:, i]]
+                cols[f"gate.{factor}.{dof}"] = _action_names(self.step_scales[factor][:, i])
         cols.update(self.extra_columns)
         out = io.StringIO()
         writer = csv.writer(out, lineterminator="\n")
@@ -76,8 +76,9 @@ class ValidationOutcome:
         return out.getvalue()
 
 
-def _action_name(scale: float) -> str:
-    return "exclude" if not np.isfinite(scale) else ("inflate" if scale > 1.0 else "include")
+def _action_names(scales: np.ndarray) -> list[str]:
+    """Per sigma scale: exclude (infinite), inflate (> 1) or include."""
+    return np.where(~np.isfinite(scales), "exclude", np.where(scales > 1.0, "inflate", "include")).tolist()
 
 
 def _format_diagnoses(result: DiagnosisResult) -> str:
@@ -96,7 +97,14 @@ def step_scales(
     """Sigma scale per factor type, validation step and degree of freedom
     (m, dofs), with every gating decision also applied to the ``lookback_s``
     before it."""
-    per_step = [factor_scales(gating, a, factor_dofs) for a in actions]
+    # Few distinct actions recur over a run: compute each set's scales once.
+    known: dict[tuple, dict[str, np.ndarray]] = {}
+    per_step = []
+    for a in actions:
+        key = tuple(sorted(a.items()))
+        if key not in known:
+            known[key] = factor_scales(gating, a, factor_dofs)
+        per_step.append(known[key])
     scales = {}
     for factor, dofs in factor_dofs.items():
         scale = np.array([s[factor] for s in per_step]).reshape(len(actions), len(dofs))

@@ -39,7 +39,7 @@ from typing import Any
 
 from slam.config import InputConfig
 from slam.errors import GslamError
-from slam.io import cdr
+from slam.io import cdr, rosbag2_sqlite
 from slam.io.rosbag_imu import _CompassImuStream, _CompassMagStream, _GyroStream, world_yaw_rate
 from slam.io.rosbag_poses import _GpsStream, _PoseStream
 from slam.io.rosbag_scans import _ScanStream
@@ -225,6 +225,43 @@ def _read_messages(
     return counts
 
 
+def _read_plain(
+    plain: rosbag2_sqlite.PlainBag,
+    streams: list[_Stream],
+    counts: dict[str, int],
+    on_scans: Callable[[_Stream], None] | None,
+) -> None:
+    """Read the streams whose topics ``plain`` serves with the standard
+    definitions, the scans first (``on_scans`` is called with their stream
+    as soon as they are read), adding the number of messages per topic read
+    to ``counts``. A topic whose messages do not decode in bulk is left to
+    rosbags."""
+    by_topic: dict[str, list[_Stream]] = {}
+    for stream in sorted(streams, key=lambda s: s.name != "scan"):
+        topic = plain.topics.get(stream.topic)
+        if topic is not None and topic.msgtype in stream.msgtypes and cdr.supported(topic.msgtype):
+            by_topic.setdefault(stream.topic, []).append(stream)
+    for name, group in by_topic.items():
+        msgtype = plain.topics[name].msgtype
+        raws = plain.raw(name)
+        fields = sorted({f for s in group for f in s.bulk_fields()})
+        for s in group:
+            s.msgtype = msgtype
+        for lo in range(0, len(raws), BULK_CHUNK):
+            cols = cdr.decode_columns(msgtype, raws[lo : lo + BULK_CHUNK], fields)
+            if cols is None:  # the layout changes within the topic
+                for s in group:
+                    s.reset_columns()
+                break
+            for s in group:
+                s.add_columns(cols)
+        else:
+            counts[name] = len(raws)
+            scan = next((s for s in group if s.name == "scan"), None)
+            if scan is not None and on_scans is not None:
+                on_scans(scan)
+
+
 def _raw_messages(reader: Any, path: Path, conns: list[Any]):
     """(topic, connection, raw bytes) of every message on ``conns``."""
     messages = reader.messages(connections=conns)
@@ -263,22 +300,35 @@ def read_rosbag(path: str | Path, config: InputConfig, on_scans: ScansHook | Non
     """
     path = resolve_bag_path(Path(path))
     streams = _make_streams(path, config)
-    reader = _open_reader(path)
+    counts: dict[str, int] = {}
     done: list[_Stream] = []
-    try:
-        wanted = _connections(reader, path, streams)
-        counts: dict[str, int] = {}
-        first = [s for s in streams if s.name == "scan"] if on_scans is not None else []
-        if first:
-            scan = first[0]
-            counts.update(_read_messages(reader, path, first, {scan.topic: wanted[scan.topic]}))
-            _finish(scan, counts)
-            done.append(scan)
-            on_scans(scan.build(scan.first_ns()))
-        rest = [s for s in streams if s not in done and s.topic not in counts]
-        counts.update(_read_messages(reader, path, rest, {s.topic: wanted[s.topic] for s in rest}))
-    finally:
-        reader.close()
+
+    def scans_read(scan: _Stream) -> None:
+        _finish(scan, counts)
+        done.append(scan)
+        on_scans(scan.build(scan.first_ns()))
+
+    plain = rosbag2_sqlite.open_plain(path) if path.is_dir() else None
+    if plain is not None:
+        try:
+            _read_plain(plain, streams, counts, scans_read if on_scans is not None else None)
+        finally:
+            plain.close()
+    rest = [s for s in streams if s.topic not in counts]
+    if rest:
+        reader = _open_reader(path)
+        try:
+            wanted = _connections(reader, path, rest)
+            streams = [s for s in streams if s.topic in counts or s in rest]  # absent optional ones dropped
+            first = [s for s in rest if s.name == "scan"] if on_scans is not None else []
+            if first:
+                scan = first[0]
+                counts.update(_read_messages(reader, path, first, {scan.topic: wanted[scan.topic]}))
+                scans_read(scan)
+            rest = [s for s in rest if s not in done and s.topic not in counts]
+            counts.update(_read_messages(reader, path, rest, {s.topic: wanted[s.topic] for s in rest}))
+        finally:
+            reader.close()
 
     for stream in streams:
         if stream not in done:
