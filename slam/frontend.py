@@ -9,7 +9,9 @@ yaw and distance streams for validation come from it.
 KISS-ICP reports no quality of its own: with no points in range it returns
 its constant-velocity prediction, with one straight wall it slides along it.
 That silent failure is what sensor validation is for, so the front-end does
-not try to detect it.
+not try to detect it; on request it reports, per scan, what a scan check
+needs to (:func:`scan_quality`): its returns and how well its geometry
+constrains each direction.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numpy as np
 
 from slam.config import FrontendConfig
 from slam.recording import Scans, Trajectory
+from slam.scan_geometry import scan_geometry
 
 log = logging.getLogger(__name__)
 
@@ -183,3 +186,26 @@ def run_frontend(
     log.info("KISS-ICP registered %d scans in %.2f s", n, elapsed)
     poses = Trajectory(t=scans.t.copy(), x=xyyaw[:, 0], y=xyyaw[:, 1], yaw=xyyaw[:, 2])
     return FrontendResult(poses=poses, n_points=n_points, time_s=elapsed)
+
+
+@dataclass(frozen=True)
+class ScanQuality:
+    """Per scan: ``t`` (n,) s, ``returns`` (n,) in range, ``min_eigenvalue``
+    (n,) of its normalised point-to-line information matrix and that
+    eigenvector ``weak`` (n, 3) (forward, left, turn); :mod:`slam.scan_geometry`."""
+
+    t: np.ndarray
+    returns: np.ndarray
+    min_eigenvalue: np.ndarray
+    weak: np.ndarray
+
+
+def scan_quality(scans: Scans, config: FrontendConfig, chunk: int = 512) -> ScanQuality:
+    """:class:`ScanQuality` of every scan (at least one), over the beams
+    the front-end registers (``config``'s range limits), ``chunk`` scans at
+    a time."""
+    max_range = min(config.max_range_m, scans.range_max)
+    parts = [scan_geometry(scans.ranges[i : i + chunk], scans.angles, config.min_range_m, max_range)
+             for i in range(0, len(scans), chunk)]
+    returns, eig, weak = (np.concatenate(p) for p in zip(*parts))
+    return ScanQuality(scans.t.copy(), returns, eig, weak)

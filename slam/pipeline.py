@@ -255,8 +255,13 @@ class MappingPipeline:
         if vcfg.mode == "interval_oracle" and not any(rec.faults.values()):
             log.info("oracle gating without true fault intervals: nothing will be gated")
         sm = self.frontend.poses if self.frontend is not None else None
+        quality = None
+        if vcfg.mode == "on" and vcfg.observers.scan.enabled and self.frontend is not None:
+            from slam.frontend import scan_quality
+
+            quality = scan_quality(rec.scans, self.config.frontend)
         self.validation = run_validation(
-            rec, sm, self.measurements.t, vcfg, gcfg, FACTOR_DOFS, rec.faults, rec.magnetic_reference
+            rec, sm, self.measurements.t, vcfg, gcfg, FACTOR_DOFS, rec.faults, rec.magnetic_reference, quality
         )
         self.weights = self.validation.weights
         self.timings.validation_s = self.validation.time_s

@@ -2,7 +2,8 @@
 
 A *unary* check tests one component against physics (the magnetometer's
 field strength and dip against the local Earth field, the GPS receiver's
-reported sigma); it says ``IMPLAUSIBLE`` once the deviation has lasted
+reported sigma, a laser scan's returns and the conditioning of its
+registration); it says ``IMPLAUSIBLE`` once the deviation has lasted
 ``hold_s`` and ``PLAUSIBLE`` otherwise. :func:`unary_checks` builds the
 enabled checks from :class:`~validation.observer_config.ObserversConfig`;
 :func:`held` applies the hold time over a whole run.
@@ -17,7 +18,8 @@ from typing import Protocol
 
 import numpy as np
 
-from validation.observer_config import ObserversConfig
+from validation.observer_config import SCAN_AXES, ObserversConfig
+from validation.streams import Stream
 
 logger = logging.getLogger(__name__)
 
@@ -66,7 +68,50 @@ class GpsQualityCheck:
         return np.asarray(values["gps_sigma"]) > self.max_sigma_m
 
 
-UnaryCheck = MagnetometerCheck | GpsQualityCheck
+class ScanGeometrySeries(Protocol):
+    """The front-end's figures per scan: ``t`` (n,) s, ``returns`` (n,),
+    ``min_eigenvalue`` (n,) of the normalised point-to-line information
+    matrix and its unit eigenvector ``weak`` (n, 3) (forward, left, turn)."""
+
+    t: np.ndarray
+    returns: np.ndarray
+    min_eigenvalue: np.ndarray
+    weak: np.ndarray
+
+
+@dataclass(frozen=True)
+class ScanDegeneracyCheck:
+    """One scan-matching modality (``axis`` 0 forward, 1 left, 2 turn)
+    against the geometry of the scans it registers (Zhang, Kaess and Singh,
+    ICRA 2016): too few returns, or the weakest direction of the
+    point-to-line information is too weak and lies along ``axis``.
+
+    Its stream is the verdict per scan, 1 or 0 (:meth:`flags`); on the
+    validation steps between two scans it is interpolated, so every step
+    between a degenerate scan and its neighbours is deviant: both scan
+    matching motions that end or start at that scan."""
+
+    name: str
+    component: str
+    axis: int
+    min_returns: int
+    min_eigenvalue: float
+    min_share: float
+    hold_s: float
+    streams: tuple[str, ...] = ()
+
+    def flags(self, geometry: ScanGeometrySeries) -> np.ndarray:
+        """True for each scan that cannot constrain this modality."""
+        few = np.asarray(geometry.returns) < self.min_returns
+        weak = np.asarray(geometry.min_eigenvalue) < self.min_eigenvalue
+        return few | (weak & (np.abs(np.asarray(geometry.weak)[:, self.axis]) > self.min_share))
+
+    def deviant(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
+        """True where a degenerate scan is at either end of the interval."""
+        return np.asarray(values[self.streams[0]]) > 0.0
+
+
+UnaryCheck = MagnetometerCheck | GpsQualityCheck | ScanDegeneracyCheck
 
 
 def unary_checks(config: ObserversConfig, reference: MagneticReference | None = None) -> list[UnaryCheck]:
@@ -92,7 +137,23 @@ def unary_checks(config: ObserversConfig, reference: MagneticReference | None = 
     if config.gps.enabled:
         g = config.gps
         checks.append(GpsQualityCheck(g.name, g.component, g.max_sigma_m, g.hold_s))
+    scan = config.scan
+    if scan.enabled:
+        for axis, (name, component, label) in enumerate(zip(scan.names, scan.components, SCAN_AXES)):
+            checks.append(ScanDegeneracyCheck(name, component, axis, scan.min_returns, scan.min_eigenvalue,
+                                              scan.min_share, scan.hold_s, (f"scan_degenerate_{label}",)))
     return checks
+
+
+def scan_streams(checks: list[UnaryCheck], geometry: ScanGeometrySeries | None) -> dict[str, Stream]:
+    """The streams of the scan checks among ``checks`` from the front-end's
+    ``geometry`` (none without it: the coverage then says the stream is
+    absent)."""
+    if geometry is None:
+        return {}
+    t = np.asarray(geometry.t, dtype=float)
+    return {c.streams[0]: Stream(t, c.flags(geometry).astype(float))
+            for c in checks if isinstance(c, ScanDegeneracyCheck)}
 
 
 def held(t: np.ndarray, deviant: np.ndarray, hold_s: float) -> np.ndarray:

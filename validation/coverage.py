@@ -33,6 +33,7 @@ _SOURCE = {
     "sm": "the run has no scan matching (no laser, or the front-end is off)",
     "odo": "the run has no odometry",
     "gps": "the run has fewer than two GPS fixes",
+    "scan": "the run has no laser scans, or the front-end's scan figures were not computed",
 }
 _WHOLE = 0.95  # a stream with data on this share of the steps needs no explaining
 

@@ -2,7 +2,8 @@
 
 :class:`RelationConfig` describes one relation observer (Algorithm 3,
 :mod:`validation.observers`); :class:`MagnetometerCheckConfig` and
-:class:`GpsCheckConfig` the unary checks (:mod:`validation.checks`);
+:class:`GpsCheckConfig` and :class:`ScanCheckConfig` the unary checks
+(:mod:`validation.checks`);
 :class:`ObserversConfig` nests them all with the resampling gaps, and
 :func:`observers_config` / :func:`load_observers_config` validate a mapping
 or a YAML file into it with one-line errors.
@@ -172,6 +173,34 @@ class GpsCheckConfig(_Strict):
     hold_s: float = Field(0.0, ge=0.0)
 
 
+SCAN_AXES = ("dist", "lat", "yaw")
+"""The scan check's axes, in the order of the scan's (forward, left, turn)."""
+
+
+class ScanCheckConfig(_Strict):
+    """Scan degeneracy: one check per scan-matching modality, named
+    ``{name}_dist``, ``{name}_lat`` and ``{name}_yaw`` (components
+    ``components``). A scan is implausible for all three with fewer than
+    ``min_returns`` returns, and for a modality when the smallest eigenvalue
+    of its point-to-line information is below ``min_eigenvalue`` and that
+    eigenvector's forward, left or turn part exceeds ``min_share`` in size
+    (:mod:`slam.scan_geometry`); the defaults are the simulator's fault
+    definition (:mod:`slam.sim.faults`). Off unless enabled: the front-end
+    then computes the figures."""
+
+    enabled: bool = False
+    name: str = "scan_degenerate"
+    components: tuple[Component, Component, Component] = ("SM_DIST", "SM_LAT", "SM_YAW")
+    min_returns: int = Field(20, ge=1)
+    min_eigenvalue: float = Field(0.03, ge=0.0)
+    min_share: float = Field(0.5, gt=0.0, lt=1.0)
+    hold_s: float = Field(0.0, ge=0.0)
+
+    @property
+    def names(self) -> tuple[str, str, str]:
+        return tuple(f"{self.name}_{axis}" for axis in SCAN_AXES)
+
+
 class ObserversConfig(_Strict):
     """All observers. ``max_gap_s`` is the largest gap (s) between samples a
     step may be interpolated across; a sparse stream may bridge up to
@@ -195,6 +224,7 @@ class ObserversConfig(_Strict):
     relations: tuple[RelationConfig, ...] = DEFAULT_RELATIONS
     magnetometer: MagnetometerCheckConfig = MagnetometerCheckConfig()
     gps: GpsCheckConfig = GpsCheckConfig()
+    scan: ScanCheckConfig = ScanCheckConfig()
     max_gap_s: float = Field(0.5, gt=0.0)
     gap_periods: float | None = Field(3.0, gt=0.0)
     stream_max_gap_s: dict[str, float] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
@@ -203,7 +233,7 @@ class ObserversConfig(_Strict):
 
     @model_validator(mode="after")
     def _names(self) -> "ObserversConfig":
-        names = [r.name for r in self.relations] + [self.magnetometer.name, self.gps.name]
+        names = [r.name for r in self.relations] + [self.magnetometer.name, self.gps.name, *self.scan.names]
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
             raise ValueError(f"observer name {dupes[0]!r} used twice")

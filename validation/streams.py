@@ -28,7 +28,9 @@ not depend on the pipeline that reads them.
 Quality streams for the unary checks: ``mag_strength`` (T) and ``mag_dip``
 (rad, positive downward, assuming a level robot) from the raw compass field,
 and ``gps_sigma`` (m). Fixes with a negative status carry no position and
-are left out.
+are left out. The scan check's ``scan_degenerate_{dist,lat,yaw}`` (1 where
+a scan cannot constrain that motion, else 0) come from the front-end's
+figures per scan (:func:`validation.checks.scan_streams`).
 
 Streams are then resampled onto the validation step times by linear
 interpolation (angles unwrapped first, so the result is continuous) with a
@@ -53,7 +55,9 @@ StreamName = Literal[
     "compass_yaw", "gyro_yaw", "sm_yaw", "odo_yaw", "odo_distance", "sm_distance",
     "odo_forward", "sm_forward", "odo_lateral", "sm_lateral", "odo_speed", "gps_speed",
 ]
-QualityStreamName = Literal["mag_strength", "mag_dip", "gps_sigma"]
+QualityStreamName = Literal[
+    "mag_strength", "mag_dip", "gps_sigma", "scan_degenerate_dist", "scan_degenerate_lat", "scan_degenerate_yaw",
+]
 
 STREAM_COMPONENT: dict[str, str] = {
     "compass_yaw": "IMU_YAW",
@@ -71,6 +75,9 @@ STREAM_COMPONENT: dict[str, str] = {
     "mag_strength": "IMU_YAW",
     "mag_dip": "IMU_YAW",
     "gps_sigma": "GPS",
+    "scan_degenerate_dist": "SM_DIST",
+    "scan_degenerate_lat": "SM_LAT",
+    "scan_degenerate_yaw": "SM_YAW",
 }
 STREAM_NAMES: tuple[str, ...] = get_args(StreamName) + get_args(QualityStreamName)
 ANGULAR_STREAMS: frozenset[str] = frozenset({"compass_yaw", "sm_yaw", "odo_yaw"})

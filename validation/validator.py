@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from validation.checks import MagneticReference
+from validation.checks import MagneticReference, ScanGeometrySeries, scan_streams
 from validation.config import GatingConfig, ValidationConfig
 from validation.diagnosis import Diagnoser, DiagnosisResult
 from validation.gating import Actions, Gate, factor_scales, offline_actions, oracle_actions
@@ -146,11 +146,13 @@ def run_validation(
     factor_dofs: Mapping[str, Sequence[str]],
     faults: Mapping[str, Sequence[Interval]] | None = None,
     magnetic_reference: MagneticReference | None = None,
+    scan_geometry: ScanGeometrySeries | None = None,
 ) -> ValidationOutcome:
     """Validate one run and decide the weight of every factor's degrees of
     freedom per keyframe. ``factor_dofs`` names each factor type's degrees of
     freedom in the order of its noise model; ``faults`` are the true fault
-    intervals (for ``interval_oracle`` and the metrics)."""
+    intervals (for ``interval_oracle`` and the metrics); ``scan_geometry``
+    the front-end's figures per scan, for the scan check."""
     start = time.perf_counter()
     faults = dict(faults or {})
     step_t = fixed_rate_steps(float(keyframe_t[0]), float(keyframe_t[-1]), config.rate_hz)
@@ -162,6 +164,7 @@ def run_validation(
         window = config.window
         streams = validation_streams(sensors, sm_poses, obs.gps_speed_window_s, window)
         checks = unary_checks(obs, magnetic_reference)
+        streams.update(scan_streams(checks, scan_geometry))
         steps = resample_streams(streams, step_t, obs.max_gap_s, obs.stream_max_gap_s, obs.gap_periods)
         observer_log = observe_steps(steps, obs.relations, checks, window, obs.rule, config.offline)
         coverage = observer_coverage(observer_log, steps, streams, obs.relations, {c.name: c.streams for c in checks})

@@ -11,7 +11,7 @@ recording's own time base (s from its start) and frames.
   (:func:`heading_error`).
 * **Laser cut.** Ranges beyond ``range_m`` become no return. Whether the
   cut scan still constrains a pose is judged from its own points
-  (:func:`scan_geometry`): normals from a line through each return and its
+  (:func:`slam.scan_geometry.scan_geometry`): normals from a line through each return and its
   neighbours, then the point-to-line information matrix of
   :mod:`slam.sim.faults`.
 * **Slip.** Odometry increments scaled over the interval and the poses
@@ -28,6 +28,7 @@ from slam.geometry import wrap_angle
 from slam.inject.spec import DipoleFault, LaserCutFault, MultipathFault, SlipFault
 from slam.measurements import interpolate_poses
 from slam.recording import Trajectory
+from slam.scan_geometry import scan_geometry
 from slam.sim.faults import SM_MODALITIES, sm_masks
 from slam.sim.magnetics import dipole_field, world_to_body
 
@@ -96,44 +97,6 @@ def cut_ranges(ranges: np.ndarray, range_m: float, no_return: float) -> np.ndarr
     with np.errstate(invalid="ignore"):
         r[r > range_m] = no_return
     return r
-
-
-def scan_geometry(ranges: np.ndarray, angles: np.ndarray, range_min: float, range_max: float,
-                  neighbours: int = 2, max_spread_m: float = 0.5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Returns (n,), smallest eigenvalue (n,) of the normalised point-to-line
-    information matrix and its unit eigenvector (n, 3) (forward, left, turn)
-    of scans ``ranges`` (n, B) m at beam ``angles`` (B,) rad, as
-    :func:`slam.sim.faults.scan_constraint` with normals estimated from the
-    scan: the line through each return and its neighbours within
-    ``neighbours`` beams and ``max_spread_m``."""
-    r = np.asarray(ranges, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        ok = np.isfinite(r) & (r > range_min) & (r < range_max)
-    r = np.where(ok, r, 0.0)
-    px, py = r * np.cos(angles), r * np.sin(angles)
-    s = {k: np.zeros_like(px) for k in ("n", "x", "y", "xx", "xy", "yy")}
-    for d in range(-neighbours, neighbours + 1):
-        qx, qy, qok = (np.roll(a, d, axis=1) for a in (px, py, ok))
-        if d > 0:
-            qok[:, :d] = False
-        elif d < 0:
-            qok[:, d:] = False
-        near = ok & qok & (np.hypot(qx - px, qy - py) <= max_spread_m)
-        for key, v in (("n", 1.0), ("x", qx), ("y", qy), ("xx", qx * qx), ("xy", qx * qy), ("yy", qy * qy)):
-            s[key] += np.where(near, v, 0.0)
-    n = np.maximum(s["n"], 1.0)
-    mx, my = s["x"] / n, s["y"] / n
-    cxx, cxy, cyy = s["xx"] / n - mx * mx, s["xy"] / n - mx * my, s["yy"] / n - my * my
-    line = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)  # direction of the major axis
-    nx, ny = -np.sin(line), np.cos(line)
-    used = ok & (s["n"] >= 3)
-    count = ok.sum(axis=1)
-    scale = np.where(count > 0, r.sum(axis=1) / np.maximum(count, 1), 1.0)
-    rot = (px * ny - py * nx) / scale[:, None]
-    rows = np.stack([nx, ny, rot], axis=-1) * used[..., None]
-    info = np.einsum("nbi,nbj->nij", rows, rows) / r.shape[1]
-    values, vectors = np.linalg.eigh(info)
-    return count, values[:, 0], vectors[:, :, 0]
 
 
 def laser_labels(ranges: np.ndarray, angles: np.ndarray, range_min: float, range_max: float,

@@ -1,0 +1,105 @@
+"""The scan check: the front-end's figures per scan (returns, conditioning
+of the point-to-line information) and the unary check that turns them into
+IMPLAUSIBLE for the scan-matching modalities a scan cannot constrain."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slam.config import FrontendConfig, load_config
+from slam.frontend import scan_quality
+from slam.inject import inject
+from slam.inject import physics
+from slam.inject.spec import parse_fault
+from slam.pipeline import run_map
+from slam.recording import Scans
+from tests.conftest import TELEMAX_CONFIG
+from validation.checks import ScanDegeneracyCheck, scan_streams, unary_checks
+from validation.errors import ValidationError
+from validation.model import Plausibility
+from validation.observers import ObserversConfig, observe_steps
+from validation.observer_config import observers_config
+from validation.streams import resample_streams
+
+
+def _ranges(walls: list[tuple[float, float, float]], n: int = 360) -> tuple[np.ndarray, np.ndarray]:
+    """Ranges of a laser at the origin to infinite lines ``n_x x + n_y y = d``."""
+    angles = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    r = np.full(n, np.inf)
+    for nx, ny, d in walls:
+        along = nx * np.cos(angles) + ny * np.sin(angles)
+        with np.errstate(divide="ignore"):
+            r = np.minimum(r, np.where(along > 1e-6, d / along, np.inf))
+    return r, angles
+
+
+CORRIDOR = [(0.0, 1.0, 1.5), (0.0, -1.0, 1.5)]
+ROOM = [*CORRIDOR, (1.0, 0.0, 3.0), (-1.0, 0.0, 2.0)]
+
+
+def _scans(kinds: list[str]) -> Scans:
+    """One scan a second: ``room``, ``corridor`` (walls left and right) or ``blind``."""
+    rows = []
+    for kind in kinds:
+        r, angles = _ranges(ROOM if kind != "corridor" else CORRIDOR)
+        rows.append(np.full_like(r, np.inf) if kind == "blind" else r)
+    return Scans(np.arange(len(kinds), dtype=float), np.array(rows, dtype=np.float32), angles, 0.1, 30.0)
+
+
+def _checks() -> list[ScanDegeneracyCheck]:
+    cfg = observers_config({"scan": {"enabled": True}, "magnetometer": {"enabled": False}, "gps": {"enabled": False}})
+    return unary_checks(cfg)
+
+
+def test_the_front_end_figures_say_which_direction_a_scan_leaves_free():
+    q = scan_quality(_scans(["room", "corridor", "blind"]), FrontendConfig(max_range_m=30.0))
+    assert q.returns[0] == 360 and q.returns[2] == 0
+    assert q.min_eigenvalue[0] > 0.03 and q.min_eigenvalue[1] < 1e-6
+    assert abs(q.weak[1, 0]) == pytest.approx(1.0, abs=1e-6)  # the corridor leaves the forward motion free
+    flags = {c.component: c.flags(q).tolist() for c in _checks()}
+    assert flags == {"SM_DIST": [False, True, True], "SM_LAT": [False, False, True], "SM_YAW": [False, False, True]}
+
+
+def test_the_check_and_the_injected_labels_share_one_criterion():
+    """The labels of ``gslam inject``'s laser cut are the check's verdict on
+    the cut scans: its recall against them is a consistency check."""
+    scans = _scans(["room", "room", "corridor", "room"])
+    cut = physics.cut_ranges(scans.ranges, 1.6, np.inf)  # keeps the corridor's walls only
+    labels = physics.laser_labels(cut, scans.angles, 0.0, 30.0, parse_fault("laser_cut@0:3,range_m=1.6"))
+    q = scan_quality(Scans(scans.t, cut, scans.angles, 0.0, 30.0), FrontendConfig(min_range_m=0.0, max_range_m=30.0))
+    assert {c.component: c.flags(q).tolist() for c in _checks()} == {m: v.tolist() for m, v in labels.items()}
+
+
+def test_a_degenerate_scan_makes_both_motions_at_it_implausible_for_its_modality_only():
+    checks = _checks()
+    q = scan_quality(_scans(["room", "room", "corridor", "room", "room"]), FrontendConfig(max_range_m=30.0))
+    step_t = np.arange(0.0, 4.01, 0.1)
+    steps = resample_streams(scan_streams(checks, q), step_t, max_gap_s=1.5)
+    log = observe_steps(steps, (), checks)
+    bad = {c.component: np.array([log.observations(k)[c.name] is Plausibility.IMPLAUSIBLE for k in range(len(step_t))])
+           for c in checks}
+    # Scan 2 (t = 2 s) is a corridor: the motions from scan 1 and to scan 3 lose their distance.
+    assert step_t[bad["SM_DIST"]] == pytest.approx(np.arange(1.1, 2.95, 0.1))
+    assert not bad["SM_LAT"].any() and not bad["SM_YAW"].any()
+
+
+def test_without_scans_the_check_has_no_stream_and_names_stay_unique():
+    assert scan_streams(_checks(), None) == {}
+    assert unary_checks(ObserversConfig()) and not any(isinstance(c, ScanDegeneracyCheck) for c in unary_checks(ObserversConfig()))
+    with pytest.raises(ValidationError, match="scan_degenerate_dist"):
+        observers_config({"gps": {"name": "scan_degenerate_dist"}, "scan": {"enabled": True}})
+
+
+def test_the_check_blames_scan_matching_where_the_laser_is_cut(short_run, tmp_path):
+    cfg = load_config(TELEMAX_CONFIG, ["validation.mode=on", "validation.observers.relations=[]",
+                                       "validation.observers.magnetometer.enabled=false",
+                                       "validation.observers.gps.enabled=false",
+                                       "validation.observers.scan.enabled=true", "output.plots=false"])
+    cut = inject(short_run.run_dir, ["laser_cut@16:20,range_m=0.3"], tmp_path / "cut", cfg.input).run_dir
+    out = run_map(cut, cfg, tmp_path / "map")
+    log = out.validation.observer_log
+    implausible = log.unary["scan_degenerate_dist"].implausible
+    assert implausible[(log.t > 16.2) & (log.t < 19.8)].all() and not implausible[log.t < 15.0].any()
+    assert out.metrics["blamed_steps"].get("SM_DIST", 0) >= 30
+    assert out.metrics["observer_coverage"]["scan_degenerate_dist"] > 0.9
