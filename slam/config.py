@@ -25,7 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from slam.errors import GslamError
 from slam.loops.config import LoopsConfig
-from slam.io.yamlfile import check_finite, load_yaml, non_finite, read_text_file, yaml_number
+from slam.io.yamlfile import SAFE_LOADER, check_finite, load_yaml, non_finite, read_text_file, yaml_number
 
 __all__ = [  # the YAML helpers are used through this module too
     "PipelineConfig", "check_finite", "describe_validation_error", "dump_config", "load_config", "load_yaml",
@@ -367,7 +367,7 @@ def parse_override(text: str) -> tuple[str, Any]:
     if not key or any(not part for part in key.split(".")):
         raise GslamError(f"--set {text}: expected KEY=VALUE with a dotted key, e.g. backend.optimizer=isam2")
     try:
-        value = yaml.safe_load(raw) if raw.strip() else None
+        value = yaml.load(raw, Loader=SAFE_LOADER) if raw.strip() else None
     except yaml.YAMLError:
         value = raw
     return key, value

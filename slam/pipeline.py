@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -116,7 +116,8 @@ class MappingPipeline:
         self.loop_factors = None
         self.metrics: dict[str, Any] = {}
         self.extra_metrics: dict[str, Any] = {}
-        self.extra_outputs: dict[str, str] = {}
+        self.extra_outputs: dict[str, str | Callable[[], str]] = {}
+        self.points: np.ndarray | None = None
 
     # -- the table of contents ------------------------------------------------
 
@@ -134,6 +135,7 @@ class MappingPipeline:
                 self.second_pass()
                 self.close_loops()
                 self.optimise()
+                self.start_figures(tmp)
                 self.evaluate()
                 self.write(tmp)
             finally:  # before a failed result's folder is removed
@@ -265,8 +267,7 @@ class MappingPipeline:
         )
         self.weights = self.validation.weights
         self.timings.validation_s = self.validation.time_s
-        self.extra_metrics.update(self.validation.metrics)
-        self.extra_outputs["validation.csv"] = self.validation.csv_text()
+        self.extra_outputs["validation.csv"] = self.validation.csv_text  # written while the figures are drawn
 
     def learn_odometry_scale(self) -> None:
         """With ``backend.factors.odometry.learn_scale`` and validation on
@@ -417,6 +418,8 @@ class MappingPipeline:
         m["fallback_steps"] = self.backend.fallback_steps
         if self.loop_observation is not None:
             m["loops"] = self._loop_metrics()
+        if self.validation is not None:
+            m.update(self.validation.metrics)
         m.update(self.extra_metrics)
         self.metrics = m
 
@@ -442,17 +445,23 @@ class MappingPipeline:
             out["true_rejected"] = int(sum(1 for v, good in zip(obs.verdicts, ok) if not v.accepted and good))
         return out
 
-    def write(self, folder: Path) -> None:
-        """Write the results into ``folder`` (the temporary folder that is
-        renamed into place afterwards): the figures are handed to the second
-        process first, the numbers written meanwhile, metrics.json last."""
+    def start_figures(self, folder: Path) -> None:
+        """Hand the figures to their processes as soon as the estimate is
+        final; the map's points are kept for ``map.ply``."""
         t = time.perf_counter()
-        points = self.map_points()
+        self.points = self.map_points()
         if self.plots is not None:
             rec = self.recording
-            self.plots.submit(MapFigures(folder, rec.name, self.backend.trajectory, rec.groundtruth, rec.faults, points))
-        self._write_into(folder, points)
-        self.timings.write_s = time.perf_counter() - t
+            self.plots.submit(MapFigures(folder, rec.name, self.backend.trajectory, rec.groundtruth, rec.faults, self.points))
+        self.timings.write_s += time.perf_counter() - t
+
+    def write(self, folder: Path) -> None:
+        """Write the numeric results into ``folder`` (the temporary folder
+        that is renamed into place afterwards) while the figures are drawn,
+        then wait for them; metrics.json last."""
+        t = time.perf_counter()
+        self._write_into(folder, self.points)
+        self.timings.write_s += time.perf_counter() - t
         if self.plots is not None:
             t = time.perf_counter()
             self.plots.wait()
@@ -520,7 +529,7 @@ class MappingPipeline:
         rec, est = self.recording, self.backend.trajectory
         write_tum(d / "trajectory.tum", est, rec.t0)
         for name, text in self.extra_outputs.items():
-            (d / name).write_text(text)
+            (d / name).write_text(text() if callable(text) else text)
         if points is not None:
             from slam.io.pointcloud import write_ply
 

@@ -53,6 +53,19 @@ def save_figure(fig: Figure, path: str | Path) -> None:
     logger.debug("wrote figure %s", path)
 
 
+def warm_up() -> None:
+    """Draw a small figure with the elements of the real ones into memory:
+    the first figure a process draws also loads the font and fills
+    matplotlib's text caches (some 40 ms), which a process waiting for its
+    data can do beforehand."""
+    import io
+
+    fig, ax = _new_axes("warm-up")
+    ax.plot([0.0, 1.0], [0.0, 1.0], label="a")
+    ax.legend(loc="best", fontsize="small")
+    fig.savefig(io.BytesIO(), format="png", dpi=DPI, bbox_inches="tight", pil_kwargs={"compress_level": 1})
+
+
 def _new_axes(title: str) -> tuple[Figure, Axes]:
     fig = Figure(figsize=(8, 7))
     ax = fig.add_subplot()

@@ -19,6 +19,7 @@ import logging
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -41,7 +42,9 @@ class ValidationOutcome:
     """Everything validation decided, per validation step, and the weights
     per keyframe, factor type and degree of freedom (sigma multipliers,
     (K, dofs); ``inf`` excludes). ``extra_columns``: more per-step columns
-    for the log (the loop observer's, validation.loops)."""
+    for the log (the loop observer's, validation.loops). :attr:`metrics`
+    and :meth:`csv_text` are computed when first asked for (a map asks
+    while its figures are drawn)."""
 
     step_t: np.ndarray
     observer_log: ObserverLog | None
@@ -50,10 +53,23 @@ class ValidationOutcome:
     factor_dofs: dict[str, tuple[str, ...]]
     step_scales: dict[str, np.ndarray]
     weights: dict[str, np.ndarray]
-    metrics: dict
     time_s: float
+    faults: dict[str, list[Interval]] | None = None
+    sensors: dict = field(default_factory=dict)  # the model's whole-sensor components
+    coverage: dict | None = None
     sm_poses: PoseSeries | None = None
     extra_columns: dict[str, list] = field(default_factory=dict)
+
+    @cached_property
+    def metrics(self) -> dict:
+        """Detection, isolation and coverage figures for ``metrics.json``."""
+        metrics = validation_metrics(self.step_t, self.results, self.actions, self.faults, self.sensors)
+        if self.coverage is not None:
+            metrics["observer_coverage"] = {name: round(c.fraction, 4) for name, c in self.coverage.items()}
+        metrics["validation_time_s"] = round(self.time_s, 4)
+        metrics["keyframes_excluded"] = {f: int(np.sum(np.all(~np.isfinite(w), axis=1))) for f, w in self.weights.items()}
+        metrics["keyframes_gated"] = {f: int(np.sum(np.any(w > 1, axis=1))) for f, w in self.weights.items()}
+        return metrics
 
     def csv_text(self) -> str:
         """The per-step log: trends, counters, observations, diagnoses, decisions."""
@@ -185,13 +201,9 @@ def run_validation(
     scales = step_scales(step_t, actions, gating, dofs, lookback)
     weights = keyframe_weights(step_t, scales, keyframe_t)
     elapsed = time.perf_counter() - start
-    expand = config.model.sensors if config.model is not None else {}
-    metrics = validation_metrics(step_t, results, actions, faults, expand)
-    if coverage is not None:
-        metrics["observer_coverage"] = {name: round(c.fraction, 4) for name, c in coverage.items()}
-    metrics["validation_time_s"] = round(elapsed, 4)
-    metrics["keyframes_excluded"] = {f: int(np.sum(np.all(~np.isfinite(w), axis=1))) for f, w in weights.items()}
-    metrics["keyframes_gated"] = {f: int(np.sum(np.any(w > 1, axis=1))) for f, w in weights.items()}
+    sensors = config.model.sensors if config.model is not None else {}
     log.info("validation (%s): %d steps in %.3f s; gated keyframes %s", config.mode, len(step_t), elapsed,
-             metrics["keyframes_gated"])
-    return ValidationOutcome(step_t, observer_log, results, actions, dofs, scales, weights, metrics, elapsed, sm_poses)
+             {f: int(np.sum(np.any(w > 1, axis=1))) for f, w in weights.items()})
+    return ValidationOutcome(
+        step_t, observer_log, results, actions, dofs, scales, weights, elapsed, faults, sensors, coverage, sm_poses
+    )

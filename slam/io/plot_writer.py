@@ -1,17 +1,18 @@
-"""The figures of a map result, drawn in a second process.
+"""The figures of a map result, drawn in processes of their own.
 
 matplotlib takes a third of a second to import and as long again to draw
-the two figures of ``gslam map``. :class:`PlotWriter` starts a child
-process (:mod:`slam.background`) when the run starts; the child imports
-matplotlib while the parent reads and matches scans, at a lower priority
-(``IMPORT_NICENESS``) so that it only takes CPU time the reading and scan
-matching leave, and then waits for the estimate. :meth:`PlotWriter.submit`
-hands it over as soon as the numbers are final; the child forks once more
-so the two figures are drawn at the same time, one per core, while the
-parent writes the numeric results. :meth:`PlotWriter.wait` returns once
-both PNGs are in the result folder (before the folder is renamed into
-place). The figures are the same bytes as drawn in the parent.
-"""
+the two figures of ``gslam map``. :class:`PlotWriter` starts one child
+process per figure (:mod:`slam.background`) when the run starts; each
+imports matplotlib while the parent reads and matches scans, at a lower
+priority (``IMPORT_NICENESS``) so that it only takes CPU time the reading
+and scan matching leave, and then waits for the estimate.
+:meth:`PlotWriter.submit` hands it over as soon as the numbers are final;
+the two figures are drawn at the same time while the parent writes the
+numeric results. (Forking the second drawer only then would cost more than
+it saves: parent and child both fault on every page they then touch.)
+:meth:`PlotWriter.wait` returns once both PNGs are in the result folder
+(before the folder is renamed into place). The figures are the same bytes
+as drawn in the parent."""
 
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from slam.background import Inbox, Subforked, start
+from slam.background import Inbox, start
 from slam.recording import Interval, Trajectory
 
 IMPORT_NICENESS = 10  # the child's priority while it imports and waits; back to the parent's to draw
@@ -57,30 +58,28 @@ def draw_map(figures: MapFigures) -> None:
         plot_map(f.folder / "map.png", f.points, f.estimate, title=f"{f.name}: laser map")
 
 
-def draw(figures: MapFigures, concurrent: bool = False) -> None:
-    """``trajectory.png`` and, with points, ``map.png`` in ``figures.folder``;
-    with ``concurrent``, the map in a forked child meanwhile."""
-    if concurrent and figures.points is not None and hasattr(os, "fork"):
-        worker = Subforked("map figure", draw_map, figures)
-        draw_trajectory(figures)
-        worker.result()
-    else:
-        draw_trajectory(figures)
-        draw_map(figures)
+def draw(figures: MapFigures) -> None:
+    """``trajectory.png`` and, with points, ``map.png`` in ``figures.folder``."""
+    draw_trajectory(figures)
+    draw_map(figures)
 
 
-def _draw_when_given(inbox: Inbox, concurrent: bool) -> None:
+FIGURES = {"trajectory figure": draw_trajectory, "map figure": draw_map}
+
+
+def _draw_when_given(inbox: Inbox, which: str, concurrent: bool) -> None:
     niceness = os.nice(0)
     if concurrent:
         os.nice(IMPORT_NICENESS)
-    import slam.plots  # noqa: F401 - while the parent works
+    import slam.plots  # while the parent works
 
+    slam.plots.warm_up()
     figures = inbox()
     if figures is None:
         return
     if concurrent:
         _renice(niceness)
-    draw(figures, concurrent)
+    FIGURES[which](figures)
 
 
 def _renice(niceness: int) -> None:
@@ -93,23 +92,26 @@ def _renice(niceness: int) -> None:
 
 
 class PlotWriter:
-    """Draws one result's figures in a second process when ``concurrent``
-    (else in this one, at :meth:`wait`)."""
+    """Draws one result's figures, each in a process of its own when
+    ``concurrent`` (else in this one, at :meth:`wait`)."""
 
     def __init__(self, concurrent: bool = True):
-        self.worker = start("plots", _draw_when_given, concurrent, concurrent=concurrent)
+        self.workers = [start(which, _draw_when_given, which, concurrent, concurrent=concurrent) for which in FIGURES]
         self.submitted = False
 
     def submit(self, figures: MapFigures | None) -> None:
         """What to draw (None: nothing); once."""
         if not self.submitted:
-            self.worker.send(figures)
+            for worker in self.workers:
+                worker.send(figures)
             self.submitted = True
 
     def wait(self) -> None:
         """Return when the figures are written; raise what drawing raised."""
         self.submit(None)
-        self.worker.result()
+        for worker in self.workers:
+            worker.result()
 
     def close(self) -> None:
-        self.worker.close()
+        for worker in self.workers:
+            worker.close()

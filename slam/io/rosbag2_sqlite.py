@@ -26,6 +26,7 @@ from pathlib import Path
 import yaml
 
 from slam.errors import GslamError
+from slam.io.yamlfile import SAFE_LOADER
 
 # RIHS01 hashes of the standard definitions (ROS 2 Iron, Jazzy and later;
 # tests/test_rosbag2_sqlite.py checks them against rosbags' type stores).
@@ -81,7 +82,7 @@ def _open_plain(path: Path) -> PlainBag | None:
     meta_file = path / "metadata.yaml"
     if not path.is_dir() or not meta_file.is_file():
         return None
-    info = yaml.safe_load(meta_file.read_text())["rosbag2_bagfile_information"]
+    info = yaml.load(meta_file.read_text(), Loader=SAFE_LOADER)["rosbag2_bagfile_information"]
     files = info.get("relative_file_paths") or []
     if info.get("storage_identifier") != "sqlite3" or info.get("compression_mode") or len(files) != 1:
         return None
