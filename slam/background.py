@@ -140,3 +140,44 @@ class Forked:
             self.process.join()
         self.conn.close()
 
+
+
+class Subforked(Forked):
+    """:class:`Forked` for a process that :mod:`multiprocessing` will not
+    let have children (a :class:`Forked` child is daemonic): the child is
+    made with ``os.fork`` and reaped with ``os.waitpid``."""
+
+    def __init__(self, what: str, fn: Callable[..., Any], *args: Any):
+        self.what = what
+        parent = os.getpid()
+        self.conn, child_conn = multiprocessing.Pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: no return from here
+            self.conn.close()
+            try:
+                _child(child_conn, fn, args, parent)
+            finally:
+                os._exit(0)
+        self.pid: int | None = pid
+        child_conn.close()
+
+    def _died(self) -> None:
+        status = self._reap(block=True)
+        raise GslamError(f"{self.what}: its process ended without a result (status {status})")
+
+    def _reap(self, block: bool) -> int | None:
+        if self.pid is None:
+            return None
+        pid, status = os.waitpid(self.pid, 0 if block else os.WNOHANG)
+        if pid == 0:
+            return None
+        self.pid = None
+        return status
+
+    def close(self) -> None:
+        """End the child if it still runs (an error elsewhere) and reap it."""
+        if self.pid is not None and self._reap(block=False) is None:
+            self.conn.close()
+            os.kill(self.pid, signal.SIGTERM)
+            self._reap(block=True)
+        self.conn.close()

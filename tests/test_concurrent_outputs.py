@@ -177,3 +177,30 @@ def test_closing_unfinished_background_work_ends_its_process():
     job = start("echo", _echo, 0)  # waits for input that never comes
     job.close()
     assert not job.process.is_alive()
+
+
+@needs_fork
+def test_a_failing_figure_is_an_error_of_the_map_and_leaves_no_process(tmp_path, monkeypatch):
+    import slam.io.plot_writer as plot_writer
+
+    def broken(figures):
+        raise ValueError("no room for the legend")
+
+    monkeypatch.setattr(plot_writer, "draw_map", broken)  # the forked drawers inherit it
+    est = Trajectory(t=np.arange(3.0), x=np.zeros(3), y=np.arange(3.0), yaw=np.zeros(3))
+    writer = plot_writer.PlotWriter(concurrent=True)
+    writer.submit(plot_writer.MapFigures(tmp_path, "run", est, None, {}, np.zeros((4, 2))))
+    with pytest.raises(ValueError, match="no room for the legend"):
+        writer.wait()
+    writer.close()
+    assert (tmp_path / "trajectory.png").is_file() and not (tmp_path / "map.png").exists()
+    children = [p for p in os.listdir("/proc") if p.isdigit() and _parent_of(int(p)) == os.getpid()]
+    assert children == []
+
+
+def _parent_of(pid: int) -> int | None:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return int(f.read().rsplit(")", 1)[1].split()[1])
+    except (OSError, ValueError, IndexError):
+        return None

@@ -1,28 +1,29 @@
 """The figures of a map result, drawn in processes of their own.
 
-matplotlib takes a third of a second to import and as long again to draw
-the two figures of ``gslam map``. :class:`PlotWriter` starts one child
-process per figure (:mod:`slam.background`) when the run starts; each
-imports matplotlib while the parent reads and matches scans, at a lower
-priority (``IMPORT_NICENESS``) so that it only takes CPU time the reading
-and scan matching leave, and then waits for the estimate.
-:meth:`PlotWriter.submit` hands it over as soon as the numbers are final;
-the two figures are drawn at the same time while the parent writes the
-numeric results. (Forking the second drawer only then would cost more than
-it saves: parent and child both fault on every page they then touch.)
-:meth:`PlotWriter.wait` returns once both PNGs are in the result folder
-(before the folder is renamed into place). The figures are the same bytes
-as drawn in the parent."""
+matplotlib takes a third of a second to import and a tenth of a second to
+draw each of the two figures of ``gslam map``. :class:`PlotWriter` starts
+a child process (:mod:`slam.background`) when the run starts; it imports
+matplotlib while the parent reads and matches scans, at a lower priority
+(``IMPORT_NICENESS``) so that it takes only CPU time the reading and scan
+matching leave, draws a small figure to load fonts and caches, and forks
+the map's drawer, which warms up the same way; then both wait for the
+estimate. :meth:`PlotWriter.submit` hands it over as soon as the numbers
+are final, the two figures are drawn at the same time while the parent
+writes the numeric results, and :meth:`PlotWriter.wait` returns once both
+PNGs are in the result folder (before the folder is renamed into place).
+The figures are the same bytes as drawn in the parent."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 from pathlib import Path
 
 import numpy as np
 
-from slam.background import Inbox, start
+from slam.background import Inbox, Subforked, start
 from slam.recording import Interval, Trajectory
 
 IMPORT_NICENESS = 10  # the child's priority while it imports and waits; back to the parent's to draw
@@ -64,22 +65,48 @@ def draw(figures: MapFigures) -> None:
     draw_map(figures)
 
 
-FIGURES = {"trajectory figure": draw_trajectory, "map figure": draw_map}
-
-
-def _draw_when_given(inbox: Inbox, which: str, concurrent: bool) -> None:
+def _draw_when_given(inbox: Inbox, concurrent: bool) -> None:
+    """The plot process: import and warm up, fork the map's drawer (both
+    then warm up their own copy of matplotlib's state, so neither faults on
+    shared pages while drawing), wait for the figures, draw them at once."""
     niceness = os.nice(0)
     if concurrent:
         os.nice(IMPORT_NICENESS)
     import slam.plots  # while the parent works
 
     slam.plots.warm_up()
+    map_drawer = start_subforked("map figure", _draw_map_when_given, niceness) if concurrent else None
+    slam.plots.warm_up()
     figures = inbox()
-    if figures is None:
-        return
-    if concurrent:
+    try:
+        if map_drawer is not None:
+            map_drawer.send(figures)
+        if figures is not None:
+            if concurrent:
+                _renice(niceness)
+            draw_trajectory(figures)
+            if map_drawer is None:
+                draw_map(figures)
+        if map_drawer is not None:
+            map_drawer.result()
+    finally:
+        if map_drawer is not None:
+            map_drawer.close()
+
+
+def _draw_map_when_given(inbox: Inbox, niceness: int) -> None:
+    import slam.plots
+
+    slam.plots.warm_up()
+    figures = inbox()
+    if figures is not None:
         _renice(niceness)
-    FIGURES[which](figures)
+        draw_map(figures)
+
+
+def start_subforked(what: str, fn: Callable[..., None], *args: Any) -> Subforked | None:
+    """A :class:`~slam.background.Subforked` child where ``os.fork`` exists, else None."""
+    return Subforked(what, fn, *args) if hasattr(os, "fork") else None
 
 
 def _renice(niceness: int) -> None:
@@ -92,26 +119,23 @@ def _renice(niceness: int) -> None:
 
 
 class PlotWriter:
-    """Draws one result's figures, each in a process of its own when
-    ``concurrent`` (else in this one, at :meth:`wait`)."""
+    """Draws one result's figures in a second process (and its child) when
+    ``concurrent``, else in this one, at :meth:`wait`."""
 
     def __init__(self, concurrent: bool = True):
-        self.workers = [start(which, _draw_when_given, which, concurrent, concurrent=concurrent) for which in FIGURES]
+        self.worker = start("plots", _draw_when_given, concurrent, concurrent=concurrent)
         self.submitted = False
 
     def submit(self, figures: MapFigures | None) -> None:
         """What to draw (None: nothing); once."""
         if not self.submitted:
-            for worker in self.workers:
-                worker.send(figures)
+            self.worker.send(figures)
             self.submitted = True
 
     def wait(self) -> None:
         """Return when the figures are written; raise what drawing raised."""
         self.submit(None)
-        for worker in self.workers:
-            worker.result()
+        self.worker.result()
 
     def close(self) -> None:
-        for worker in self.workers:
-            worker.close()
+        self.worker.close()
