@@ -1,8 +1,8 @@
 """Unary plausibility checks: one component against physics.
 
 A *unary* check tests one component against physics (the magnetometer's
-field strength and dip against the local Earth field, the GPS receiver's
-reported sigma); it says ``IMPLAUSIBLE`` once the deviation has lasted
+field strength and dip against the local Earth field, its vector's turn
+against the gyro's, the GPS receiver's reported sigma); it says ``IMPLAUSIBLE`` once the deviation has lasted
 ``hold_s`` and ``PLAUSIBLE`` otherwise. :func:`unary_checks` builds the
 enabled checks from :class:`~validation.observer_config.ObserversConfig`;
 :func:`held` applies the hold time over a whole run.
@@ -52,6 +52,22 @@ class MagnetometerCheck:
 
 
 @dataclass(frozen=True)
+class FieldGyroCheck:
+    """The field's change the gyro's turn does not explain (T) against a
+    tolerance (:mod:`validation.field_gyro`)."""
+
+    name: str
+    component: str
+    tolerance_T: float
+    hold_s: float
+    streams: tuple[str, ...] = ("mag_field_change",)
+
+    def deviant(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
+        """True where the field changed beyond the tolerance."""
+        return np.asarray(values["mag_field_change"]) > self.tolerance_T
+
+
+@dataclass(frozen=True)
 class GpsQualityCheck:
     """The receiver's horizontal sigma (m) against a maximum."""
 
@@ -66,7 +82,7 @@ class GpsQualityCheck:
         return np.asarray(values["gps_sigma"]) > self.max_sigma_m
 
 
-UnaryCheck = MagnetometerCheck | GpsQualityCheck
+UnaryCheck = MagnetometerCheck | FieldGyroCheck | GpsQualityCheck
 
 
 def unary_checks(config: ObserversConfig, reference: MagneticReference | None = None) -> list[UnaryCheck]:
@@ -89,6 +105,9 @@ def unary_checks(config: ObserversConfig, reference: MagneticReference | None = 
                     mag.tolerance_T, float(np.radians(mag.tolerance_dip_deg)), mag.hold_s,
                 )
             )
+    fg = config.field_gyro
+    if fg.enabled:
+        checks.append(FieldGyroCheck(fg.name, fg.component, fg.tolerance_T, fg.hold_s))
     if config.gps.enabled:
         g = config.gps
         checks.append(GpsQualityCheck(g.name, g.component, g.max_sigma_m, g.hold_s))
