@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 from conftest import real_data
 from slam.errors import GslamError
 from slam.geometry import heading_from_magnetometer, wrap_angle
-from slam.io.broad import gyro_heading, level_field, looks_like_broad, read_broad
+from slam.io.broad import MAG_LAG_S, gyro_heading, level_field, looks_like_broad, read_broad
 
 FS = 100.0
 STRENGTH_UT = 50.0
@@ -36,11 +36,14 @@ def orientation(t: np.ndarray, roll_deg=20.0, pitch_deg=-10.0, yaw0_deg=30.0) ->
 
 
 def write_trial(path: Path, duration_s=20.0, disturb=(12.0, 14.0), lost=(3.0, 3.5), **overrides) -> Path:
+    """A trial as the real sensor records it: the magnetometer's samples
+    are ``MAG_LAG_S`` late."""
     t = np.arange(int(duration_s * FS)) / FS
     rot = orientation(t)
+    measured = t - MAG_LAG_S
     field_w = np.tile(earth_field_ut(), (len(t), 1))
     if disturb is not None:
-        inside = (t >= disturb[0]) & (t < disturb[1])
+        inside = (measured >= disturb[0]) & (measured < disturb[1])
         field_w[inside] += [40.0, 0.0, 0.0]  # a magnet to the east
     inv = rot.inv()
     w_world = np.zeros((len(t), 3))
@@ -50,7 +53,7 @@ def write_trial(path: Path, duration_s=20.0, disturb=(12.0, 14.0), lost=(3.0, 3.
     data = {
         "imu_gyr": inv.apply(w_world),
         "imu_acc": inv.apply(np.tile([0.0, 0.0, 9.81], (len(t), 1))),
-        "imu_mag": inv.apply(field_w),
+        "imu_mag": orientation(measured).inv().apply(field_w),
         "opt_quat": quat,
         "opt_pos": np.column_stack([0.01 * t, -0.02 * t, np.ones_like(t)]),
         "sampling_rate": np.array([[FS]]),
@@ -222,3 +225,12 @@ def test_real_undisturbed_and_attached_magnet():
     magnet = read_broad(real_trial("32_disturbed_attached_magnet_1cm"))
     labelled = sum(b - a for a, b in magnet.faults["IMU_YAW"])
     assert 30.0 < labelled < 120.0
+
+
+def test_real_magnetometer_lag_alone_turns_the_heading_past_the_label():
+    # Undisturbed fast rotation: with the magnetometer's 12 ms lag left in,
+    # its heading is more than 20 deg off the optical one for seconds.
+    path = real_trial("08_undisturbed_fast_rotation_with_breaks_A")
+    assert read_broad(path).faults["IMU_YAW"] == []
+    late = read_broad(path, mag_lag_s=0.0).faults["IMU_YAW"]
+    assert sum(b - a for a, b in late) > 5.0

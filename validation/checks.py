@@ -1,9 +1,10 @@
 """Unary plausibility checks: one component against physics.
 
 A *unary* check tests one component against physics (the magnetometer's
-field strength and dip against the local Earth field, the GPS receiver's
-reported sigma, a laser scan's returns and the conditioning of its
-registration); it says ``IMPLAUSIBLE`` once the deviation has lasted
+field strength and dip against the local Earth field, its vector's turn
+against the gyro's, the GPS receiver's reported sigma, a laser scan's
+returns and the conditioning of its registration); it says
+``IMPLAUSIBLE`` once the deviation has lasted
 ``hold_s`` and ``PLAUSIBLE`` otherwise. :func:`unary_checks` builds the
 enabled checks from :class:`~validation.observer_config.ObserversConfig`;
 :func:`held` applies the hold time over a whole run.
@@ -51,6 +52,22 @@ class MagnetometerCheck:
         return (np.abs(values["mag_strength"] - self.strength_T) > self.tolerance_T) | (
             np.abs(values["mag_dip"] - self.dip_rad) > self.tolerance_dip_rad
         )
+
+
+@dataclass(frozen=True)
+class FieldGyroCheck:
+    """The field's change the gyro's turn does not explain (T) against a
+    tolerance (:mod:`validation.field_gyro`)."""
+
+    name: str
+    component: str
+    tolerance_T: float
+    hold_s: float
+    streams: tuple[str, ...] = ("mag_field_change",)
+
+    def deviant(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
+        """True where the field changed beyond the tolerance."""
+        return np.asarray(values["mag_field_change"]) > self.tolerance_T
 
 
 @dataclass(frozen=True)
@@ -111,7 +128,7 @@ class ScanDegeneracyCheck:
         return np.asarray(values[self.streams[0]]) > 0.0
 
 
-UnaryCheck = MagnetometerCheck | GpsQualityCheck | ScanDegeneracyCheck
+UnaryCheck = MagnetometerCheck | FieldGyroCheck | GpsQualityCheck | ScanDegeneracyCheck
 
 
 def unary_checks(config: ObserversConfig, reference: MagneticReference | None = None) -> list[UnaryCheck]:
@@ -134,6 +151,9 @@ def unary_checks(config: ObserversConfig, reference: MagneticReference | None = 
                     mag.tolerance_T, float(np.radians(mag.tolerance_dip_deg)), mag.hold_s,
                 )
             )
+    fg = config.field_gyro
+    if fg.enabled:
+        checks.append(FieldGyroCheck(fg.name, fg.component, fg.tolerance_T, fg.hold_s))
     if config.gps.enabled:
         g = config.gps
         checks.append(GpsQualityCheck(g.name, g.component, g.max_sigma_m, g.hold_s))

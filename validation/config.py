@@ -118,7 +118,7 @@ def _check_names(cfg: ValidationConfig, gate: GatingConfig) -> None:
                 f"validation.observers: relation '{rel.name}' relates {sorted(rel.components)}, "
                 f"the model says {sorted(model.relations[rel.name])}"
             )
-    for check in (cfg.observers.magnetometer, cfg.observers.gps):
+    for check in (cfg.observers.magnetometer, cfg.observers.field_gyro, cfg.observers.gps):
         if check.enabled and check.name not in model.unary_checks:
             raise ValidationError(f"validation.observers: check '{check.name}' is not in the model's unary_checks")
     check_components(gate, model)

@@ -1,9 +1,9 @@
 """Configuration of the observers: relations, unary checks and their defaults.
 
 :class:`RelationConfig` describes one relation observer (Algorithm 3,
-:mod:`validation.observers`); :class:`MagnetometerCheckConfig` and
-:class:`GpsCheckConfig` and :class:`ScanCheckConfig` the unary checks
-(:mod:`validation.checks`);
+:mod:`validation.observers`); :class:`MagnetometerCheckConfig`,
+:class:`FieldGyroCheckConfig`, :class:`GpsCheckConfig` and
+:class:`ScanCheckConfig` the unary checks (:mod:`validation.checks`);
 :class:`ObserversConfig` nests them all with the resampling gaps, and
 :func:`observers_config` / :func:`load_observers_config` validate a mapping
 or a YAML file into it with one-line errors.
@@ -163,6 +163,21 @@ class MagnetometerCheckConfig(_Strict):
     hold_s: float = Field(1.0, ge=0.0)
 
 
+class FieldGyroCheckConfig(_Strict):
+    """The field's change over ``window_s`` that the gyro's turn does not
+    explain, each end averaged over ``smooth_s``, against ``tolerance_T``
+    (:mod:`validation.field_gyro`). Off unless enabled: it needs the
+    magnetometer's field and a gyro on one clock."""
+
+    enabled: bool = False
+    name: str = "mag_field_gyro"
+    component: Component = "IMU_YAW"
+    window_s: float = Field(1.0, gt=0.0)
+    smooth_s: float = Field(0.1, gt=0.0)
+    tolerance_T: float = Field(5e-6, gt=0.0)
+    hold_s: float = Field(0.0, ge=0.0)
+
+
 class GpsCheckConfig(_Strict):
     """The receiver's reported horizontal sigma against a maximum."""
 
@@ -223,6 +238,7 @@ class ObserversConfig(_Strict):
     rule: Rule = "paper"
     relations: tuple[RelationConfig, ...] = DEFAULT_RELATIONS
     magnetometer: MagnetometerCheckConfig = MagnetometerCheckConfig()
+    field_gyro: FieldGyroCheckConfig = FieldGyroCheckConfig()
     gps: GpsCheckConfig = GpsCheckConfig()
     scan: ScanCheckConfig = ScanCheckConfig()
     max_gap_s: float = Field(0.5, gt=0.0)
@@ -233,7 +249,9 @@ class ObserversConfig(_Strict):
 
     @model_validator(mode="after")
     def _names(self) -> "ObserversConfig":
-        names = [r.name for r in self.relations] + [self.magnetometer.name, self.gps.name, *self.scan.names]
+        names = [r.name for r in self.relations] + [
+            self.magnetometer.name, self.field_gyro.name, self.gps.name, *self.scan.names
+        ]
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
             raise ValueError(f"observer name {dupes[0]!r} used twice")
@@ -241,6 +259,12 @@ class ObserversConfig(_Strict):
             if key not in STREAM_NAMES:
                 raise ValueError(f"stream_max_gap_s: unknown stream {key!r}")
         return self
+
+
+def field_gyro_stream(config: ObserversConfig) -> tuple[float, float] | None:
+    """``(window_s, smooth_s)`` of ``mag_field_change`` when its check is on."""
+    fg = config.field_gyro
+    return (fg.window_s, fg.smooth_s) if fg.enabled else None
 
 
 def observers_config(data: Mapping, source: str = "observers") -> ObserversConfig:

@@ -27,10 +27,12 @@ not depend on the pipeline that reads them.
 
 Quality streams for the unary checks: ``mag_strength`` (T) and ``mag_dip``
 (rad, positive downward, assuming a level robot) from the raw compass field,
-and ``gps_sigma`` (m). Fixes with a negative status carry no position and
-are left out. The scan check's ``scan_degenerate_{dist,lat,yaw}`` (1 where
-a scan cannot constrain that motion, else 0) come from the front-end's
-figures per scan (:func:`validation.checks.scan_streams`).
+``mag_field_change`` (T; the field's change the gyro's turn does not
+explain, :mod:`validation.field_gyro`) when asked for, and ``gps_sigma``
+(m). Fixes with a negative status carry no position and are left out.
+The scan check's ``scan_degenerate_{dist,lat,yaw}`` (1 where a scan cannot
+constrain that motion, else 0) come from the front-end's figures per scan
+(:func:`validation.checks.scan_streams`).
 
 Streams are then resampled onto the validation step times by linear
 interpolation (angles unwrapped first, so the result is continuous) with a
@@ -47,6 +49,7 @@ from typing import Literal, Protocol, get_args
 import numpy as np
 
 from validation.errors import ValidationError
+from validation.field_gyro import field_change
 from validation.trends import Window, derive_stream
 
 logger = logging.getLogger(__name__)
@@ -56,7 +59,8 @@ StreamName = Literal[
     "odo_forward", "sm_forward", "odo_lateral", "sm_lateral", "odo_speed", "gps_speed",
 ]
 QualityStreamName = Literal[
-    "mag_strength", "mag_dip", "gps_sigma", "scan_degenerate_dist", "scan_degenerate_lat", "scan_degenerate_yaw",
+    "mag_strength", "mag_dip", "mag_field_change", "gps_sigma",
+    "scan_degenerate_dist", "scan_degenerate_lat", "scan_degenerate_yaw",
 ]
 
 STREAM_COMPONENT: dict[str, str] = {
@@ -74,6 +78,7 @@ STREAM_COMPONENT: dict[str, str] = {
     "gps_speed": "GPS",
     "mag_strength": "IMU_YAW",
     "mag_dip": "IMU_YAW",
+    "mag_field_change": "IMU_YAW",
     "gps_sigma": "GPS",
     "scan_degenerate_dist": "SM_DIST",
     "scan_degenerate_lat": "SM_LAT",
@@ -194,6 +199,7 @@ def validation_streams(
     sm: PoseSeries | None = None,
     gps_speed_window_s: float = 5.0,
     window: Window = "trailing",
+    field_gyro: tuple[float, float] | None = None,
 ) -> dict[str, Stream]:
     """The named streams available in ``recording`` (plus scan matching).
 
@@ -218,6 +224,10 @@ def validation_streams(
         yaw = np.concatenate(([0.0], np.cumsum(0.5 * (g.values[1:] + g.values[:-1]) * np.diff(g.t))))
         # Already continuous: no unwrapping needed.
         streams["gyro_yaw"] = Stream(g.t, yaw, angular=False)
+        c = recording.compass
+        if field_gyro is not None and c is not None and c.field is not None:
+            change = field_change(c.t, c.field, g.t, yaw, *field_gyro)
+            streams["mag_field_change"] = _clean("mag_field_change", c.t, change)
     if sm is not None and len(sm):
         _trajectory_streams("sm", sm, streams)
     if recording.odometry is not None and len(recording.odometry):

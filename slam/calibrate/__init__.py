@@ -9,8 +9,8 @@ from recorded runs instead of typed in by hand.
    (:mod:`slam.calibrate.fit`), then its boundary, window and threshold
    from that noise and the target false-alarm rate
    (:mod:`slam.calibrate.select`): the run's target share of steps with a
-   false alarm, split evenly over the observers. The magnetometer check
-   gets its tolerances the same way.
+   false alarm, split evenly over the observers. The magnetometer and
+   field-gyro checks get their tolerances the same way.
 3. Streams of different sensors whose rates correlate and which no
    relation compares yet are proposed as new relations
    (:mod:`slam.calibrate.propose`).
@@ -29,7 +29,8 @@ from pathlib import Path
 
 from slam.calibrate.propose import Proposal, propose
 from slam.calibrate.runs import CalibrationRun, load_run, parse_clean
-from slam.calibrate.select import CheckChoice, Choice, calibrate_magnetometer, calibrate_relation
+from slam.calibrate.select import (CheckChoice, Choice, FieldGyroChoice, calibrate_field_gyro, calibrate_magnetometer,
+                                   calibrate_relation)
 from slam.calibrate.write import calibrated_config
 from slam.config import PipelineConfig, load_config, validation_sections
 from slam.errors import GslamError
@@ -51,6 +52,7 @@ class CalibrationResult:
     out: Path | None
     choices: dict[str, Choice | None]
     magnetometer: CheckChoice | None
+    field_gyro: FieldGyroChoice | None
     proposals: list[Proposal]
     target_per_observer: float
     text: str
@@ -98,7 +100,8 @@ def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm:
     vcfg, _ = validation_sections(config)
     relations = vcfg.observers.relations
     has_mag = vcfg.observers.magnetometer.enabled and any("mag_strength" in r.streams for r in loaded)
-    observers = len(relations) + int(has_mag)
+    has_field = vcfg.observers.field_gyro.enabled and any("mag_field_change" in r.streams for r in loaded)
+    observers = len(relations) + int(has_mag) + int(has_field)
     if observers == 0:
         raise GslamError("validation.observers: no relation or check to calibrate")
     target = false_alarm / observers
@@ -113,10 +116,11 @@ def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm:
             log.warning("relation %s: %s turns against %s (gain %.2f): check input.frames", name,
                         choice.relation.stream_b, choice.relation.stream_a, choice.fit.gain)
     mag = calibrate_magnetometer(loaded, vcfg.observers.magnetometer, target) if has_mag else None
+    field = calibrate_field_gyro(loaded, vcfg.observers.field_gyro, target) if has_field else None
     proposals = propose(loaded, relations, vcfg.model, vcfg, target)
     header = [*header, *_header(false_alarm, target, observers, vcfg.offline)]
-    text = calibrated_config(config, choices, mag, proposals, header, target, len(loaded))
-    return CalibrationResult(None, choices, mag, proposals, target, text)
+    text = calibrated_config(config, choices, mag, field, proposals, header, target, len(loaded))
+    return CalibrationResult(None, choices, mag, field, proposals, target, text)
 
 
 def _learnt_from(stretch) -> str:

@@ -12,7 +12,9 @@ with the pass the config names) runs on the learning steps for each
 candidate, smallest multiple first and, for each, smallest ``th`` first.
 The first candidate whose ``NO_MATCH`` steps are at most the target share
 of the learning steps, on every run, is taken: the smallest error, then
-the shortest one, the observer can see at that false-alarm rate.
+the shortest one, the observer can see at that false-alarm rate. The
+unary magnetometer and field-gyro checks get their tolerances from
+quantiles of their deviations.
 
 A trend or residual relation tries windows of half, once and twice the
 configured ``window_s`` (none shorter than four samples of its sparser
@@ -36,7 +38,7 @@ import numpy as np
 from slam.calibrate.fit import RateFit, fit_offset, fit_rates, fit_slopes, robust_sd
 from slam.calibrate.runs import CalibrationRun
 from validation.config import ValidationConfig
-from validation.observer_config import MagnetometerCheckConfig, RelationConfig
+from validation.observer_config import FieldGyroCheckConfig, MagnetometerCheckConfig, RelationConfig
 from validation.observers import evidence, observe, observe_steps
 
 log = logging.getLogger(__name__)
@@ -183,11 +185,20 @@ class CheckChoice:
     steps: int
 
 
+def _tolerance(deviation: np.ndarray, share: float, declared: bool) -> float:
+    """The ``1 - share`` quantile of one run's ``deviation``; over a whole
+    run (not ``declared`` clean), no further than 6 robust sds above its
+    median, so faults do not widen it."""
+    tol = float(np.percentile(deviation, 100.0 * (1.0 - share)))
+    if not declared:
+        tol = min(tol, float(np.median(deviation)) + 6.0 * robust_sd(deviation))
+    return tol
+
+
 def calibrate_magnetometer(runs: Sequence[CalibrationRun], cfg: MagnetometerCheckConfig, target: float) -> CheckChoice | None:
     """Tolerances of field strength and dip at the ``1 - target / 2``
     quantile of their deviations on the learning steps of the worst run
-    (over a whole run, no further than 6 robust sds above the median, so
-    faults do not widen them); no hold. None without magnetometer data."""
+    (:func:`_tolerance`); no hold. None without magnetometer data."""
     if not cfg.enabled:
         return None
     worst_b = worst_d = 0.0
@@ -202,11 +213,7 @@ def calibrate_magnetometer(runs: Sequence[CalibrationRun], cfg: MagnetometerChec
             continue
         db = np.abs(s.values["mag_strength"][ok] - check.strength_T)
         dd = np.abs(s.values["mag_dip"][ok] - check.dip_rad)
-        q = 100.0 * (1.0 - 0.5 * target)
-        tb, td = float(np.percentile(db, q)), float(np.percentile(dd, q))
-        if not run.declared:
-            tb = min(tb, float(np.median(db)) + 6.0 * robust_sd(db))
-            td = min(td, float(np.median(dd)) + 6.0 * robust_sd(dd))
+        tb, td = _tolerance(db, 0.5 * target, run.declared), _tolerance(dd, 0.5 * target, run.declared)
         worst_b, worst_d, steps = max(worst_b, tb), max(worst_d, td), steps + int(ok.sum())
     if not steps:
         return None
@@ -215,4 +222,34 @@ def calibrate_magnetometer(runs: Sequence[CalibrationRun], cfg: MagnetometerChec
     return CheckChoice(new, worst_b, worst_d, steps)
 
 
-__all__ = ["Choice", "CheckChoice", "calibrate_magnetometer", "calibrate_relation", "fit_rates"]
+@dataclass
+class FieldGyroChoice:
+    """The field-gyro check's tolerance and the learning steps it came from."""
+
+    config: FieldGyroCheckConfig
+    steps: int
+
+
+def calibrate_field_gyro(runs: Sequence[CalibrationRun], cfg: FieldGyroCheckConfig, target: float) -> FieldGyroChoice | None:
+    """The field-gyro check's tolerance at the ``1 - target`` quantile of
+    ``mag_field_change`` on the learning steps of the worst run
+    (:func:`_tolerance`); its window and smoothing stay as configured (how
+    long a disturbance may take to build and still be seen is the user's
+    choice); no hold. None when no run has the stream."""
+    if not cfg.enabled:
+        return None
+    worst, steps = 0.0, 0
+    for run in runs:
+        if "mag_field_change" not in run.steps.values:
+            continue
+        ok = run.steps.valid["mag_field_change"] & run.clean
+        if ok.any():
+            worst = max(worst, _tolerance(run.steps.values["mag_field_change"][ok], target, run.declared))
+            steps += int(ok.sum())
+    if not steps:
+        return None
+    return FieldGyroChoice(cfg.model_copy(update={"tolerance_T": sig(max(worst, 1e-9), 3), "hold_s": 0.0}), steps)
+
+
+__all__ = ["Choice", "CheckChoice", "FieldGyroChoice", "calibrate_field_gyro", "calibrate_magnetometer",
+           "calibrate_relation", "fit_rates"]

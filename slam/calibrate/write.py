@@ -11,7 +11,7 @@ import numpy as np
 import yaml
 
 from slam.calibrate.propose import Proposal
-from slam.calibrate.select import CheckChoice, Choice
+from slam.calibrate.select import CheckChoice, Choice, FieldGyroChoice
 from slam.config import PipelineConfig
 from slam.io.outdir import result_file_mark
 from validation.observer_config import RelationConfig
@@ -65,6 +65,7 @@ def calibrated_config(
     config: PipelineConfig,
     choices: dict[str, Choice | None],
     magnetometer: CheckChoice | None,
+    field_gyro: FieldGyroChoice | None,
     proposals: Sequence[Proposal],
     header: Sequence[str],
     target: float,
@@ -78,6 +79,8 @@ def calibrated_config(
     observers = dict(validation["observers"])
     if magnetometer is not None:
         observers["magnetometer"] = magnetometer.config.model_dump(mode="json")
+    if field_gyro is not None:
+        observers["field_gyro"] = field_gyro.config.model_dump(mode="json")
     observers["relations"] = _PLACEHOLDER
     validation["observers"] = observers
     sections = config.model_dump(mode="json")
@@ -106,12 +109,20 @@ def calibrated_config(
         mag_note = [f"{_INDENT}# magnetometer check: field strength within {magnetometer.strength_T * 1e6:.3g} uT and dip within "
                     f"{np.degrees(magnetometer.dip_rad):.3g} deg of the reference on all but {_pct(0.5 * target)} "
                     f"each of {magnetometer.steps} learning steps (worst run)"]
+    field_note = []
+    if field_gyro is not None:
+        fg = field_gyro.config
+        field_note = [f"{_INDENT}# field-gyro check: the field's change over {fg.window_s:g} s that the gyro's turn does "
+                      f"not explain stays within {fg.tolerance_T * 1e6:.3g} uT on all but {_pct(target)} of "
+                      f"{field_gyro.steps} learning steps (worst run)"]
     lines = []
     for line in text.splitlines():
         if line.strip() == f"relations: {_PLACEHOLDER}":
             lines += block
         elif line.strip().startswith("magnetometer:") and line.startswith(_INDENT) and mag_note:
             lines += mag_note + [line]
+        elif line.strip().startswith("field_gyro:") and line.startswith(_INDENT) and field_note:
+            lines += field_note + [line]
         else:
             lines.append(line)
     head = [result_file_mark("calibrate") + ": a pipeline config whose observers were learnt from data"]
