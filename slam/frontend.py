@@ -104,26 +104,38 @@ class FrontendResult:
     time_s: float
 
 
+def kiss_config(config: FrontendConfig, range_max: float):
+    """KISS-ICP's config for a 2D scanner whose beams reach ``range_max``."""
+    from kiss_icp.config import KISSConfig
+
+    kiss = KISSConfig()
+    kiss.data.max_range = min(config.max_range_m, range_max)
+    kiss.data.min_range = config.min_range_m
+    kiss.data.deskew = False  # 2D scanners give no per-point stamps
+    kiss.mapping.voxel_size = config.voxel_size_m
+    kiss.mapping.max_points_per_voxel = config.max_points_per_voxel
+    kiss.adaptive_threshold.initial_threshold = config.initial_threshold_m
+    kiss.adaptive_threshold.min_motion_th = config.min_motion_m
+    kiss.registration.max_num_iterations = config.max_iterations
+    kiss.registration.max_num_threads = 1
+    return kiss
+
+
 class ScanMatcher:
-    """KISS-ICP configured for a 2D scanner."""
+    """KISS-ICP configured for a 2D scanner.
+
+    :meth:`register` runs KISS-ICP's ``register_frame`` on a scan's points;
+    :meth:`register_voxelized` runs its second half on what its first half
+    (range filter and voxel grids, which depend on the scan alone) made of
+    them elsewhere (:class:`slam.scan_prep.ScanPreparer`): the same calls,
+    so the same poses to the last bit."""
 
     def __init__(self, config: FrontendConfig, range_max: float):
-        from kiss_icp.config import KISSConfig
         from kiss_icp.kiss_icp import KissICP
 
         self.config = config
         self.max_range = min(config.max_range_m, range_max)
-        kiss = KISSConfig()
-        kiss.data.max_range = self.max_range
-        kiss.data.min_range = config.min_range_m
-        kiss.data.deskew = False  # 2D scanners give no per-point stamps
-        kiss.mapping.voxel_size = config.voxel_size_m
-        kiss.mapping.max_points_per_voxel = config.max_points_per_voxel
-        kiss.adaptive_threshold.initial_threshold = config.initial_threshold_m
-        kiss.adaptive_threshold.min_motion_th = config.min_motion_m
-        kiss.registration.max_num_iterations = config.max_iterations
-        kiss.registration.max_num_threads = 1
-        self._icp = KissICP(kiss)
+        self._icp = KissICP(kiss_config(config, range_max))
 
     def register(self, points: np.ndarray, guess: np.ndarray | None = None) -> tuple[float, float, float]:
         """Register one scan; returns the planar pose (x, y, yaw) of the laser.
@@ -131,13 +143,42 @@ class ScanMatcher:
         ``guess``: the motion (dx, dy, dyaw) since the previous scan, in its
         frame, to start from instead of KISS-ICP's constant velocity.
         """
+        self._start_from(guess)
+        self._icp.register_frame(points, np.zeros(len(points)))
+        return self._planar_pose()
+
+    def register_voxelized(
+        self, source: np.ndarray, frame_downsample: np.ndarray, guess: np.ndarray | None = None
+    ) -> tuple[float, float, float]:
+        """:meth:`register` for a scan already through KISS-ICP's range
+        filter and voxel grids: ``KissICP.register_frame`` from its
+        threshold on (kiss-icp 1.x)."""
+        self._start_from(guess)
+        icp = self._icp
+        sigma = icp.adaptive_threshold.get_threshold()
+        initial_guess = icp.last_pose @ icp.last_delta
+        new_pose = icp.registration.align_points_to_map(
+            points=source,
+            voxel_map=icp.local_map,
+            initial_guess=initial_guess,
+            max_correspondance_distance=3 * sigma,
+            kernel=sigma,
+        )
+        icp.adaptive_threshold.update_model_deviation(np.linalg.inv(initial_guess) @ new_pose)
+        icp.local_map.update(frame_downsample, new_pose)
+        icp.last_delta = np.linalg.inv(icp.last_pose) @ new_pose
+        icp.last_pose = new_pose
+        return self._planar_pose()
+
+    def _start_from(self, guess: np.ndarray | None) -> None:
         if guess is not None:
             delta = np.eye(4)
             c, s = np.cos(guess[2]), np.sin(guess[2])
             delta[:2, :2] = [[c, -s], [s, c]]
             delta[:2, 3] = guess[:2]
             self._icp.last_delta = delta
-        self._icp.register_frame(points, np.zeros(len(points)))
+
+    def _planar_pose(self) -> tuple[float, float, float]:
         # KISS-ICP compounds its pose and velocity as 4x4 float products; over
         # a long blind stretch (no points: prediction only) round-off makes the
         # rotation non-orthogonal and Sophus aborts the process. A 2D scanner
@@ -146,6 +187,34 @@ class ScanMatcher:
         self._icp.last_delta = planar(self._icp.last_delta)
         pose = self._icp.last_pose
         return float(pose[0, 3]), float(pose[1, 3]), float(np.arctan2(pose[1, 0], pose[0, 0]))
+
+
+def odometry_guesses(
+    scan_t: np.ndarray, config: FrontendConfig, odometry: Trajectory | None
+) -> list[np.ndarray | None] | None:
+    """Per scan, the odometry's motion since the previous scan (dx, dy,
+    dyaw), or None where the odometry has no data; None for all when
+    ``config.initial_guess`` is not ``odometry`` or there is no odometry."""
+    if config.initial_guess != "odometry" or odometry is None or len(odometry) < 2:
+        return None
+    from slam.measurements import covered, interpolate_poses, relative_poses
+
+    poses = interpolate_poses(odometry, scan_t)
+    guesses = np.zeros_like(poses)
+    guesses[1:] = relative_poses(poses[:-1], poses[1:])
+    ok = covered(odometry.t, scan_t, max_gap_s=1.0)
+    usable = np.zeros(len(scan_t), dtype=bool)
+    usable[1:] = ok[1:] & ok[:-1]
+    return [g if u else None for g, u in zip(guesses, usable)]
+
+
+def progress_bar(total: int, enabled: bool):
+    """A tqdm bar over ``total`` scans (shown only on a terminal), or None."""
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc="scan matching", unit="scan", leave=False, disable=None)
 
 
 def run_frontend(
@@ -158,30 +227,20 @@ def run_frontend(
     """
     matcher = ScanMatcher(config, scans.range_max)
     n = len(scans)
-    guesses = None
-    if config.initial_guess == "odometry" and odometry is not None and len(odometry) > 1:
-        from slam.measurements import covered, interpolate_poses, relative_poses
-
-        poses = interpolate_poses(odometry, scans.t)
-        guesses = np.zeros_like(poses)
-        guesses[1:] = relative_poses(poses[:-1], poses[1:])
-        ok = covered(odometry.t, scans.t, max_gap_s=1.0)
-        usable = np.zeros(n, dtype=bool)
-        usable[1:] = ok[1:] & ok[:-1]
+    guesses = odometry_guesses(scans.t, config, odometry)
     xyyaw = np.zeros((n, 3))
     n_points = np.zeros(n, dtype=np.int64)
     start = time.perf_counter()
-    iterator = range(n)
-    if progress:
-        from tqdm import tqdm
-
-        iterator = tqdm(iterator, desc="scan matching", unit="scan", leave=False, disable=None)  # none when stderr is not a terminal
+    bar = progress_bar(n, progress)
     project = ScanProjector(scans.angles, config.min_range_m, matcher.max_range)
-    for i in iterator:
+    for i in range(n):
         pts = project(scans.ranges[i])
         n_points[i] = len(pts)
-        guess = guesses[i] if guesses is not None and usable[i] else None
-        xyyaw[i] = matcher.register(pts, guess)
+        xyyaw[i] = matcher.register(pts, guesses[i] if guesses is not None else None)
+        if bar is not None:
+            bar.update()
+    if bar is not None:
+        bar.close()
     elapsed = time.perf_counter() - start
     log.info("KISS-ICP registered %d scans in %.2f s", n, elapsed)
     poses = Trajectory(t=scans.t.copy(), x=xyyaw[:, 0], y=xyyaw[:, 1], yaw=xyyaw[:, 2])

@@ -208,3 +208,22 @@ def _parent_of(pid: int) -> int | None:
             return int(f.read().rsplit(")", 1)[1].split()[1])
     except (OSError, ValueError, IndexError):
         return None
+
+
+@needs_fork
+def test_an_error_preparing_the_scans_reaches_the_caller(short_run, monkeypatch):
+    import slam.prefetch as prefetch
+
+    def broken(scans, config, guesses):
+        yield from ()
+        raise ValueError("voxel grid refused")
+
+    monkeypatch.setattr(prefetch, "prepared_chunks", broken)
+    config = load_config(TELEMAX_CONFIG)
+    rec = read_recording(short_run.run_dir, config.input)
+    sm = prefetch.BackgroundScanMatching(config.frontend, concurrent=True)
+    sm.give(rec.scans)
+    with pytest.raises(ValueError, match="voxel grid refused"):
+        sm.result(rec.scans)
+    sm.close()
+    assert not sm.worker.process.is_alive()
