@@ -3,13 +3,15 @@ as cold processes on the same bag.
 
     python scripts/bench_speed.py [--repeats 5] [--inputs lab loop] [--laps 7]
                                   [--out runs/bench_speed] [--before DIR] [--config PATH]
+                                  [--kiss-threads N]
 
 Inputs (simulated once into ``OUT/inputs``, seed 5): ``lab`` is
 telemax_lab (220.6 s, 2,207 scans); ``loop`` is telemax_loop with
 ``--laps`` laps (7: 29.5 min). Programs, each a fresh interpreter:
 
 * ``kiss``: ``scripts/kiss_only.py`` (rosbags' AnyReader on the LaserScan
-  topic, message by message, KissICP's default config);
+  topic, message by message, KissICP's default config; ``--kiss-threads 1``
+  registers on one thread, as gslam's front-end does);
 * ``gslam``: ``python -m slam.cli -q map RUN --config CONFIG --out TMP
   --gating on`` with this checkout's code;
 * ``before`` (with ``--before DIR``): the same command with the code of
@@ -112,9 +114,9 @@ def _timed(cmd: list[str], env: dict[str, str] | None = None, cwd: Path = ROOT) 
     return wall, cpu
 
 
-def run_kiss(name: str, run: Path, rnd: int) -> Sample:
+def run_kiss(name: str, run: Path, rnd: int, threads: int = 0) -> Sample:
     load = os.getloadavg()[0]
-    wall, cpu = _timed([sys.executable, str(ROOT / "scripts/kiss_only.py"), str(run)])
+    wall, cpu = _timed([sys.executable, str(ROOT / "scripts/kiss_only.py"), str(run), "--threads", str(threads)])
     return Sample(name, "kiss", rnd, wall, cpu, load, duration_s=data_span(run))
 
 
@@ -239,6 +241,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=ROOT / "runs/bench_speed", help="report folder")
     p.add_argument("--config", type=Path, default=ROOT / "configs/telemax.yaml")
     p.add_argument("--before", type=Path, default=None, help="another checkout's code to time as 'before'")
+    p.add_argument("--kiss-threads", type=int, default=0,
+                   help="KISS-ICP alone's threads (default 0: all cores, its default; 1: as gslam's front-end)")
     args = p.parse_args(argv)
     if args.repeats < 1:
         raise SystemExit("bench_speed: --repeats: expected at least 1")
@@ -258,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
         for rnd in range(1, args.repeats + 1):
             for prog in programs:
                 if prog == "kiss":
-                    s = run_kiss(inp, run, rnd)
+                    s = run_kiss(inp, run, rnd, args.kiss_threads)
                 else:
                     s = run_gslam(inp, prog, code[prog], run, args.config.resolve(), out / "tmp_map", rnd, keep[prog])
                 samples.append(s)

@@ -1,13 +1,15 @@
 """KISS-ICP alone on a bag's LaserScan topic: the floor of what mapping a
 recorded run costs, as a process a user would write.
 
-    python scripts/kiss_only.py BAG [--topic /scan] [--poses OUT.txt]
+    python scripts/kiss_only.py BAG [--topic /scan] [--poses OUT.txt] [--threads N]
 
 It reads the topic with rosbags' ``AnyReader``, deserialising message by
 message, turns each scan into planar points (finite ranges, z = 0) and
 registers it with KissICP's default config, with ``max_range`` from the
 scan's ``range_max`` and the voxel ``max_range / 100`` (KISS-ICP's own rule
-when no voxel is given). No 2D scanner gives per-point stamps, so no point
+when no voxel is given), on all cores unless ``--threads`` says otherwise
+(``--threads 1``: the one thread gslam's front-end uses, for the same
+poses on every run). No 2D scanner gives per-point stamps, so no point
 is deskewed. After each scan the pose and velocity are made exactly planar
 again, as gslam's front-end does: without it, round-off over a long blind
 stretch makes KISS-ICP's Sophus abort the process (telemax_loop does this).
@@ -52,7 +54,7 @@ def planar(transform: np.ndarray) -> np.ndarray:
     return out
 
 
-def kiss_only(path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
+def kiss_only(path: Path, topic: str, threads: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Stamps (s, header) and KISS-ICP poses (n, 4, 4) of every scan on ``topic``."""
     store = get_typestore(Stores.ROS1_NOETIC if path.suffix == ".bag" else Stores.LATEST)
     stamps, poses = [], []
@@ -67,6 +69,7 @@ def kiss_only(path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
                 config = load_config(None)  # KISS-ICP's defaults
                 config.data.max_range = float(msg.range_max)
                 config.mapping.voxel_size = config.data.max_range / 100.0
+                config.registration.max_num_threads = threads  # 0: all cores (the default)
                 icp = KissICP(config)
                 beams = np.arange(len(msg.ranges))
                 angles = msg.angle_min + beams * msg.angle_increment
@@ -89,8 +92,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("bag", type=Path, help="a .bag file, a rosbag2 folder or a simulated run folder")
     p.add_argument("--topic", default="/scan", help="the LaserScan topic (default /scan)")
     p.add_argument("--poses", type=Path, default=None, help="write 't x y yaw' per scan to this file")
+    p.add_argument("--threads", type=int, default=0, help="KISS-ICP's threads (default 0: all cores)")
     args = p.parse_args(argv)
-    stamps, poses = kiss_only(bag_path(args.bag), args.topic)
+    stamps, poses = kiss_only(bag_path(args.bag), args.topic, args.threads)
     if args.poses is not None:
         yaw = np.arctan2(poses[:, 1, 0], poses[:, 0, 0])
         np.savetxt(args.poses, np.column_stack([stamps, poses[:, 0, 3], poses[:, 1, 3], yaw]), fmt="%.6f")
