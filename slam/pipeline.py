@@ -447,12 +447,14 @@ class MappingPipeline:
 
     def start_figures(self, folder: Path) -> None:
         """Hand the figures to their processes as soon as the estimate is
-        final; the map's points are kept for ``map.ply``."""
+        final, then the map's points (kept for ``map.ply``)."""
         t = time.perf_counter()
-        self.points = self.map_points()
         if self.plots is not None:
             rec = self.recording
-            self.plots.submit(MapFigures(folder, rec.name, self.backend.trajectory, rec.groundtruth, rec.faults, self.points))
+            self.plots.submit(MapFigures(folder, rec.name, self.backend.trajectory, rec.groundtruth, rec.faults))
+        self.points = self.map_points()
+        if self.plots is not None:
+            self.plots.submit_points(self.points)
         self.timings.write_s += time.perf_counter() - t
 
     def write(self, folder: Path) -> None:

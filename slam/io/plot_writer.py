@@ -6,12 +6,14 @@ a child process (:mod:`slam.background`) when the run starts; it imports
 matplotlib while the parent reads and matches scans, at a lower priority
 (``IMPORT_NICENESS``) so that it takes only CPU time the reading and scan
 matching leave, draws a small figure to load fonts and caches, and forks
-the map's drawer, which warms up the same way; then both wait for the
-estimate. :meth:`PlotWriter.submit` hands it over as soon as the numbers
-are final, the two figures are drawn at the same time while the parent
-writes the numeric results, and :meth:`PlotWriter.wait` returns once both
-PNGs are in the result folder (before the folder is renamed into place).
-The figures are the same bytes as drawn in the parent."""
+the trajectory's drawer, which warms up the same way; then both wait.
+:meth:`PlotWriter.submit` hands over the estimate as soon as it is final,
+and the trajectory is drawn while the parent makes the map's points;
+:meth:`PlotWriter.submit_points` hands those over, and the map is drawn
+while the parent evaluates and writes the numbers. :meth:`PlotWriter.wait`
+returns once both PNGs are in the result folder (before the folder is
+renamed into place). The figures are the same bytes as drawn in the
+parent."""
 
 from __future__ import annotations
 
@@ -66,42 +68,45 @@ def draw(figures: MapFigures) -> None:
 
 
 def _draw_when_given(inbox: Inbox, concurrent: bool) -> None:
-    """The plot process: import and warm up, fork the map's drawer (both
-    then warm up their own copy of matplotlib's state, so neither faults on
-    shared pages while drawing), wait for the figures, draw them at once."""
+    """The plot process: import and warm up, fork the trajectory's drawer
+    (both then warm up their own copy of matplotlib's state, so neither
+    faults on shared pages while drawing), pass it the figures as soon as
+    they come, and draw the map once its points follow."""
     niceness = os.nice(0)
     if concurrent:
         os.nice(IMPORT_NICENESS)
     import slam.plots  # while the parent works
 
     slam.plots.warm_up()
-    map_drawer = start_subforked("map figure", _draw_map_when_given, niceness) if concurrent else None
+    drawer = start_subforked("trajectory figure", _draw_trajectory_when_given, niceness) if concurrent else None
     slam.plots.warm_up()
     figures = inbox()
     try:
-        if map_drawer is not None:
-            map_drawer.send(figures)
-        if figures is not None:
+        if drawer is not None:
+            drawer.send(figures)
+        elif figures is not None:
+            draw_trajectory(figures)
+        points = inbox()
+        if figures is not None and points is not None:
             if concurrent:
                 _renice(niceness)
-            draw_trajectory(figures)
-            if map_drawer is None:
-                draw_map(figures)
-        if map_drawer is not None:
-            map_drawer.result()
+            figures.points = points
+            draw_map(figures)
+        if drawer is not None:
+            drawer.result()
     finally:
-        if map_drawer is not None:
-            map_drawer.close()
+        if drawer is not None:
+            drawer.close()
 
 
-def _draw_map_when_given(inbox: Inbox, niceness: int) -> None:
+def _draw_trajectory_when_given(inbox: Inbox, niceness: int) -> None:
     import slam.plots
 
     slam.plots.warm_up()
     figures = inbox()
     if figures is not None:
         _renice(niceness)
-        draw_map(figures)
+        draw_trajectory(figures)
 
 
 def start_subforked(what: str, fn: Callable[..., None], *args: Any) -> Subforked | None:
@@ -120,21 +125,30 @@ def _renice(niceness: int) -> None:
 
 class PlotWriter:
     """Draws one result's figures in a second process (and its child) when
-    ``concurrent``, else in this one, at :meth:`wait`."""
+    ``concurrent``, else in this one, at :meth:`wait`. :meth:`submit` the
+    figures, then :meth:`submit_points` the map's points: the trajectory is
+    drawn while the points are made."""
 
     def __init__(self, concurrent: bool = True):
         self.worker = start("plots", _draw_when_given, concurrent, concurrent=concurrent)
-        self.submitted = False
+        self.sent = 0  # messages sent: the figures, then the points
 
     def submit(self, figures: MapFigures | None) -> None:
         """What to draw (None: nothing); once."""
-        if not self.submitted:
+        if self.sent == 0:
             self.worker.send(figures)
-            self.submitted = True
+            self.sent = 1
+
+    def submit_points(self, points: np.ndarray | None) -> None:
+        """The map's points (None: no map figure); once, after :meth:`submit`."""
+        self.submit(None)
+        if self.sent == 1:
+            self.worker.send(points)
+            self.sent = 2
 
     def wait(self) -> None:
         """Return when the figures are written; raise what drawing raised."""
-        self.submit(None)
+        self.submit_points(None)
         self.worker.result()
 
     def close(self) -> None:
