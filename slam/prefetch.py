@@ -4,12 +4,15 @@ KISS-ICP is the largest part of mapping a run, and it needs nothing but the
 laser scans (and, with ``frontend.initial_guess: odometry``, the odometry).
 :class:`BackgroundScanMatching` starts a child process (see
 :mod:`slam.background`) before the run is read; the child imports KISS-ICP
-and waits. The reader hands it the scans as soon as they are decoded (a ROS
-bag's scan topic is read first), and the child registers them while the
-parent reads the other topics, imports the back-end and validation, and
-writes what does not depend on the estimate. :meth:`result` then waits for
-the poses. The poses are the same as :func:`slam.frontend.run_frontend`'s in
-the parent: the same code runs on the same scans.
+and waits. The reader hands over the scans as soon as they are decoded (a
+ROS bag's scan topic is read first): a thread here puts them through
+KISS-ICP's first half, which depends on each scan alone
+(:mod:`slam.scan_prep`), and feeds the child a chunk at a time as it takes
+them, while this process reads the other topics, imports the back-end and
+validation, and writes what does not depend on the estimate. The child
+registers them. :meth:`BackgroundScanMatching.result` then waits for the
+poses. They are the same as :func:`slam.frontend.run_frontend`'s in this
+process: KISS-ICP's own calls, in its order, on the same scans.
 """
 
 from __future__ import annotations
