@@ -46,11 +46,15 @@ def fault_shading(faults: Mapping[str, Sequence[Interval]]) -> list[Shade]:
 
 
 def save_figure(fig: Figure, path: str | Path) -> None:
-    """Write ``fig`` to ``path`` (format from the suffix) atomically."""
+    """Write ``fig`` to ``path`` as a PNG, atomically."""
     with atomic_path(path) as tmp:
-        # zlib level 1: the same pixels, written in a fraction of the time.
-        fig.savefig(tmp, dpi=DPI, bbox_inches="tight", pil_kwargs={"compress_level": 1})
+        _render_png(fig, tmp)
     logger.debug("wrote figure %s", path)
+
+
+def _render_png(fig: Figure, target) -> None:
+    # zlib level 1: the same pixels, written in a fraction of the time.
+    fig.savefig(target, format="png", dpi=DPI, bbox_inches="tight", pil_kwargs={"compress_level": 1})
 
 
 def warm_up() -> None:
@@ -63,7 +67,7 @@ def warm_up() -> None:
     fig, ax = _new_axes("warm-up")
     ax.plot([0.0, 1.0], [0.0, 1.0], label="a")
     ax.legend(loc="best", fontsize="small")
-    fig.savefig(io.BytesIO(), format="png", dpi=DPI, bbox_inches="tight", pil_kwargs={"compress_level": 1})
+    _render_png(fig, io.BytesIO())
 
 
 def _new_axes(title: str) -> tuple[Figure, Axes]:

@@ -61,12 +61,6 @@ def draw_map(figures: MapFigures) -> None:
         plot_map(f.folder / "map.png", f.points, f.estimate, title=f"{f.name}: laser map")
 
 
-def draw(figures: MapFigures) -> None:
-    """``trajectory.png`` and, with points, ``map.png`` in ``figures.folder``."""
-    draw_trajectory(figures)
-    draw_map(figures)
-
-
 def _draw_when_given(inbox: Inbox, concurrent: bool) -> None:
     """The plot process: import and warm up, fork the trajectory's drawer
     (both then warm up their own copy of matplotlib's state, so neither

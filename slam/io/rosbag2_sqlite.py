@@ -51,10 +51,10 @@ class Topic:
 class PlainBag:
     """An open plain bag (see :func:`open_plain`); close it after use."""
 
-    def __init__(self, db: Path, topics: dict[str, Topic]):
+    def __init__(self, db: Path, conn: sqlite3.Connection, topics: dict[str, Topic]):
         self.db = db
         self.topics = topics
-        self._conn = sqlite3.connect(f"{db.resolve().as_uri()}?mode=ro", uri=True)
+        self._conn = conn
 
     def raw(self, topic: str) -> list[bytes]:
         """The CDR bytes of every message on ``topic``, in rosbags' order."""
@@ -91,18 +91,28 @@ def _open_plain(path: Path) -> PlainBag | None:
         return None
     conn = sqlite3.connect(f"{db.resolve().as_uri()}?mode=ro", uri=True)
     try:
-        columns = {row[1] for row in conn.execute("PRAGMA table_info(topics)")}
-        if "type_description_hash" not in columns:
-            return None
-        rows = conn.execute("SELECT id, name, type, serialization_format, type_description_hash FROM topics").fetchall()
-    finally:
+        topics = _standard_topics(conn)
+    except BaseException:
         conn.close()
+        raise
+    if topics is None:
+        conn.close()
+        return None
+    return PlainBag(db, conn, topics)
+
+
+def _standard_topics(conn: sqlite3.Connection) -> dict[str, Topic] | None:
+    """The topics of the bag open on ``conn`` that carry a standard
+    definition, or None when rosbags must read the bag."""
+    columns = {row[1] for row in conn.execute("PRAGMA table_info(topics)")}
+    if "type_description_hash" not in columns:
+        return None
+    rows = conn.execute("SELECT id, name, type, serialization_format, type_description_hash FROM topics").fetchall()
     names = [row[1] for row in rows]
     if len(set(names)) != len(names):  # a topic with two types or connections: rosbags sorts that out
         return None
-    topics = {
+    return {
         name: Topic(int(topic_id), msgtype)
         for topic_id, name, msgtype, fmt, type_hash in rows
         if fmt == "cdr" and STANDARD_HASHES.get(msgtype) == type_hash
     }
-    return PlainBag(db, topics)
