@@ -91,12 +91,16 @@ def _interval_mask(t: np.ndarray, intervals: Sequence[Interval]) -> np.ndarray:
 
 def _draw_shaded(ax: Axes, base: Trajectory, shaded: Sequence[Shade]) -> None:
     """Overlay the parts of ``base`` inside each labelled set of intervals
-    as a broad translucent band, broken where the mask is False."""
+    as a broad translucent band, broken where the mask is False (from the
+    first pose inside to the last: matplotlib walks a line's leading NaNs
+    one by one in Python)."""
     for n, (label, intervals, *color) in enumerate(shaded):
         mask = _interval_mask(base.t, intervals)
+        inside = np.flatnonzero(mask)
+        span = slice(inside[0], inside[-1] + 1) if len(inside) else slice(0, 0)
         ax.plot(
-            np.where(mask, base.x, np.nan),
-            np.where(mask, base.y, np.nan),
+            np.where(mask, base.x, np.nan)[span],
+            np.where(mask, base.y, np.nan)[span],
             color=color[0] if color else _SHADE_COLORS[n % len(_SHADE_COLORS)],
             linewidth=9,
             alpha=0.45,

@@ -162,6 +162,18 @@ def test_absent_stream_makes_no_observation():
     assert log.observations(100)[YAW_RELATION.name] is Observation.MATCH
 
 
+def test_patterns_give_every_steps_observations():
+    """Diagnosis runs once per distinct pattern: the patterns and the index
+    must give back each step's observations, with and without data."""
+    sc = yaw_scenario(duration_s=120.0, compass_drift=(40.0, 70.0), seed=3)
+    log = run_observers(sc.streams, [YAW_RELATION, DEFAULT_RELATIONS[-1]], sc.step_t, rule="project")
+    patterns, index = log.patterns()
+    assert len(index) == len(sc.step_t)
+    assert len(patterns) == len({frozenset(p.items()) for p in patterns}) >= 3  # no data, match, no_match
+    for k in range(len(sc.step_t)):
+        assert patterns[index[k]] == log.observations(k)
+
+
 def test_gap_in_a_stream_invalidates_its_steps():
     sc = yaw_scenario(duration_s=40.0, compass_drift=None)
     c = sc.streams["compass_yaw"]

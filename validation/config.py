@@ -33,7 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from validation.gating import GatingConfig, check_components
 from validation.model import SystemModel, validate_mapping
-from validation.observers import ObserversConfig, observers_config
+from validation.observer_config import ObserversConfig, observers_config
 from validation.trends import Window
 from validation.yamlio import load_yaml
 

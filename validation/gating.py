@@ -30,14 +30,16 @@ import logging
 import math
 from collections.abc import Mapping, Sequence
 from enum import Enum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from validation.diagnosis import DiagnosisResult
 from validation.errors import ValidationError
 from validation.model import SystemModel, validate_mapping
+
+if TYPE_CHECKING:  # the solver behind the diagnosis loads once there is one to make
+    from validation.diagnosis import DiagnosisResult
 
 log = logging.getLogger(__name__)
 

@@ -72,6 +72,28 @@ class ObserverLog:
                 out[name] = p
         return out
 
+    def patterns(self) -> tuple[list[dict[str, Observation | Plausibility]], np.ndarray]:
+        """The distinct observations over the steps, as :meth:`observations`
+        gives them, and each step's index into that list: a run has a few
+        dozen patterns over thousands of steps, and each is diagnosed once."""
+        names: list[str] = []
+        values: list[tuple[Observation, Observation] | tuple[Plausibility, Plausibility]] = []
+        codes: list[np.ndarray] = []  # 0: no data, 1: the first value, 2: the second
+        for name, r in self.relations.items():
+            names.append(name)
+            values.append((Observation.MATCH, Observation.NO_MATCH))
+            codes.append(np.where(r.valid, np.where(r.no_match, 2, 1), 0))
+        for name, u in self.unary.items():
+            names.append(name)
+            values.append((Plausibility.PLAUSIBLE, Plausibility.IMPLAUSIBLE))
+            codes.append(np.where(u.valid, np.where(u.implausible, 2, 1), 0))
+        if not codes:
+            return [{}], np.zeros(len(self.t), dtype=np.intp)
+        table = np.stack(codes, axis=1).astype(np.int8)
+        unique, index = np.unique(table, axis=0, return_inverse=True)
+        patterns = [{n: v[c - 1] for n, v, c in zip(names, values, row) if c} for row in unique.tolist()]
+        return patterns, index.reshape(-1)
+
     def columns(self) -> dict[str, np.ndarray]:
         """Flat named columns (for the per-step CSV log)."""
         cols: dict[str, np.ndarray] = {"t": self.t}

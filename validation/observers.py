@@ -116,11 +116,16 @@ def observe(
         counter = s - np.minimum.accumulate(np.minimum(s, 0)) if len(s) else s
     else:
         # Reflected at both ends: no simple closed form, and one pass is cheap.
-        counter = np.empty(len(step), dtype=np.int64)
+        counts = []
         c = 0
-        for k, x in enumerate(step.tolist()):
-            c = min(max_counter, max(0, c + x))
-            counter[k] = c
+        for x in step.tolist():
+            c += x
+            if c < 0:
+                c = 0
+            elif c > max_counter:
+                c = max_counter
+            counts.append(c)
+        counter = np.array(counts, dtype=np.int64)
     return counter, valid & (counter > threshold)
 
 

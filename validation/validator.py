@@ -188,7 +188,9 @@ def run_validation(
         warn_low_coverage(coverage, obs.min_coverage)
         require_observations(coverage)
         diagnoser = Diagnoser(config.model)
-        results = [diagnoser.diagnose(observer_log.observations(k)) for k in range(len(step_t))]
+        patterns, index = observer_log.patterns()
+        diagnosed = [diagnoser.diagnose(p) for p in patterns]
+        results = [diagnosed[i] for i in index]
         if config.offline:
             actions = offline_actions(gating, results)
         else:
