@@ -354,6 +354,9 @@ def main(argv: list[str] | None = None) -> int:
     except (GslamError, ValidationError) as e:
         print(f"gslam: error: {_one_line(str(e))}", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # the reader left (gslam inspect ... | head): no more to say
+        sys.stdout = open(os.devnull, "w")  # the interpreter's last flush must not fail either
+        return 141  # as if killed by SIGPIPE, what a shell reports for the other commands of a pipe
     except OSError as e:  # the machine, not the input: a full disk, a vanished folder
         where = f"{e.filename}: " if e.filename else ""
         print(f"gslam: error: {where}{e.strerror or e}", file=sys.stderr)

@@ -306,3 +306,15 @@ def test_entry_point_maps_and_fails_cleanly(short_run, tmp_path):
     assert bad.returncode == 1 and bad.stdout == ""
     assert bad.stderr == "gslam: error: --set backend.foo=1: unknown config key 'backend.foo'\n"
     assert not (tmp_path / "x").exists()
+
+
+def test_a_reader_that_leaves_early_gets_no_error(short_run):
+    """``gslam inspect RUN | head -1``: the pipe closes before gslam writes."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "slam.cli", "inspect", str(short_run.run_dir)],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )
+    proc.stdout.close()  # long before the interpreter has imported anything
+    stderr = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141
+    assert stderr == ""
