@@ -65,10 +65,15 @@ def _blamed(
         return {m for c in comps for m in expand.get(c, (c,))}
 
     if results is not None:
-        top = [parts(r.diagnoses[0]) if r.consistent else set() for r in results]
-        union = [parts(set().union(*r.diagnoses)) if r.consistent else set() for r in results]
-        alarm = np.array([(not r.consistent) or bool(r.diagnoses[0]) for r in results], dtype=bool)
-        return top, union, alarm
+        # Steps with the same observations share one result: each is read once.
+        seen: dict[int, tuple[set[str], set[str], bool]] = {}
+        for r in results:
+            if id(r) not in seen:
+                ok = r.consistent
+                seen[id(r)] = (parts(r.diagnoses[0]) if ok else set(), parts(set().union(*r.diagnoses)) if ok else set(),
+                               (not ok) or bool(r.diagnoses[0]))
+        read = [seen[id(r)] for r in results]
+        return [x[0] for x in read], [x[1] for x in read], np.array([x[2] for x in read], dtype=bool)
     gated = [parts(c for c, a in act.items() if a is not GatingAction.INCLUDE) for act in actions]
     return gated, gated, np.array([bool(c) for c in gated], dtype=bool)
 
@@ -115,11 +120,12 @@ def validation_metrics(
     for comp, intervals in faults.items():
         found, ends = [], []
         comp_blamed = np.array([comp in u for u in blamed], dtype=bool)
+        comp_suspected = np.array([comp in u for u in union], dtype=bool)
         starts = sorted(a for a, _ in intervals)
         for a, b in intervals:
             next_start = min((s for s in starts if s > b), default=np.inf)
-            hits = [t for t, u in zip(step_t, union) if a <= t <= b and comp in u]
-            if hits:
+            hits = step_t[(step_t >= a) & (step_t <= b) & comp_suspected]
+            if len(hits):
                 found.append(hits[0] - a)
                 detected += 1
                 lag = _blame_end_lag(step_t, comp_blamed, a, b, next_start)

@@ -89,7 +89,8 @@ class ValidationOutcome:
         out = io.StringIO()
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(cols)
-        writer.writerows(zip(*cols.values()))
+        # Python's numbers print as numpy's do, several times faster.
+        writer.writerows(zip(*(c.tolist() if isinstance(c, np.ndarray) else c for c in cols.values())))
         return out.getvalue()
 
 
