@@ -68,12 +68,14 @@ def _blamed(
         # Steps with the same observations share one result: each is read once.
         seen: dict[int, tuple[set[str], set[str], bool]] = {}
         for r in results:
-            if id(r) not in seen:
-                ok = r.consistent
-                seen[id(r)] = (parts(r.diagnoses[0]) if ok else set(), parts(set().union(*r.diagnoses)) if ok else set(),
-                               (not ok) or bool(r.diagnoses[0]))
-        read = [seen[id(r)] for r in results]
-        return [x[0] for x in read], [x[1] for x in read], np.array([x[2] for x in read], dtype=bool)
+            if id(r) in seen:
+                continue
+            if r.consistent:
+                seen[id(r)] = (parts(r.diagnoses[0]), parts(set().union(*r.diagnoses)), bool(r.diagnoses[0]))
+            else:
+                seen[id(r)] = (set(), set(), True)
+        top, union, alarm = zip(*(seen[id(r)] for r in results)) if results else ((), (), ())
+        return list(top), list(union), np.array(alarm, dtype=bool)
     gated = [parts(c for c, a in act.items() if a is not GatingAction.INCLUDE) for act in actions]
     return gated, gated, np.array([bool(c) for c in gated], dtype=bool)
 
