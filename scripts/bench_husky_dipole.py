@@ -3,13 +3,14 @@ found, and does the validator stay quiet elsewhere?
 
     python scripts/bench_husky_dipole.py [--data DIR] [--config configs/datasets/husky.yaml]
                                          [--out runs/bench_husky_dipole]
+                                         [--faults DIPOLE ...] [--sets NAME ...] [--passes PASS ...]
 
 The bag's compass is the IMU's orientation estimate, so a dipole is
 injected as the heading error it causes (``dipole@T0:T1,target=heading``,
 500 A m^2 two metres beside the path: :mod:`slam.inject.physics`), twice,
 over ``DIPOLES``. For each observer set of ``SETS`` (the config's trend
-relations, and the same with an offset, a cusum or a residual relation of
-compass against gyro), each validation pass and each way of learning of
+relations, the same with an offset, a cusum or a residual relation of
+compass against gyro, and the config as shipped), each validation pass and each way of learning of
 ``LEARNING``, the observers are calibrated on the *original* bag and the
 injected bag is mapped with them, gating on. The ways of learning:
 
@@ -29,7 +30,9 @@ than ``CLEAN_ERROR_DEG`` (the compass as recorded; the dipole's approach,
 off by 1-5 degrees, is neither a labelled fault nor clean). "Compass":
 steps whose most probable diagnosis blames IMU_YAW (the one sensor whose
 truth is known); "any": steps blaming any sensor or with no diagnosis.
-Writes ``husky_dipole.md`` and ``husky_dipole.csv``.
+Writes ``husky_dipole.md`` and ``husky_dipole.csv``. ``--faults`` injects
+other dipoles (``gslam inject`` syntax) to choose a config on without
+touching the reported ones; ``--sets`` and ``--passes`` run a subset.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -77,7 +81,19 @@ SETS = {
                        "max_counter": 22}],
     "trend + residual": [{"name": "yaw_compass_gyro_res", "kind": "residual", **COMPASS_GYRO, "threshold": 2,
                           "max_counter": 22}],
+    "shipped": None,
 }
+
+
+def trend_config(config_path: Path, folder: Path) -> Path:
+    """The config with its trend relations only (the base the sets add to)."""
+    tree = yaml.safe_load(config_path.read_text())
+    tree["validation"]["model"] = str((config_path.parent / tree["validation"]["model"]).resolve())
+    rels = tree["validation"]["observers"]["relations"]
+    tree["validation"]["observers"]["relations"] = [r for r in rels if r.get("kind", "trend") == "trend"]
+    out = folder / "trend_only.yaml"
+    out.write_text(yaml.safe_dump(tree, sort_keys=False))
+    return out
 
 
 def learning_steps(t: np.ndarray, how: str) -> tuple[np.ndarray, bool, np.ndarray]:
@@ -118,6 +134,9 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=None)
     ap.add_argument("--config", type=Path, default=ROOT / "configs/datasets/husky.yaml")
     ap.add_argument("--out", type=Path, default=ROOT / "runs/bench_husky_dipole")
+    ap.add_argument("--faults", nargs="+", default=[f"dipole@{a:g}:{b:g},target=heading" for a, b in DIPOLES])
+    ap.add_argument("--sets", nargs="+", choices=list(SETS), default=list(SETS))
+    ap.add_argument("--passes", nargs="+", choices=PASSES, default=list(PASSES))
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     for noisy in ("slam", "validation"):
@@ -129,19 +148,21 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         input_config = load_config(args.config).input
-        faults = [f"dipole@{a:g}:{b:g},target=heading" for a, b in DIPOLES]
-        injected = inject(bag, faults, tmp / "husky_dipole", config=input_config)
+        injected = inject(bag, args.faults, tmp / "husky_dipole", config=input_config)
         labels = injected.faults.get("IMU_YAW", [])
         error = None
-        for pass_ in PASSES:
+        for pass_ in args.passes:
             over = [f"validation.pass={pass_}"]
-            bases = {name: base_config(args.config, added, tmp) for name, added in SETS.items()}
+            trend = trend_config(args.config, tmp)
+            bases = {name: args.config if SETS[name] is None else base_config(trend, SETS[name], tmp)
+                     for name in ["trend", *args.sets]}
             first = load_config(bases["trend"], over)
             whole = load_run(bag, first, validation_sections(first)[0], None)
             for how in LEARNING:
                 learnt, declared, judged = learning_steps(whole.steps.t, how)
                 run = dataclasses.replace(whole, clean=learnt, declared=declared)
-                for name, base in bases.items():
+                for name in args.sets:
+                    base = bases[name]
                     config = load_config(base, over)
                     learnt_path = tmp / f"cal_{len(rows)}.yaml"
                     learnt_path.write_text(learn([run], config).text)

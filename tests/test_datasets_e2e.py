@@ -59,9 +59,11 @@ def test_husky_bag_gated(tmp_path):
     m = gslam_map(tmp_path, "rosbag/test1_husky_2015.bag", "husky.yaml", "on")
     assert m["n_poses"] == 719
     assert m["factor_counts"]["odometry"] == 718 and m["factor_counts"]["gyro"] >= 700
-    assert 0 < m["factor_counts"]["compass"] < 718  # some excluded by gating
-    # The compass drifts off the GPS course at 195-205 s: some alarms, not many.
-    assert 0.0 < m["alarm_fraction"] < 0.2
+    # The shipped observers, learnt on the first 180 s, stand above the
+    # compass's slow drift at 195-205 s: no compass excluded (README, "Husky
+    # bag"); the other relations alarm on a few per cent of the steps.
+    assert m["factor_counts"]["compass"] == 718
+    assert 0.0 < m["alarm_fraction"] < 0.1
 
 
 def test_broad_attached_magnet_gating_restores_the_heading(tmp_path):

@@ -122,7 +122,7 @@ def test_validation_streams_from_recording():
     s = validation_streams(rec, sm)
     assert set(s) == {
         "gyro_yaw", "odo_yaw", "odo_distance", "odo_forward", "odo_lateral", "odo_speed",
-        "sm_yaw", "sm_distance", "sm_forward", "sm_lateral", "gps_speed", "gps_sigma",
+        "sm_yaw", "sm_distance", "sm_forward", "sm_lateral", "gps_speed", "gps_sigma", "odo_fix_speed",
     }
     np.testing.assert_allclose(s["gyro_yaw"].values, 0.1 * rec.gyro.t, atol=1e-12)
     np.testing.assert_allclose(s["odo_distance"].values, 0.5 * rec.odometry.t, atol=1e-12)
@@ -135,6 +135,26 @@ def test_validation_streams_from_recording():
     np.testing.assert_allclose(s["odo_lateral"].values[-1], -np.sin(0.2) * 5.0, atol=1e-9)
     np.testing.assert_allclose(s["odo_forward"].values[-1], np.cos(0.2) * 5.0, atol=1e-9)
     assert s["odo_yaw"].angular and not s["odo_distance"].angular
+
+
+def test_odometry_speed_derived_as_gps_speed_lags_alike():
+    # The robot drives at 1 m/s and stops at 20 s; GPS and odometry see the
+    # same path. GPS speed over a trailing 8 s window reports the stop
+    # seconds late, the odometry's derivative at once, the odometry's speed
+    # through the GPS's regression exactly as late as the GPS.
+    t = np.arange(0.0, 40.001, 0.1)
+    x = np.minimum(t, 20.0)
+    odo = Trajectory(t, x, np.zeros_like(t), np.zeros_like(t))
+    tg = t[::4]
+    gps = Gps(tg, x[::4], np.zeros_like(tg), np.ones_like(tg), np.zeros(len(tg), int))
+    s = validation_streams(Recording("stop", odometry=odo, gps=gps), gps_speed_window_s=8.0, window="trailing")
+    at = lambda name, when: float(np.interp(when, s[name].t, s[name].values))  # noqa: E731
+    assert at("odo_speed", 22.0) == pytest.approx(0.0, abs=1e-9)
+    assert at("gps_speed", 22.0) > 0.5
+    for when in (10.0, 21.0, 22.0, 24.0, 26.0, 30.0):
+        assert at("odo_fix_speed", when) == pytest.approx(at("gps_speed", when), abs=0.02)
+    centred = validation_streams(Recording("stop", odometry=odo, gps=gps), gps_speed_window_s=8.0, window="centred")
+    assert float(np.interp(18.0, centred["odo_fix_speed"].t, centred["odo_fix_speed"].values)) < 0.95
 
 
 def test_resample_validity_and_angles():

@@ -19,6 +19,8 @@ sm_lateral     SM_LAT    the same from scan matching, m
 odo_speed      ODO_DIST  derivative of odo_distance, m/s
 gps_speed      GPS       speed from the slope of the fixes' x and y over a
                          window, m/s
+odo_fix_speed  ODO_DIST  the odometry's speed derived as gps_speed is: the
+                         slope of its x and y over the same window, m/s
 ============== ========= ===================================================
 
 The sensors come in as any object with the attributes of
@@ -56,7 +58,7 @@ logger = logging.getLogger(__name__)
 
 StreamName = Literal[
     "compass_yaw", "gyro_yaw", "sm_yaw", "odo_yaw", "odo_distance", "sm_distance",
-    "odo_forward", "sm_forward", "odo_lateral", "sm_lateral", "odo_speed", "gps_speed",
+    "odo_forward", "sm_forward", "odo_lateral", "sm_lateral", "odo_speed", "gps_speed", "odo_fix_speed",
 ]
 QualityStreamName = Literal[
     "mag_strength", "mag_dip", "mag_field_change", "gps_sigma",
@@ -76,6 +78,7 @@ STREAM_COMPONENT: dict[str, str] = {
     "sm_lateral": "SM_LAT",
     "odo_speed": "ODO_DIST",
     "gps_speed": "GPS",
+    "odo_fix_speed": "ODO_DIST",
     "mag_strength": "IMU_YAW",
     "mag_dip": "IMU_YAW",
     "mag_field_change": "IMU_YAW",
@@ -194,6 +197,11 @@ def _trajectory_streams(prefix: str, traj: PoseSeries, streams: dict[str, Stream
     streams[f"{prefix}_lateral"] = _clean(f"{prefix}_lateral", traj.t, lateral_travel(traj.x, traj.y, traj.yaw))
 
 
+def _window_speed(x: Stream, y: Stream, window_s: float, window: Window) -> np.ndarray:
+    """Norm of the regression slopes (Algorithm 2) of ``x`` and ``y`` over ``window_s``."""
+    return np.hypot(derive_stream(x.t, x.values, window_s, window), derive_stream(y.t, y.values, window_s, window))
+
+
 def validation_streams(
     recording: SensorSet,
     sm: PoseSeries | None = None,
@@ -208,7 +216,10 @@ def validation_streams(
     GPS speed is the norm of the regression slopes (Algorithm 2) of x and y
     over ``gps_speed_window_s``, ``window`` centred or trailing: differences
     of single fixes carry the fixes' metre-level noise divided by 0.2 s, far
-    above a robot's speed.
+    above a robot's speed. ``odo_fix_speed`` is the odometry's speed through
+    the same regression over the same window: compared with it, GPS speed
+    is compared with a speed that lags and smooths alike (a trailing 8 s
+    window reports a stop seconds late; a derivative of the odometry at once).
     """
     streams: dict[str, Stream] = {}
     if recording.compass is not None:
@@ -234,15 +245,17 @@ def validation_streams(
         _trajectory_streams("odo", recording.odometry, streams)
         d = streams["odo_distance"]
         streams["odo_speed"] = Stream(d.t, _gradient(d.t, d.values))
+        o = recording.odometry
+        x, y = _clean("odo_x", o.t, o.x), _clean("odo_y", o.t, o.y)
+        if len(x.t) == len(y.t) and len(x.t) >= 2:
+            streams["odo_fix_speed"] = Stream(x.t, _window_speed(x, y, gps_speed_window_s, window))
     if recording.gps is not None:
         gps = recording.gps
         fix = np.asarray(gps.status) >= 0
         x = _clean("gps_x", gps.t[fix], gps.x[fix])
         y = _clean("gps_y", gps.t[fix], gps.y[fix])
         if len(x.t) == len(y.t) and len(x.t) >= 2:
-            vx = derive_stream(x.t, x.values, gps_speed_window_s, window)
-            vy = derive_stream(y.t, y.values, gps_speed_window_s, window)
-            streams["gps_speed"] = Stream(x.t, np.hypot(vx, vy))
+            streams["gps_speed"] = Stream(x.t, _window_speed(x, y, gps_speed_window_s, window))
         streams["gps_sigma"] = _clean("gps_sigma", gps.t[fix], gps.sigma[fix])
     logger.info("validation streams: %s", ", ".join(sorted(streams)))
     return streams
