@@ -89,8 +89,10 @@ class ObserverLog:
             codes.append(np.where(u.valid, np.where(u.implausible, 2, 1), 0))
         if not codes:
             return [{}], np.zeros(len(self.t), dtype=np.intp)
-        table = np.stack(codes, axis=1).astype(np.int8)
-        unique, index = np.unique(table, axis=0, return_inverse=True)
+        table = np.ascontiguousarray(np.stack(codes, axis=1), dtype=np.int8)
+        rows = table.view(np.dtype((np.void, table.shape[1]))).ravel()  # a row as one value: a quick unique
+        unique, index = np.unique(rows, return_inverse=True)
+        unique = unique.view(np.int8).reshape(-1, table.shape[1])
         patterns = [{n: v[c - 1] for n, v, c in zip(names, values, row) if c} for row in unique.tolist()]
         return patterns, index.reshape(-1)
 

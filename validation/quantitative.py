@@ -163,16 +163,21 @@ def _robust_line(x: np.ndarray, y: np.ndarray, tolerance: float) -> float:
     of it: started from the window's median, refitted on the points that
     agree (three times, so a slow drift brings the window's ends back in);
     the median where too few agree."""
-    offset, slope = float(np.median(y)), 0.0
+    median = float(np.median(y))
+    offset, slope, fitted_on = median, 0.0, None
     for _ in range(3):
         near = np.abs(y - (offset + slope * x)) <= tolerance
-        if near.sum() < max(3, len(x) // 10):
-            return float(np.median(y))
+        n = int(np.count_nonzero(near))
+        if n < max(3, len(x) // 10):
+            return median
+        if fitted_on is not None and np.array_equal(near, fitted_on):
+            break  # the same points give the same line
         xs, ys = x[near], y[near]
-        xm, ym = xs.mean(), ys.mean()
+        xm, ym = xs.sum() / n, ys.sum() / n
         var = float(((xs - xm) ** 2).sum())
         slope = float(((xs - xm) * (ys - ym)).sum()) / var if var > 0 else 0.0
         offset = ym - slope * xm
+        fitted_on = near
     return float(offset)
 
 
