@@ -13,7 +13,9 @@ from recorded runs instead of typed in by hand.
    field-gyro checks get their tolerances the same way.
 3. Streams of different sensors whose rates correlate and which no
    relation compares yet are proposed as new relations
-   (:mod:`slam.calibrate.propose`).
+   (:mod:`slam.calibrate.propose`); yaw streams stamped early or late
+   against the gyro get a proposed ``input.time_offsets_s``
+   (:mod:`slam.calibrate.lags`).
 4. The result is the input config with the learnt observers and the
    measured figures as comments (:mod:`slam.calibrate.write`), for the
    pass (offline or causal) the config names. Learnt on some runs, it is
@@ -27,6 +29,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from slam.calibrate.lags import LagEstimate, learn_lags
 from slam.calibrate.propose import Proposal, propose
 from slam.calibrate.runs import CalibrationRun, load_run, parse_clean
 from slam.calibrate.select import (CheckChoice, Choice, FieldGyroChoice, calibrate_field_gyro, calibrate_magnetometer,
@@ -56,6 +59,7 @@ class CalibrationResult:
     proposals: list[Proposal]
     target_per_observer: float
     text: str
+    lags: list[LagEstimate]
 
 
 def calibrate(
@@ -67,12 +71,14 @@ def calibrate(
     force: bool = False,
     progress: bool = False,
     overrides: Sequence[str] = (),
+    lag_reference: str = "gyro",
 ) -> CalibrationResult:
     """Learn the observers of ``config_path`` from ``runs`` (module
     docstring) and write the calibrated config to ``out`` (a new file, an
     earlier calibrate result, or any file with ``force``). ``clean``:
     ``START:END`` seconds of every run declared clean; None learns from
-    whole runs with robust statistics."""
+    whole runs with robust statistics. ``lag_reference``: the stream the
+    others' time offsets are measured against."""
     if not runs:
         raise GslamError("gslam calibrate: no run given")
     if not 0.0 < false_alarm < 1.0:
@@ -86,14 +92,14 @@ def calibrate(
     loaded: list[CalibrationRun] = [load_run(r, config, vcfg, stretch, progress) for r in runs]
     header = [f"Learnt from {len(runs)} run{'s' if len(runs) > 1 else ''} ({', '.join(Path(r).name for r in runs)}) "
               f"{_learnt_from(stretch)}, starting from {Path(config_path).name}."]
-    res = learn(loaded, config, false_alarm, header)
+    res = learn(loaded, config, false_alarm, header, lag_reference)
     write_text(out, res.text)
     res.out = Path(out)
     return res
 
 
 def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm: float = DEFAULT_FALSE_ALARM,
-          header: Sequence[str] = ()) -> CalibrationResult:
+          header: Sequence[str] = (), lag_reference: str = "gyro") -> CalibrationResult:
     """Steps 2-4 of the module docstring on runs already loaded
     (:func:`slam.calibrate.runs.load_run`); the text is not written
     (``out`` is None)."""
@@ -118,9 +124,15 @@ def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm:
     mag = calibrate_magnetometer(loaded, vcfg.observers.magnetometer, target) if has_mag else None
     field = calibrate_field_gyro(loaded, vcfg.observers.field_gyro, target) if has_field else None
     proposals = propose(loaded, relations, vcfg.model, vcfg, target)
+    lags = learn_lags(loaded, lag_reference)
+    for lag in lags:
+        log.info("time offset of %s against %s: %+.3f s (RMS of the rate difference %.3g -> %.3g rad/s, "
+                 "correlation %.2f, halves %+.3f / %+.3f s)%s", lag.stream, lag.reference, lag.offset_s,
+                 lag.rms_before, lag.rms_after, lag.correlation, *lag.halves_s,
+                 ": proposed" if lag.proposed else f": not proposed, {lag.why_not()}")
     header = [*header, *_header(false_alarm, target, observers, vcfg.offline)]
-    text = calibrated_config(config, choices, mag, field, proposals, header, target, len(loaded))
-    return CalibrationResult(None, choices, mag, field, proposals, target, text)
+    text = calibrated_config(config, choices, mag, field, proposals, header, target, len(loaded), lags)
+    return CalibrationResult(None, choices, mag, field, proposals, target, text, lags)
 
 
 def _learnt_from(stretch) -> str:
