@@ -13,9 +13,11 @@ from recorded runs instead of typed in by hand.
    field-gyro checks get their tolerances the same way.
 3. Streams of different sensors whose rates correlate and which no
    relation compares yet are proposed as new relations
-   (:mod:`slam.calibrate.propose`); yaw streams stamped early or late
-   against the gyro get a proposed ``input.time_offsets_s``
-   (:mod:`slam.calibrate.lags`).
+   (:mod:`slam.calibrate.propose`). Yaw streams stamped early or late
+   against the gyro are found (:mod:`slam.calibrate.lags`); ``gslam
+   calibrate`` adds the clear offsets to ``input.time_offsets_s``, reads
+   the runs again with them and learns steps 2-3 anew, so the relations
+   are learnt on streams as the model's config will read them.
 4. The result is the input config with the learnt observers and the
    measured figures as comments (:mod:`slam.calibrate.write`), for the
    pass (offline or causal) the config names. Learnt on some runs, it is
@@ -26,7 +28,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from slam.calibrate.lags import LagEstimate, learn_lags
@@ -60,6 +62,8 @@ class CalibrationResult:
     target_per_observer: float
     text: str
     lags: list[LagEstimate]
+    applied: list[LagEstimate] = field(default_factory=list)
+    """The first pass's estimates when their clear offsets were added to the config and the runs learnt again."""
 
 
 def calibrate(
@@ -93,6 +97,19 @@ def calibrate(
     header = [f"Learnt from {len(runs)} run{'s' if len(runs) > 1 else ''} ({', '.join(Path(r).name for r in runs)}) "
               f"{_learnt_from(stretch)}, starting from {Path(config_path).name}."]
     res = learn(loaded, config, false_alarm, header, lag_reference)
+    moved = {lag.stream: round(getattr(config.input.time_offsets_s, lag.stream) + lag.offset_s, 3)
+             for lag in res.lags if lag.proposed}
+    if moved:
+        first = res.lags
+        overrides = [*overrides, *(f"input.time_offsets_s.{name}={value}" for name, value in moved.items())]
+        config = load_config(config_path, overrides)
+        loaded = [load_run(r, config, vcfg, stretch, progress) for r in runs]
+        header.append("Time offsets found in a first pass and added to input.time_offsets_s, the relations "
+                      "learnt with them: " + "; ".join(
+                          f"{lag.stream} {lag.offset_s:+.3f} s (RMS of its yaw rate's difference to the {lag.reference}'s "
+                          f"{-100 * lag.gain:+.0f} %)" for lag in first if lag.proposed) + ".")
+        res = learn(loaded, config, false_alarm, header, lag_reference)
+        res.applied = [lag for lag in first if lag.proposed]
     write_text(out, res.text)
     res.out = Path(out)
     return res

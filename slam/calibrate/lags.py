@@ -87,7 +87,7 @@ class LagEstimate:
             return (f"the halves disagree ({self.halves_s[0]:+.3f} s and {self.halves_s[1]:+.3f} s, "
                     f"more than one step of {self.grid_s:.3g} s)")
         if self.gain <= MIN_GAIN:
-            return f"the RMS falls by {100 * self.gain:.0f} % only (<= {100 * MIN_GAIN:.0f} %)"
+            return f"the RMS changes by {-100 * self.gain:+.0f} % (a fall of more than {100 * MIN_GAIN:.0f} % is needed)"
         return ""
 
 
@@ -152,9 +152,11 @@ def learn_lags(runs: Sequence[CalibrationRun], reference: str = "gyro") -> list[
     """The offset of every yaw stream against ``reference`` (an
     ``input.time_offsets_s`` key of a yaw stream) over the learning steps
     of the first run that has both (the config holds one offset per
-    stream)."""
+    stream). ``reference`` ``none``: none measured."""
+    if reference == "none":
+        return []
     if reference not in YAW_STREAMS:
-        raise GslamError(f"--lag-reference {reference}: expected one of {', '.join(YAW_STREAMS)}")
+        raise GslamError(f"--lag-reference {reference}: expected one of {', '.join(YAW_STREAMS)} or none")
     found: list[LagEstimate] = []
     for name, stream_name in YAW_STREAMS.items():
         if name == reference:

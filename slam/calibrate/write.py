@@ -1,7 +1,7 @@
 """The calibrated config as YAML: the input config, every default spelled
-out, with its observers replaced by the learnt ones, the proposed time
-offsets in ``input.time_offsets_s``, and the measured figures beside each
-as comments. ``gslam map OTHER --config MODEL.yaml``
+out, with its observers replaced by the learnt ones and the measured
+figures beside each as comments, the streams' time offsets measured
+against the gyro among them. ``gslam map OTHER --config MODEL.yaml``
 uses it as it is; :func:`slam.config.load_config` reads it back."""
 
 from __future__ import annotations
@@ -88,10 +88,6 @@ def calibrated_config(
     validation["observers"] = observers
     sections = config.model_dump(mode="json")
     sections["validation"] = validation
-    offsets = sections["input"]["time_offsets_s"]
-    for lag in lags:
-        if lag.proposed:
-            offsets[lag.stream] = round(offsets[lag.stream] + lag.offset_s, 3)
     lag_note = [f"  # {line}" for line in _lag_comment(lags)]
     text = yaml.safe_dump(sections, sort_keys=False, allow_unicode=True, width=120, default_flow_style=None)
 
@@ -145,13 +141,10 @@ def _lag_comment(lags: Sequence[LagEstimate]) -> list[str]:
         return []
     ref = lags[0].reference
     lines = [f"Time offsets against the {ref} (slam.calibrate.lags): RMS of the yaw rates' difference over "
-             f"{RATE_WINDOW_S:g} s, at the configured offset -> at the one found:"]
+             f"{RATE_WINDOW_S:g} s, at the offsets below -> at the offset found:"]
     for lag in lags:
-        verdict = "added below" if lag.proposed else f"not proposed: {lag.why_not()}"
+        verdict = "PROPOSED: add it to the offset below" if lag.proposed else f"not proposed: {lag.why_not()}"
         lines.append(f"{lag.stream}: {lag.offset_s:+.3f} s (halves {lag.halves_s[0]:+.3f} / {lag.halves_s[1]:+.3f} s), "
                      f"{np.degrees(lag.rms_before):.3g} -> {np.degrees(lag.rms_after):.3g} deg/s "
-                     f"(-{100 * lag.gain:.0f} %), correlation {lag.correlation:.2f} over {lag.steps} steps; {verdict}")
-    if any(lag.proposed for lag in lags):
-        lines.append("The relations below were learnt with the offsets as configured: calibrate again with this "
-                     "file to learn them with the new ones.")
+                     f"({-100 * lag.gain:+.0f} %), correlation {lag.correlation:.2f} over {lag.steps} steps; {verdict}")
     return lines
