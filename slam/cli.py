@@ -86,7 +86,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     from slam.calibrate import calibrate
 
     res = calibrate(args.runs, _config_path(args.config), args.out, clean=args.clean, false_alarm=args.false_alarm,
-                    force=args.force, progress=not args.quiet, overrides=args.set or [])
+                    force=args.force, progress=not args.quiet, overrides=args.set or [],
+                    lag_reference=args.lag_reference)
     for name, choice in res.choices.items():
         if choice is None:
             print(f"  {name}: kept as configured (no run has both its streams)")
@@ -98,6 +99,13 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
               f"alarms on {alarm} of the learning steps")
     for p in res.proposals:
         print(f"  proposed {p.choice.relation.name}: rates correlate {p.choice.fit.corr:.3f} (commented out in the file)")
+    for lag in res.applied:
+        print(f"  time offset of {lag.stream} against {lag.reference}: {lag.offset_s:+.3f} s, RMS of the rate "
+              f"difference {-100 * lag.gain:+.0f} %: added to input.time_offsets_s, the relations learnt with it")
+    for lag in res.lags:
+        if not any(a.stream == lag.stream for a in res.applied):
+            print(f"  time offset of {lag.stream} against {lag.reference}: {lag.offset_s:+.3f} s, RMS of the rate "
+                  f"difference {-100 * lag.gain:+.0f} %: kept as configured, {lag.why_not() or 'proposed (see the file)'}")
     print(f"wrote {res.out} (target {100 * res.target_per_observer:.3f} % of steps per observer): "
           f"gslam map RUN --config {res.out} --out DIR --gating on")
     return 0
@@ -287,6 +295,9 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--false-alarm", type=float, default=0.005, metavar="SHARE",
                    help="target share of a run's validation steps with a false alarm (default 0.005)")
     k.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (repeatable)")
+    k.add_argument("--lag-reference", default="gyro", choices=["gyro", "odometry", "compass", "scan", "none"],
+                   help="the stream the yaw streams' time offsets are measured against (default gyro; none: "
+                        "measure none, keep input.time_offsets_s as configured)")
     k.add_argument("--out", required=True, metavar="MODEL.yaml", help="the calibrated config to write")
     k.add_argument("--force", action="store_true", help="replace --out even if it is not an earlier calibrate result")
     k.set_defaults(func=_cmd_calibrate)

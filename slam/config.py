@@ -119,11 +119,31 @@ class FramesConfig(Strict):
         return self == FramesConfig()
 
 
+class TimeOffsetsConfig(Strict):
+    """Seconds added to each stream's stamps when the recording is read
+    (``input.time_offsets_s``): stamp + offset = the time the sample was
+    taken. A stream stamped 0.1 s early (its turns show 0.1 s before the
+    gyro's) gets +0.1; one stamped late gets a negative offset.
+    ``gslam calibrate`` measures the yaw streams' offsets against the gyro."""
+
+    scan: float = 0.0
+    gyro: float = 0.0
+    compass: float = 0.0
+    odometry: float = 0.0
+    gps: float = 0.0
+    groundtruth: float = 0.0
+
+    def shifted(self) -> dict[str, float]:
+        """The streams with a non-zero offset."""
+        return {name: value for name, value in self.model_dump().items() if value != 0.0}
+
+
 class InputConfig(Strict):
     """``format``: ``auto`` guesses the reader from the path (ROS 1 ``.bag``,
     ROS 2 bag folder, simulated run folder, CARMEN ``.log``/``.log.gz``,
     BROAD ``.mat``, libRSF ``*_Input.txt``). ``frames``: the frame
-    conventions of a bag's streams (the other formats have fixed ones)."""
+    conventions of a bag's streams (the other formats have fixed ones).
+    ``time_offsets_s``: per stream, seconds added to its stamps (any format)."""
 
     format: Literal["auto", "rosbag", "carmen", "broad", "librsf"] = "auto"
     topics: TopicsConfig = TopicsConfig()
@@ -131,6 +151,7 @@ class InputConfig(Strict):
     compass: CompassInputConfig = CompassInputConfig()
     gps: GpsInputConfig = GpsInputConfig()
     frames: FramesConfig = FramesConfig()
+    time_offsets_s: TimeOffsetsConfig = TimeOffsetsConfig()
 
 
 # --- front-end -----------------------------------------------------------

@@ -13,7 +13,11 @@ from recorded runs instead of typed in by hand.
    field-gyro checks get their tolerances the same way.
 3. Streams of different sensors whose rates correlate and which no
    relation compares yet are proposed as new relations
-   (:mod:`slam.calibrate.propose`).
+   (:mod:`slam.calibrate.propose`). Yaw streams stamped early or late
+   against the gyro are found (:mod:`slam.calibrate.lags`); ``gslam
+   calibrate`` adds the clear offsets to ``input.time_offsets_s``, reads
+   the runs again with them and learns steps 2-3 anew, so the relations
+   are learnt on streams as the model's config will read them.
 4. The result is the input config with the learnt observers and the
    measured figures as comments (:mod:`slam.calibrate.write`), for the
    pass (offline or causal) the config names. Learnt on some runs, it is
@@ -24,9 +28,10 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from slam.calibrate.lags import LagEstimate, learn_lags
 from slam.calibrate.propose import Proposal, propose
 from slam.calibrate.runs import CalibrationRun, load_run, parse_clean
 from slam.calibrate.select import (CheckChoice, Choice, FieldGyroChoice, calibrate_field_gyro, calibrate_magnetometer,
@@ -56,6 +61,9 @@ class CalibrationResult:
     proposals: list[Proposal]
     target_per_observer: float
     text: str
+    lags: list[LagEstimate]
+    applied: list[LagEstimate] = field(default_factory=list)
+    """The first pass's estimates when their clear offsets were added to the config and the runs learnt again."""
 
 
 def calibrate(
@@ -67,12 +75,14 @@ def calibrate(
     force: bool = False,
     progress: bool = False,
     overrides: Sequence[str] = (),
+    lag_reference: str = "gyro",
 ) -> CalibrationResult:
     """Learn the observers of ``config_path`` from ``runs`` (module
     docstring) and write the calibrated config to ``out`` (a new file, an
     earlier calibrate result, or any file with ``force``). ``clean``:
     ``START:END`` seconds of every run declared clean; None learns from
-    whole runs with robust statistics."""
+    whole runs with robust statistics. ``lag_reference``: the stream the
+    others' time offsets are measured against."""
     if not runs:
         raise GslamError("gslam calibrate: no run given")
     if not 0.0 < false_alarm < 1.0:
@@ -86,14 +96,27 @@ def calibrate(
     loaded: list[CalibrationRun] = [load_run(r, config, vcfg, stretch, progress) for r in runs]
     header = [f"Learnt from {len(runs)} run{'s' if len(runs) > 1 else ''} ({', '.join(Path(r).name for r in runs)}) "
               f"{_learnt_from(stretch)}, starting from {Path(config_path).name}."]
-    res = learn(loaded, config, false_alarm, header)
+    res = learn(loaded, config, false_alarm, header, lag_reference)
+    moved = {lag.stream: round(getattr(config.input.time_offsets_s, lag.stream) + lag.offset_s, 3)
+             for lag in res.lags if lag.proposed}
+    if moved:
+        first = res.lags
+        overrides = [*overrides, *(f"input.time_offsets_s.{name}={value}" for name, value in moved.items())]
+        config = load_config(config_path, overrides)
+        loaded = [load_run(r, config, vcfg, stretch, progress) for r in runs]
+        header.append("Time offsets found in a first pass and added to input.time_offsets_s, the relations "
+                      "learnt with them: " + "; ".join(
+                          f"{lag.stream} {lag.offset_s:+.3f} s (RMS of its yaw rate's difference to the {lag.reference}'s "
+                          f"{-100 * lag.gain:+.0f} %)" for lag in first if lag.proposed) + ".")
+        res = learn(loaded, config, false_alarm, header, lag_reference)
+        res.applied = [lag for lag in first if lag.proposed]
     write_text(out, res.text)
     res.out = Path(out)
     return res
 
 
 def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm: float = DEFAULT_FALSE_ALARM,
-          header: Sequence[str] = ()) -> CalibrationResult:
+          header: Sequence[str] = (), lag_reference: str = "gyro") -> CalibrationResult:
     """Steps 2-4 of the module docstring on runs already loaded
     (:func:`slam.calibrate.runs.load_run`); the text is not written
     (``out`` is None)."""
@@ -118,9 +141,15 @@ def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm:
     mag = calibrate_magnetometer(loaded, vcfg.observers.magnetometer, target) if has_mag else None
     field = calibrate_field_gyro(loaded, vcfg.observers.field_gyro, target) if has_field else None
     proposals = propose(loaded, relations, vcfg.model, vcfg, target)
+    lags = learn_lags(loaded, lag_reference)
+    for lag in lags:
+        log.info("time offset of %s against %s: %+.3f s (RMS of the rate difference %.3g -> %.3g rad/s, "
+                 "correlation %.2f, halves %+.3f / %+.3f s)%s", lag.stream, lag.reference, lag.offset_s,
+                 lag.rms_before, lag.rms_after, lag.correlation, *lag.halves_s,
+                 ": proposed" if lag.proposed else f": not proposed, {lag.why_not()}")
     header = [*header, *_header(false_alarm, target, observers, vcfg.offline)]
-    text = calibrated_config(config, choices, mag, field, proposals, header, target, len(loaded))
-    return CalibrationResult(None, choices, mag, field, proposals, target, text)
+    text = calibrated_config(config, choices, mag, field, proposals, header, target, len(loaded), lags)
+    return CalibrationResult(None, choices, mag, field, proposals, target, text, lags)
 
 
 def _learnt_from(stretch) -> str:

@@ -1,6 +1,7 @@
 """The calibrated config as YAML: the input config, every default spelled
 out, with its observers replaced by the learnt ones and the measured
-figures beside each as comments. ``gslam map OTHER --config MODEL.yaml``
+figures beside each as comments, the streams' time offsets measured
+against the gyro among them. ``gslam map OTHER --config MODEL.yaml``
 uses it as it is; :func:`slam.config.load_config` reads it back."""
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 import yaml
 
+from slam.calibrate.lags import RATE_WINDOW_S, LagEstimate
 from slam.calibrate.propose import Proposal
 from slam.calibrate.select import CheckChoice, Choice, FieldGyroChoice
 from slam.config import PipelineConfig
@@ -70,6 +72,7 @@ def calibrated_config(
     header: Sequence[str],
     target: float,
     runs: int,
+    lags: Sequence[LagEstimate] = (),
 ) -> str:
     """The YAML text of the module docstring. ``choices`` maps every
     configured relation to its calibration (None: no run had its streams,
@@ -85,6 +88,7 @@ def calibrated_config(
     validation["observers"] = observers
     sections = config.model_dump(mode="json")
     sections["validation"] = validation
+    lag_note = [f"  # {line}" for line in _lag_comment(lags)]
     text = yaml.safe_dump(sections, sort_keys=False, allow_unicode=True, width=120, default_flow_style=None)
 
     block = [f"{_INDENT}relations:"]
@@ -123,8 +127,24 @@ def calibrated_config(
             lines += mag_note + [line]
         elif line.strip().startswith("field_gyro:") and line.startswith(_INDENT) and field_note:
             lines += field_note + [line]
+        elif line.startswith("  time_offsets_s:") and lag_note:
+            lines += lag_note + [line]
         else:
             lines.append(line)
     head = [result_file_mark("calibrate") + ": a pipeline config whose observers were learnt from data"]
     head += [f"# {h}" for h in header]
     return "\n".join(head + lines) + "\n"
+
+
+def _lag_comment(lags: Sequence[LagEstimate]) -> list[str]:
+    if not lags:
+        return []
+    ref = lags[0].reference
+    lines = [f"Time offsets against the {ref} (slam.calibrate.lags): RMS of the yaw rates' difference over "
+             f"{RATE_WINDOW_S:g} s, at the offsets below -> at the offset found:"]
+    for lag in lags:
+        verdict = "PROPOSED: add it to the offset below" if lag.proposed else f"not proposed: {lag.why_not()}"
+        lines.append(f"{lag.stream}: {lag.offset_s:+.3f} s (halves {lag.halves_s[0]:+.3f} / {lag.halves_s[1]:+.3f} s), "
+                     f"{np.degrees(lag.rms_before):.3g} -> {np.degrees(lag.rms_after):.3g} deg/s "
+                     f"({-100 * lag.gain:+.0f} %), correlation {lag.correlation:.2f} over {lag.steps} steps; {verdict}")
+    return lines

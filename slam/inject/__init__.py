@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from slam.config import InputConfig
+from slam.config import InputConfig, TimeOffsetsConfig
 from slam.errors import GslamError
 from slam.inject.broad import inject_broad
 from slam.inject.carmen import inject_carmen
@@ -81,9 +81,10 @@ def inject(
     force: bool = False,
 ) -> InjectResult:
     """Add ``faults`` (typed, or ``KIND@T0:T1[,param=value]`` texts) to the
-    recording at ``input_path``, read with ``config``, and write the run
-    folder ``out`` (:mod:`slam.io.outdir`'s rule; ``inputs`` are other files
-    the command read, which ``out`` must not be or hold)."""
+    recording at ``input_path``, read with ``config`` (its stamps as
+    recorded: ``time_offsets_s`` apply when the result is mapped), and
+    write the run folder ``out`` (:mod:`slam.io.outdir`'s rule; ``inputs``
+    are other files the command read, which ``out`` must not be or hold)."""
     input_path = Path(input_path)
     parsed = [parse_fault(f) if isinstance(f, str) else f for f in faults]
     if not parsed:
@@ -91,6 +92,9 @@ def inject(
     fmt = guess_format(input_path) if config.format == "auto" else config.format
     if fmt == "librsf":
         raise GslamError(f"{input_path}: gslam inject writes ROS bags, CARMEN logs and BROAD trials, not libRSF data sets")
+    # The faults are written into the messages as stamped: read without
+    # input.time_offsets_s, which apply when the injected run is mapped.
+    config = config.model_copy(update={"time_offsets_s": TimeOffsetsConfig()})
     with result_folder(out, "inject", [input_path, *inputs], force) as tmp:
         rec = read_recording(input_path, config)
         _check_intervals(parsed, rec)

@@ -29,7 +29,7 @@ from typing import Callable, Mapping, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from slam.config import GpsInputConfig, InputConfig
+from slam.config import GpsInputConfig, InputConfig, TimeOffsetsConfig
 from slam.io.yamlfile import read_text_file
 from slam.errors import GslamError
 from slam.io import broad, carmen, librsf
@@ -206,7 +206,8 @@ def attach_sidecar(rec: Recording, sidecar: Sidecar) -> None:
 
 def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | None = None) -> Recording:
     """Read a recorded run with the reader for ``config.format`` (``auto``
-    guesses it from the path). A run folder reads its ``bag/``, is named
+    guesses it from the path), each stream's stamps moved by its
+    ``config.time_offsets_s`` (:func:`shift_streams`). A run folder reads its ``bag/``, is named
     after the folder and gets the sidecar's faults and magnetic reference;
     the sidecar's GPS datum is used when the config sets none.
 
@@ -221,7 +222,7 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
     if fmt != "rosbag" and not config.frames.is_default():
         raise GslamError(f"input.frames: a {fmt} recording has fixed frame conventions; frames apply to ROS bags")
     if not is_run_folder(path):
-        return _read(fmt, path, config, on_scans)
+        return shift_streams(_read(fmt, path, config, on_scans), config.time_offsets_s)
 
     sidecar = load_sidecar(path / SIDECAR)
     unset = config.gps.datum_lat_deg is None and config.gps.datum_lon_deg is None
@@ -229,7 +230,7 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
         lat, lon = sidecar.gps_datum.lat_deg, sidecar.gps_datum.lon_deg
         datum = GpsInputConfig(datum_lat_deg=lat, datum_lon_deg=lon)
         config = config.model_copy(update={"gps": datum})
-    rec = _read(fmt, run_recording(path), config, on_scans)
+    rec = shift_streams(_read(fmt, run_recording(path), config, on_scans), config.time_offsets_s)
     rec.name = path.name
     attach_sidecar(rec, sidecar)
     log.info("%s: run '%s' with faults in %s", path, sidecar.scenario, ", ".join(rec.faults) or "none")
@@ -243,4 +244,17 @@ def _read(fmt: str, path: Path, config: InputConfig, on_scans: ScansHook | None)
     rec = reader.read(path, config)
     if on_scans is not None and rec.scans is not None:
         on_scans(rec.scans)
+    return rec
+
+
+def shift_streams(rec: Recording, offsets: TimeOffsetsConfig) -> Recording:
+    """Add each stream's offset to its stamps (stamp + offset = the time the
+    sample was taken), in place; ``rec.t0`` and the fault intervals stay.
+    Scans handed to ``on_scans`` before this keep their stamps; the
+    front-end's result takes the recording's."""
+    for name, offset in offsets.shifted().items():
+        stream = getattr(rec, "scans" if name == "scan" else name)
+        if stream is not None:
+            stream.t = stream.t + offset
+            log.info("%s: %s stamps moved by %+.3f s (input.time_offsets_s)", rec.name, name, offset)
     return rec
