@@ -132,6 +132,24 @@ def test_a_simulated_run_gets_the_faults_and_keeps_its_own_truth(short_run, tmp_
     assert {"SM_DIST", "SM_LAT", "SM_YAW"} <= set(res.injected)
 
 
+def test_labels_follow_the_time_offset_of_the_stream_they_were_written_into(short_run, tmp_path):
+    """The fault goes into the messages as stamped; its labels are moved by the
+    stream's ``input.time_offsets_s``, as the samples are when mapped."""
+    faults = ["dipole@3:9,moment_A_m2=50,distance_m=1", "gyro_bias@12:16,bias_deg_s=3"]
+    plain = inject(short_run.run_dir, faults, tmp_path / "plain", InputConfig())
+    shifted_config = InputConfig(time_offsets_s={"compass": 0.25})
+    shifted = inject(short_run.run_dir, faults, tmp_path / "shifted", shifted_config)
+    assert plain.injected["IMU_YAW"] and shifted.injected["IMU_YAW"] == [
+        pytest.approx((a + 0.25, b + 0.25)) for a, b in plain.injected["IMU_YAW"]
+    ]
+    assert shifted.injected["IMU_GYRO"] == plain.injected["IMU_GYRO"]  # the gyro's stamps are right
+    # Mapped with the same offset, the disturbed compass samples lie in the labels.
+    before = read_recording(short_run.run_dir, shifted_config)
+    after = read_recording(tmp_path / "shifted", shifted_config)
+    disturbed = after.compass.t[np.abs(wrap_angle(after.compass.yaw - before.compass.yaw)) > np.radians(5.0)]
+    assert len(disturbed) and all(any(a <= t <= b for a, b in after.faults["IMU_YAW"]) for t in disturbed)
+
+
 def test_a_ned_bag_takes_a_heading_fault_in_its_own_frame(tmp_path):
     bag = ned_driving_bag(duration_s=40.0)[0].write(tmp_path / "ned.bag")
     frames = {"compass": StreamFrameConfig(world="ned"), "odometry": StreamFrameConfig(world="ned"),

@@ -35,6 +35,12 @@ __all__ = ["InjectResult", "KINDS", "inject", "parse_fault"]
 
 log = logging.getLogger(__name__)
 
+LABELLED_STREAM = {
+    "IMU_YAW": "compass", "IMU_GYRO": "gyro", "ODO_DIST": "odometry", "ODO_YAW": "odometry",
+    "SM_DIST": "scan", "SM_LAT": "scan", "SM_YAW": "scan", "GPS": "gps",
+}
+"""The stream whose samples an injected fault of each component changes."""
+
 
 @dataclass
 class InjectResult:
@@ -93,7 +99,9 @@ def inject(
     if fmt == "librsf":
         raise GslamError(f"{input_path}: gslam inject writes ROS bags, CARMEN logs and BROAD trials, not libRSF data sets")
     # The faults are written into the messages as stamped: read without
-    # input.time_offsets_s, which apply when the injected run is mapped.
+    # input.time_offsets_s, which apply when the injected run is mapped; the
+    # labels are moved by them, to the times the faulty samples were taken.
+    offsets = config.time_offsets_s.model_dump()
     config = config.model_copy(update={"time_offsets_s": TimeOffsetsConfig()})
     with result_folder(out, "inject", [input_path, *inputs], force) as tmp:
         rec = read_recording(input_path, config)
@@ -107,9 +115,13 @@ def inject(
             labels = inject_carmen(source, dest, rec, parsed)
         else:
             labels = inject_broad(source, dest, parsed)
-        injected = labels.intervals()
+        injected = {c: _moved(spans, offsets[LABELLED_STREAM[c]]) for c, spans in labels.intervals().items()}
         truth = {c: union_intervals(rec.faults.get(c, []), injected.get(c, [])) for c in {*rec.faults, *injected}}
         (tmp / SIDECAR).write_text(_sidecar(rec, input_path, parsed, truth, injected))
     for comp, spans in sorted(injected.items()):
         log.info("injected %s: %s", comp, ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in spans) or "nothing labelled")
     return InjectResult(Path(out), truth, injected, rec.duration)
+
+
+def _moved(spans: list[Interval], offset_s: float) -> list[Interval]:
+    return [(a + offset_s, b + offset_s) for a, b in spans]
