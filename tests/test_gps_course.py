@@ -4,6 +4,7 @@ by calibrate (slam/calibrate)."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -14,7 +15,8 @@ from slam.calibrate.runs import CalibrationRun
 from slam.calibrate.select import calibrate_relation
 from slam.calibrate.write import _flow
 from validation.config import ValidationConfig
-from validation.model import Observation
+from validation.diagnosis import Diagnoser
+from validation.model import Observation, load_model
 from validation.observer_config import RelationConfig
 from validation.observers import ObserverBank, run_observers
 from validation.streams import Stream, fixed_rate_steps, resample_streams, validation_streams
@@ -148,3 +150,16 @@ def test_calibrate_learns_the_band_of_the_difference():
     # What it learnt sees the offset it was not shown.
     seen = run_observers(streams, [rel], t, window="centred", offline=True).relations[rel.name].no_match
     assert seen[(t > 155) & (t < 245)].mean() > 0.95
+
+
+@pytest.mark.parametrize("speed,first", [(Observation.MATCH, {"IMU_YAW"}), (Observation.NO_MATCH, {"GPS"})])
+def test_husky_model_blames_the_compass_when_the_gps_speed_matches(speed, first):
+    """Compass against course alone ties IMU_YAW and GPS; a GPS speed that
+    matches the odometry's makes the compass the more probable culprit, one
+    that does not makes the GPS."""
+    model = load_model(Path(__file__).resolve().parents[1] / "configs/validation/husky_model.yaml")
+    result = Diagnoser(model).diagnose({"yaw_compass_gps": Observation.NO_MATCH, "speed_gps_odo": speed,
+                                        "yaw_compass_gyro": Observation.MATCH})
+    assert set(result.diagnoses[0]) == first
+    if speed == Observation.MATCH:  # a GPS fault with a coincidental speed match stays a diagnosis
+        assert frozenset({"GPS"}) in result.diagnoses
