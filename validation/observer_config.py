@@ -11,6 +11,7 @@ or a YAML file into it with one-line errors.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Literal
@@ -61,7 +62,10 @@ class RelationConfig(_Strict):
     ``kind: offset`` compares the streams themselves: ``b - gain * a`` must
     stay within ``k_sigma * sigma_floor`` of its median over
     ``level_window_s`` (an absolute heading against an integrated one,
-    whose offset drifts slowly; :mod:`validation.quantitative`).
+    whose offset drifts slowly; :mod:`validation.quantitative`), or, with
+    ``level_window_s: null``, of 0 (two absolute streams calibrated against
+    each other: a compass, after its mounting yaw, against the GPS course).
+    An angular difference is wrapped to (-pi, pi] there.
 
     All feed Algorithm 3: ``threshold`` is th, in steps. Components default
     to the streams' own.
@@ -86,7 +90,7 @@ class RelationConfig(_Strict):
     sigma_rel: float = Field(0.0, ge=0.0)
     k_sigma: float = Field(3.0, gt=0.0)
     cusum_drift: float = Field(0.5, ge=0.0)
-    level_window_s: float = Field(60.0, gt=0.0)
+    level_window_s: float | None = Field(60.0, gt=0.0)
     threshold: int = Field(ge=0)
     max_counter: int | None = Field(None, ge=1)
     warmup_s: float | None = Field(None, ge=0.0)
@@ -232,6 +236,12 @@ class ObserversConfig(_Strict):
     or ``trailing`` (causal); null takes the one of ``validation.pass``.
     ``rule``: Algorithm 1's rule inside the band, ``paper`` as listed or the
     ``project``'s (:mod:`validation.trends`).
+
+    ``gps_speed_window_s``: the regression window of ``gps_speed``,
+    ``odo_fix_speed`` and ``gps_course``; the course counts where the speed
+    is at least ``gps_course_min_speed_mps`` (the travel over the window
+    several times the fixes' noise) and the odometry turns by at most
+    ``gps_course_max_turn_deg`` over the window (:mod:`validation.course`).
     """
 
     window: Window | None = None
@@ -246,6 +256,8 @@ class ObserversConfig(_Strict):
     stream_max_gap_s: dict[str, float] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
     min_coverage: float = Field(0.25, ge=0.0, le=1.0)
     gps_speed_window_s: float = Field(5.0, gt=0.0)
+    gps_course_min_speed_mps: float = Field(0.5, gt=0.0)
+    gps_course_max_turn_deg: float = Field(15.0, gt=0.0)
 
     @model_validator(mode="after")
     def _names(self) -> "ObserversConfig":
@@ -265,6 +277,11 @@ def field_gyro_stream(config: ObserversConfig) -> tuple[float, float] | None:
     """``(window_s, smooth_s)`` of ``mag_field_change`` when its check is on."""
     fg = config.field_gyro
     return (fg.window_s, fg.smooth_s) if fg.enabled else None
+
+
+def gps_course_limits(config: ObserversConfig) -> tuple[float, float]:
+    """``(min_speed_mps, max_turn_rad)`` of the ``gps_course`` stream."""
+    return config.gps_course_min_speed_mps, math.radians(config.gps_course_max_turn_deg)
 
 
 def observers_config(data: Mapping, source: str = "observers") -> ObserversConfig:

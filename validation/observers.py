@@ -69,6 +69,7 @@ from validation.quantitative import (
     residual_test,
     running_level,
     window_changes,
+    wrap_angle,
 )
 from validation.sequential import Cusum, cusum
 from validation.streams import ANGULAR_STREAMS, STREAM_NAMES, StepStreams, Stream, resample_streams
@@ -239,7 +240,12 @@ def observe_steps(
             return np.zeros(m), np.zeros(m, dtype=bool), missing
         valid = steps.valid[a] & steps.valid[b]
         d = np.where(valid, steps.values[b] - rel.gain * steps.values[a], 0.0)
-        level = running_level(steps.t, d, valid, rel.level_window_s, window, rel.k_sigma * rel.sigma_floor)
+        if rel.level_window_s is None:  # two absolute streams: the level is 0
+            if steps.angular[a] or steps.angular[b]:
+                d = wrap_angle(d)
+            level = np.zeros(m)
+        else:
+            level = running_level(steps.t, d, valid, rel.level_window_s, window, rel.k_sigma * rel.sigma_floor)
         z, mismatch = offset_test(rel, d, np.where(valid, level, d))
         return np.where(valid, z, 0.0), mismatch & valid, valid
 
@@ -413,18 +419,25 @@ class ObserverBank:
             elif rel.kind == "offset":
                 a, b = rel.streams
                 valid = present(a) and present(b)
-                tracker = self._levels.setdefault(
-                    rel.name, RunningLevel(rel.level_window_s, rel.k_sigma * rel.sigma_floor)
-                )
-                if valid:
-                    d = float(values[b]) - rel.gain * float(values[a])
-                    if self.angular.get(a, False) or self.angular.get(b, False):
-                        d = self._unwrap_offset(rel.name, d)
-                    mismatch = bool(offset_test(rel, np.array(d), np.array(tracker.update(t, d)))[1])
+                angular = self.angular.get(a, False) or self.angular.get(b, False)
+                mismatch = False
+                if rel.level_window_s is None:  # two absolute streams: the level is 0
+                    if valid:
+                        d = float(values[b]) - rel.gain * float(values[a])
+                        d = float(wrap_angle(d)) if angular else d
+                        mismatch = bool(offset_test(rel, np.array(d), np.array(0.0))[1])
                 else:
-                    tracker.reset()
-                    self._last_offset.pop(rel.name, None)
-                    mismatch = False
+                    tracker = self._levels.setdefault(
+                        rel.name, RunningLevel(rel.level_window_s, rel.k_sigma * rel.sigma_floor)
+                    )
+                    if valid:
+                        d = float(values[b]) - rel.gain * float(values[a])
+                        if angular:
+                            d = self._unwrap_offset(rel.name, d)
+                        mismatch = bool(offset_test(rel, np.array(d), np.array(tracker.update(t, d)))[1])
+                    else:
+                        tracker.reset()
+                        self._last_offset.pop(rel.name, None)
                 sym = (Trend.PLUS if mismatch else Trend.ZERO, Trend.ZERO)
             else:
                 ka, kb = _trend_key(rel, 0), _trend_key(rel, 1)

@@ -33,7 +33,10 @@ lag by half a window otherwise), held while no step agrees. Windows do not
 reach across a gap in either stream. A step is a mismatch where
 ``|d - level|`` exceeds ``k_sigma * sigma_floor``. It sees what changes cannot: a compass
 that sits a few degrees off for minutes near steel, or comes back from a
-disturbance slowly.
+disturbance slowly. With ``level_window_s`` null the level is 0 and an
+angular difference is wrapped: two absolute headings calibrated against
+each other (a compass and the GPS course) must agree, and an offset that
+stands for minutes is an error however slowly it came.
 """
 
 from __future__ import annotations
@@ -65,6 +68,11 @@ def window_changes(t: np.ndarray, v: np.ndarray, valid: np.ndarray, window_s: fl
     whole &= t[end] - t[start] >= window_s - 2 * eps
     change = np.where(whole, v[end] - v[start], 0.0)
     return change, whole
+
+
+def wrap_angle(x: np.ndarray | float) -> np.ndarray:
+    """Angles (rad) wrapped to (-pi, pi]."""
+    return np.angle(np.exp(1j * np.asarray(x, dtype=float)))
 
 
 def residual_test(rel: RelationConfig, da: np.ndarray, db: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

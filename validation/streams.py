@@ -21,6 +21,9 @@ gps_speed      GPS       speed from the slope of the fixes' x and y over a
                          window, m/s
 odo_fix_speed  ODO_DIST  the odometry's speed derived as gps_speed is: the
                          slope of its x and y over the same window, m/s
+gps_course     GPS       direction of travel from the same slopes, rad
+                         (angular), only where it is the heading
+                         (:mod:`validation.course`)
 ============== ========= ===================================================
 
 The sensors come in as any object with the attributes of
@@ -50,6 +53,7 @@ from typing import Literal, Protocol, get_args
 
 import numpy as np
 
+from validation.course import gps_course
 from validation.errors import ValidationError
 from validation.field_gyro import field_change
 from validation.trends import Window, derive_stream
@@ -59,6 +63,7 @@ logger = logging.getLogger(__name__)
 StreamName = Literal[
     "compass_yaw", "gyro_yaw", "sm_yaw", "odo_yaw", "odo_distance", "sm_distance",
     "odo_forward", "sm_forward", "odo_lateral", "sm_lateral", "odo_speed", "gps_speed", "odo_fix_speed",
+    "gps_course",
 ]
 QualityStreamName = Literal[
     "mag_strength", "mag_dip", "mag_field_change", "gps_sigma",
@@ -79,6 +84,7 @@ STREAM_COMPONENT: dict[str, str] = {
     "odo_speed": "ODO_DIST",
     "gps_speed": "GPS",
     "odo_fix_speed": "ODO_DIST",
+    "gps_course": "GPS",
     "mag_strength": "IMU_YAW",
     "mag_dip": "IMU_YAW",
     "mag_field_change": "IMU_YAW",
@@ -88,7 +94,7 @@ STREAM_COMPONENT: dict[str, str] = {
     "scan_degenerate_yaw": "SM_YAW",
 }
 STREAM_NAMES: tuple[str, ...] = get_args(StreamName) + get_args(QualityStreamName)
-ANGULAR_STREAMS: frozenset[str] = frozenset({"compass_yaw", "sm_yaw", "odo_yaw"})
+ANGULAR_STREAMS: frozenset[str] = frozenset({"compass_yaw", "sm_yaw", "odo_yaw", "gps_course"})
 
 
 class PoseSeries(Protocol):
@@ -202,12 +208,21 @@ def _window_speed(x: Stream, y: Stream, window_s: float, window: Window) -> np.n
     return np.hypot(derive_stream(x.t, x.values, window_s, window), derive_stream(y.t, y.values, window_s, window))
 
 
+def _course_stream(x: Stream, y: Stream, streams: Mapping[str, Stream], window_s: float, window: Window,
+                   course: tuple[float, float]) -> Stream:
+    yaw, forward = streams["odo_yaw"], streams["odo_forward"]
+    t, values = gps_course(x.t, x.values, y.values, (yaw.t, yaw.values), (forward.t, forward.values),
+                           window_s, window, *course)
+    return Stream(t, values, angular=True)
+
+
 def validation_streams(
     recording: SensorSet,
     sm: PoseSeries | None = None,
     gps_speed_window_s: float = 5.0,
     window: Window = "trailing",
     field_gyro: tuple[float, float] | None = None,
+    course: tuple[float, float] = (0.5, np.radians(15.0)),
 ) -> dict[str, Stream]:
     """The named streams available in ``recording`` (plus scan matching).
 
@@ -256,6 +271,8 @@ def validation_streams(
         y = _clean("gps_y", gps.t[fix], gps.y[fix])
         if len(x.t) == len(y.t) and len(x.t) >= 2:
             streams["gps_speed"] = Stream(x.t, _window_speed(x, y, gps_speed_window_s, window))
+            if "odo_forward" in streams:
+                streams["gps_course"] = _course_stream(x, y, streams, gps_speed_window_s, window, course)
         streams["gps_sigma"] = _clean("gps_sigma", gps.t[fix], gps.sigma[fix])
     logger.info("validation streams: %s", ", ".join(sorted(streams)))
     return streams

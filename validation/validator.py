@@ -29,7 +29,7 @@ from validation.diagnosis import Diagnoser, DiagnosisResult
 from validation.gating import Actions, Gate, factor_scales, offline_actions, oracle_actions
 from validation.metrics import validation_metrics
 from validation.coverage import observer_coverage, require_observations, warn_low_coverage
-from validation.observer_config import field_gyro_stream
+from validation.observer_config import field_gyro_stream, gps_course_limits
 from validation.observers import ObserverLog, observe_steps, unary_checks
 from validation.streams import PoseSeries, SensorSet, fixed_rate_steps, resample_streams, validation_streams
 
@@ -180,7 +180,8 @@ def run_validation(
     else:
         obs = config.observers
         window = config.window
-        streams = validation_streams(sensors, sm_poses, obs.gps_speed_window_s, window, field_gyro_stream(obs))
+        streams = validation_streams(sensors, sm_poses, obs.gps_speed_window_s, window, field_gyro_stream(obs),
+                                     gps_course_limits(obs))
         checks = unary_checks(obs, magnetic_reference)
         streams.update(scan_streams(checks, scan_geometry))
         steps = resample_streams(streams, step_t, obs.max_gap_s, obs.stream_max_gap_s, obs.gap_periods)

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from slam.calibrate.runs import CalibrationRun
-from validation.quantitative import running_level, window_changes
+from validation.quantitative import running_level, window_changes, wrap_angle
 from validation.trends import Window, derive_stream
 
 MAD_TO_SD = 1.4826
@@ -159,10 +159,15 @@ def fit_rates(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, w
                    robust_sd(da[keep]), inliers)
 
 
-def fit_offset(runs: Sequence[CalibrationRun], a: str, b: str, gain: float, level_window_s: float,
-               window: Window, inliers: Sequence[np.ndarray]) -> float:
-    """Robust sd of ``b - gain * a`` about its running median over
-    ``level_window_s`` (the offset observer's level), on the inlier steps."""
+def fit_offset(runs: Sequence[CalibrationRun], a: str, b: str, gain: float, level_window_s: float | None,
+               window: Window, inliers: Sequence[np.ndarray]) -> tuple[float, float, int]:
+    """``(sd, median, steps)``: robust sd and median of ``b - gain * a``
+    about its running median over ``level_window_s`` (the offset observer's
+    level) on the inlier steps, and how many there were;
+    with ``level_window_s`` None (a level of 0), of the difference itself,
+    wrapped where a stream is an angle. A robust sd, because the difference
+    of two absolute headings has heavy tails: the GPS course at walking
+    speed swings by tens of degrees where the fixes jump."""
     res = []
     for run, good in zip(runs, inliers):
         if a not in run.streams or b not in run.streams:
@@ -170,10 +175,18 @@ def fit_offset(runs: Sequence[CalibrationRun], a: str, b: str, gain: float, leve
         s = run.steps
         valid = s.valid[a] & s.valid[b]
         d = np.where(valid, s.values[b] - gain * s.values[a], 0.0)
-        level = running_level(s.t, d, valid, level_window_s, window, np.inf)
+        if level_window_s is None:
+            if s.angular[a] or s.angular[b]:
+                d = wrap_angle(d)
+            level = np.zeros(len(d))
+        else:
+            level = running_level(s.t, d, valid, level_window_s, window, np.inf)
         keep = valid & good
         res.append((d - level)[keep])
-    return max(robust_sd(np.concatenate(res)), 1e-9) if res and sum(len(r) for r in res) else 0.0
+    if not res or not sum(len(r) for r in res):
+        return 0.0, 0.0, 0
+    res = np.concatenate(res)
+    return max(robust_sd(res), 1e-9), float(np.median(res)), len(res)
 
 
 def fit_slopes(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, window: Window,

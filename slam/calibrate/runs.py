@@ -21,7 +21,7 @@ from slam.errors import GslamError
 from slam.pipeline import MappingPipeline
 from validation.checks import UnaryCheck
 from validation.config import ValidationConfig
-from validation.observer_config import field_gyro_stream
+from validation.observer_config import field_gyro_stream, gps_course_limits
 from validation.observers import unary_checks
 from validation.streams import StepStreams, Stream, fixed_rate_steps, resample_streams, validation_streams
 
@@ -75,7 +75,8 @@ def load_run(path: str | Path, config: PipelineConfig, vcfg: ValidationConfig, c
     rec, kt = pipe.recording, pipe.measurements.t
     obs = vcfg.observers
     streams = validation_streams(rec, pipe.frontend.poses if pipe.frontend is not None else None,
-                                 obs.gps_speed_window_s, vcfg.window, field_gyro_stream(obs))
+                                 obs.gps_speed_window_s, vcfg.window, field_gyro_stream(obs),
+                                 gps_course_limits(obs))
     step_t = fixed_rate_steps(float(kt[0]), float(kt[-1]), vcfg.rate_hz)
     steps = resample_streams(streams, step_t, obs.max_gap_s, obs.stream_max_gap_s, obs.gap_periods)
     mask = np.ones(len(step_t), dtype=bool)

@@ -21,7 +21,9 @@ configured ``window_s`` (none shorter than four samples of its sparser
 stream, each a whole number of step pairs) and keeps the one whose smallest visible change over a window is
 least (``b * w`` for a trend, ``k_sigma * sigma_floor`` for a residual).
 An offset relation keeps its window and ``level_window_s``: how long a
-standing offset may last and still be seen is the user's choice.
+standing offset may last and still be seen is the user's choice. One with
+a level of 0 (``level_window_s`` null: two absolute streams) also keeps
+its gain, and its noise is the spread of the difference itself.
 ``th`` is first sought no longer than the configured one (how long an
 error must last to count is the user's choice, and a short one is missed
 with a long ``th``), then longer. ``max_counter`` is ``th + 20``.
@@ -71,6 +73,8 @@ class Choice:
     alarm: float
     visible: float
     met: bool
+    offset: tuple[float, float] | None = None
+    """An offset relation's ``(median difference, steps)`` its noise was measured over."""
 
 
 def _traces(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg: ValidationConfig):
@@ -134,6 +138,7 @@ def calibrate_relation(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg
     None when no run has both its streams."""
     a, b = rel.streams
     best: Choice | None = None
+    bias = None
     windows = candidate_windows(runs, rel, vcfg.rate_hz) if rel.kind != "offset" else [rel.window_s]
     for w in windows:
         fit = fit_rates(runs, a, b, w, vcfg.window, vcfg.rate_hz, rel.gain)
@@ -156,10 +161,14 @@ def calibrate_relation(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg
                                 threshold=th, max_counter=th + COUNTER_HEADROOM)
 
         else:
-            noise = fit_offset(runs, a, b, fit.gain, rel.level_window_s, vcfg.window, fit.inliers)
+            # Two absolute streams (a level of 0) keep their gain: a gain
+            # fitted to their changes would scale a heading by it.
+            gain = rel.gain if rel.level_window_s is None else sig(fit.gain)
+            noise, median, count = fit_offset(runs, a, b, gain, rel.level_window_s, vcfg.window, fit.inliers)
+            bias = (median, count)
 
             def make(m: float, th: int) -> RelationConfig:
-                return _updated(rel, gain=sig(fit.gain), sigma_floor=sig(noise), k_sigma=m,
+                return _updated(rel, gain=gain, sigma_floor=sig(noise), k_sigma=m,
                                 threshold=th, max_counter=th + COUNTER_HEADROOM)
 
         if not noise > 0.0:  # no step to learn from in this window
@@ -167,7 +176,7 @@ def calibrate_relation(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg
         multiples = CUSUM_LIMITS if rel.kind == "cusum" else MULTIPLES
         chosen, multiple, alarm, met = _search(runs, make, vcfg, fit.inliers, target, max(rel.threshold, 1), multiples)
         visible = multiple * noise * (w if rel.kind == "trend" else 1.0)
-        choice = Choice(chosen, fit, noise, multiple, alarm, visible, met)
+        choice = Choice(chosen, fit, noise, multiple, alarm, visible, met, bias)
         if best is None or (met and not best.met) or (met == best.met and visible < best.visible / TIE):
             best = choice
     if best is not None:

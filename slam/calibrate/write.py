@@ -28,7 +28,9 @@ def _flow(rel: RelationConfig) -> str:
     every value that differs from the default."""
     data = rel.model_dump(mode="json")
     default = {k: f.default for k, f in RelationConfig.model_fields.items()}
-    shown = {k: v for k, v in data.items() if k in _KEEP or (v is not None and v != default.get(k))}
+    # None is shown where the default is not (an offset relation's level of 0).
+    shown = {k: v for k, v in data.items()
+             if k in _KEEP or (v != default.get(k) and (v is not None or default.get(k) is not None))}
     return yaml.safe_dump([shown], default_flow_style=None, width=10_000, sort_keys=False).strip()
 
 
@@ -39,11 +41,18 @@ def _pct(x: float) -> str:
 def _relation_comment(c: Choice, target: float, runs: int) -> list[str]:
     rel, fit = c.relation, c.fit
     unit = "rad" if "yaw" in rel.stream_b else "m"
-    lines = [
-        f"{rel.name} ({rel.kind}): {rel.stream_b} against {rel.stream_a} over {fit.window_s:g} s windows: "
-        f"gain {fit.gain:.4f}, offset {fit.rate_offset:.3g} {unit}/s, residual noise {fit.noise:.3g} {unit} "
-        f"(robust sd over {fit.steps} steps of {runs} run{'s' if runs > 1 else ''}, correlation {fit.corr:.3f})",
-    ]
+    of_runs = f"{runs} run{'s' if runs > 1 else ''}"
+    absolute = rel.kind == "offset" and rel.level_window_s is None
+    if absolute:
+        median, steps = c.offset
+        lines = [f"{rel.name} (offset, level 0): {rel.stream_b} - {rel.gain:g} x {rel.stream_a}: median {median:.3g} {unit}, "
+                 f"robust sd {c.noise:.3g} {unit} over {steps} steps of {of_runs}; band k_sigma = {c.multiple:g} sds"]
+    else:
+        lines = [
+            f"{rel.name} ({rel.kind}): {rel.stream_b} against {rel.stream_a} over {fit.window_s:g} s windows: "
+            f"gain {fit.gain:.4f}, offset {fit.rate_offset:.3g} {unit}/s, residual noise {fit.noise:.3g} {unit} "
+            f"(robust sd over {fit.steps} steps of {of_runs}, correlation {fit.corr:.3f})",
+        ]
     if rel.kind == "trend":
         lines.append(f"slopes differ by {c.noise:.3g} {unit}/s (robust sd): b = {c.multiple:g} x that; "
                      f"smallest visible change {c.visible:.3g} {unit} over the window")
@@ -52,10 +61,10 @@ def _relation_comment(c: Choice, target: float, runs: int) -> list[str]:
     elif rel.kind == "cusum":
         lines.append(f"CUSUM of the residual in sds, forgetting {rel.cusum_drift:g} a step: limit k_sigma = {c.multiple:g}; "
                      f"sds grow by sigma_rel {rel.sigma_rel:.3g} of the motion")
-    else:
+    elif not absolute:
         lines.append(f"difference about its {rel.level_window_s:g} s running level: {c.noise:.3g} {unit} "
                      f"(robust sd); band k_sigma = {c.multiple:g} sds")
-    if fit.gain < 0:
+    if fit.gain < 0 and not absolute:
         lines.append("WARNING: the streams turn opposite ways (negative gain): check input.frames")
     met = "" if c.met else f"; the target of {_pct(target)} could not be met with any candidate"
     lines.append(f"th {rel.threshold} steps: NO_MATCH on {_pct(c.alarm)} of the learning steps "
