@@ -51,11 +51,28 @@ def test_learns_the_odometry_offset_within_a_step(offset):
         assert "RMS changes by" in lag.why_not()
 
 
+def test_several_runs_give_one_offset_each_with_its_own_gyro_bias():
+    """The offset is a sensor's: learnt over every run's steps, each run's
+    rate difference about its own mean (its gyro's bias)."""
+    biased = lagged_run(0.1, seed=1)
+    gyro = biased.streams["gyro_yaw"]
+    biased.streams["gyro_yaw"] = Stream(gyro.t, gyro.values + 0.02 * gyro.t)  # 1.1 deg/s of bias
+    straight = lagged_run(0.1, seed=2)
+    for name in ("gyro_yaw", "odo_yaw"):  # a run that never turns cannot date the odometry alone
+        s = straight.streams[name]
+        straight.streams[name] = Stream(s.t, np.zeros(len(s.t)), angular=s.angular)
+    (alone,) = learn_lags([straight])
+    assert not alone.moving and not alone.proposed
+    (lag,) = learn_lags([straight, biased, lagged_run(0.1, seed=3)])
+    assert lag.steps == 3 * alone.steps and lag.proposed
+    assert lag.offset_s == pytest.approx(0.1, abs=0.02)
+
+
 def test_reading_the_stream_at_its_offset_removes_the_lag():
     run = lagged_run(0.1)
     odo = run.streams["odo_yaw"]
     moved = Stream(odo.t + 0.1, odo.values, angular=True)  # what input.time_offsets_s.odometry=0.1 reads
-    lag = estimate_lag(moved, run.streams["gyro_yaw"], run.steps.t, "odometry", "gyro")
+    lag = estimate_lag([(moved, run.streams["gyro_yaw"], run.steps.t)], "odometry", "gyro")
     assert abs(lag.offset_s) < 0.01 and not lag.proposed
 
 

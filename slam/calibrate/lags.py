@@ -100,59 +100,75 @@ def _rate(stream: Stream, t: np.ndarray) -> np.ndarray:
     return (np.interp(t + half, stream.t, stream.values) - np.interp(t - half, stream.t, stream.values)) / RATE_WINDOW_S
 
 
-def _rms(a: np.ndarray, b: np.ndarray) -> float:
-    d = a - b
-    return float(np.sqrt(np.mean((d - d.mean()) ** 2)))
+Piece = tuple[Stream, Stream, np.ndarray]
+"""One run's share: the stream, the reference (both unwrapped) and its learning times (s)."""
 
 
-def _best(stream: Stream, ref_rate: np.ndarray, t: np.ndarray, grid: np.ndarray) -> tuple[float, np.ndarray]:
-    """Steps 2-3: the refined offset and the RMS at each grid offset."""
-    rms = np.array([_rms(_rate(stream, t - o), ref_rate) for o in grid])
+def _rms(pieces: Sequence[Piece], offset_s: float) -> float:
+    """RMS over every piece of the rate difference about each piece's own
+    mean (each run has its own gyro bias), the stream read ``offset_s`` earlier."""
+    sq, n = 0.0, 0
+    for stream, reference, t in pieces:
+        d = _rate(stream, t - offset_s) - _rate(reference, t)
+        sq += float(np.sum((d - d.mean()) ** 2))
+        n += len(d)
+    return float(np.sqrt(sq / n))
+
+
+def _best(pieces: Sequence[Piece], grid: np.ndarray) -> float:
+    """Steps 2-3: the refined offset."""
+    rms = np.array([_rms(pieces, o) for o in grid])
     k = int(np.argmin(rms))
     if 0 < k < len(grid) - 1:
         y0, y1, y2 = rms[k - 1] ** 2, rms[k] ** 2, rms[k + 1] ** 2
         curve = y0 - 2.0 * y1 + y2
         step = grid[1] - grid[0]
         shift = 0.5 * (y0 - y2) / curve if curve > 0 else 0.0
-        return float(grid[k] + np.clip(shift, -0.5, 0.5) * step), rms
-    return float(grid[k]), rms
+        return float(grid[k] + np.clip(shift, -0.5, 0.5) * step)
+    return float(grid[k])
 
 
 def _period(stream: Stream) -> float:
     return float(np.median(np.diff(stream.t))) if len(stream.t) > 1 else np.inf
 
 
-def estimate_lag(stream: Stream, reference: Stream, t: np.ndarray, name: str = "", ref_name: str = "") -> LagEstimate | None:
-    """The offset of ``stream`` against ``reference`` (module docstring) over
-    the times ``t`` (s); None when fewer than 20 times lie where both
+def estimate_lag(pieces: Sequence[Piece], name: str = "", ref_name: str = "") -> LagEstimate | None:
+    """The offset of a stream against a reference (module docstring) over
+    ``pieces``, one ``(stream, reference, times)`` per run: one offset for
+    all (it is the sensor's); the halves are the first and the second half
+    of every run's times. None when fewer than 20 times lie where both
     streams cover every candidate."""
-    stream, reference = _unwrapped(stream), _unwrapped(reference)
-    grid_s = max(_period(stream), _period(reference))
+    pieces = [(_unwrapped(s), _unwrapped(r), np.asarray(t, float)) for s, r, t in pieces]
+    grid_s = max((max(_period(s), _period(r)) for s, r, _ in pieces), default=np.inf)
     if not np.isfinite(grid_s) or grid_s <= 0:
         return None
     n = int(np.floor(MAX_LAG_S / grid_s))
     grid = np.arange(-n, n + 1) * grid_s
     margin = MAX_LAG_S + RATE_WINDOW_S
-    lo = max(stream.t[0], reference.t[0]) + margin
-    hi = min(stream.t[-1], reference.t[-1]) - margin
-    t = t[(t >= lo) & (t <= hi)]
-    if len(t) < 20 or n < 1:
+    inside = []
+    for s, r, t in pieces:
+        lo = max(s.t[0], r.t[0]) + margin
+        hi = min(s.t[-1], r.t[-1]) - margin
+        if (t := t[(t >= lo) & (t <= hi)]).size >= 2:
+            inside.append((s, r, t))
+    steps = sum(len(t) for _, _, t in inside)
+    if steps < 20 or n < 1:
         return None
-    ref_rate = _rate(reference, t)
-    offset, rms = _best(stream, ref_rate, t, grid)
-    mid = len(t) // 2
-    halves = tuple(_best(stream, _rate(reference, part), part, grid)[0] for part in (t[:mid], t[mid:]))
-    after = _rate(stream, t - offset)
+    offset = _best(inside, grid)
+    halves = tuple(_best([(s, r, t[: len(t) // 2] if first else t[len(t) // 2 :]) for s, r, t in inside], grid)
+                   for first in (True, False))
+    after = np.concatenate([_rate(s, t - offset) for s, _, t in inside])
+    ref_rate = np.concatenate([_rate(r, t) for _, r, t in inside])
     corr = float(np.corrcoef(after, ref_rate)[0, 1]) if np.std(after) > 0 and np.std(ref_rate) > 0 else 0.0
-    return LagEstimate(name, ref_name, offset, _rms(_rate(stream, t), ref_rate), _rms(after, ref_rate), corr,
-                       (float(halves[0]), float(halves[1])), float(grid_s), len(t))
+    return LagEstimate(name, ref_name, offset, _rms(inside, 0.0), _rms(inside, offset), corr,
+                       (float(halves[0]), float(halves[1])), float(grid_s), steps)
 
 
 def learn_lags(runs: Sequence[CalibrationRun], reference: str = "gyro") -> list[LagEstimate]:
     """The offset of every yaw stream against ``reference`` (an
     ``input.time_offsets_s`` key of a yaw stream) over the learning steps
-    of the first run that has both (the config holds one offset per
-    stream). ``reference`` ``none``: none measured."""
+    of every run that has both: one offset per stream, as the config holds.
+    ``reference`` ``none``: none measured."""
     if reference == "none":
         return []
     if reference not in YAW_STREAMS:
@@ -161,12 +177,8 @@ def learn_lags(runs: Sequence[CalibrationRun], reference: str = "gyro") -> list[
     for name, stream_name in YAW_STREAMS.items():
         if name == reference:
             continue
-        for run in runs:
-            ref, own = run.streams.get(YAW_STREAMS[reference]), run.streams.get(stream_name)
-            if ref is None or own is None:
-                continue
-            est = estimate_lag(own, ref, run.steps.t[run.clean], name, reference)
-            if est is not None:
-                found.append(est)
-                break
+        pieces = [(run.streams[stream_name], run.streams[YAW_STREAMS[reference]], run.steps.t[run.clean])
+                  for run in runs if stream_name in run.streams and YAW_STREAMS[reference] in run.streams]
+        if pieces and (est := estimate_lag(pieces, name, reference)) is not None:
+            found.append(est)
     return found
