@@ -114,3 +114,15 @@ def field_body(yaw: np.ndarray, strength_T, dip_rad, declination_rad: float = 0.
     rel = north - yaw  # that direction in the body frame
     h = strength_T * np.cos(dip_rad)
     return np.column_stack([h * np.cos(rel), h * np.sin(rel), -strength_T * np.sin(dip_rad) * np.ones_like(yaw)])
+
+
+def wall_ranges(walls: list[tuple[float, float, float]], n: int = 360) -> tuple[np.ndarray, np.ndarray]:
+    """Ranges (n,) and beam angles (n,) of a laser at the origin to infinite
+    lines ``n_x x + n_y y = d`` (inf where a beam hits none)."""
+    angles = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    r = np.full(n, np.inf)
+    for nx, ny, d in walls:
+        along = nx * np.cos(angles) + ny * np.sin(angles)
+        with np.errstate(divide="ignore"):
+            r = np.minimum(r, np.where(along > 1e-6, d / along, np.inf))
+    return r, angles

@@ -19,6 +19,7 @@ from slam.io.readers import read_recording
 from slam.recording import Trajectory
 from tests.bagfactory import ned_driving_bag
 from tests.conftest import CONFIGS, real_data
+from tests.synthetic import wall_ranges
 
 
 # --- the fault syntax ------------------------------------------------------------------
@@ -81,15 +82,9 @@ def test_slip_scales_the_increments_of_its_interval_and_moves_what_follows():
     assert same[0] == pytest.approx(x) and same[1] == pytest.approx(0.1 * t**2) and same[2] == pytest.approx(0.2 * t)
 
 
-def _scan(walls: list[tuple[float, float, float]], n: int = 360) -> tuple[np.ndarray, np.ndarray]:
-    """Ranges of a laser at the origin to infinite lines ``n_x x + n_y y = d``."""
-    angles = np.linspace(-np.pi, np.pi, n, endpoint=False)
-    r = np.full(n, np.inf)
-    for nx, ny, d in walls:
-        along = nx * np.cos(angles) + ny * np.sin(angles)
-        with np.errstate(divide="ignore"):
-            hit = np.where(along > 1e-6, d / along, np.inf)
-        r = np.minimum(r, hit)
+def _scan(walls: list[tuple[float, float, float]]) -> tuple[np.ndarray, np.ndarray]:
+    """One scan (1, n) of a laser at the origin to the lines ``walls``, and its angles."""
+    r, angles = wall_ranges(walls)
     return r[None], angles
 
 

@@ -15,23 +15,13 @@ from slam.inject.spec import parse_fault
 from slam.pipeline import run_map
 from slam.recording import Scans
 from tests.conftest import TELEMAX_CONFIG
+from tests.synthetic import wall_ranges
 from validation.checks import ScanDegeneracyCheck, scan_streams, unary_checks
 from validation.errors import ValidationError
 from validation.model import Plausibility
 from validation.observers import ObserversConfig, observe_steps
 from validation.observer_config import observers_config
 from validation.streams import resample_streams
-
-
-def _ranges(walls: list[tuple[float, float, float]], n: int = 360) -> tuple[np.ndarray, np.ndarray]:
-    """Ranges of a laser at the origin to infinite lines ``n_x x + n_y y = d``."""
-    angles = np.linspace(-np.pi, np.pi, n, endpoint=False)
-    r = np.full(n, np.inf)
-    for nx, ny, d in walls:
-        along = nx * np.cos(angles) + ny * np.sin(angles)
-        with np.errstate(divide="ignore"):
-            r = np.minimum(r, np.where(along > 1e-6, d / along, np.inf))
-    return r, angles
 
 
 CORRIDOR = [(0.0, 1.0, 1.5), (0.0, -1.0, 1.5)]
@@ -42,7 +32,7 @@ def _scans(kinds: list[str]) -> Scans:
     """One scan a second: ``room``, ``corridor`` (walls left and right) or ``blind``."""
     rows = []
     for kind in kinds:
-        r, angles = _ranges(ROOM if kind != "corridor" else CORRIDOR)
+        r, angles = wall_ranges(ROOM if kind != "corridor" else CORRIDOR)
         rows.append(np.full_like(r, np.inf) if kind == "blind" else r)
     return Scans(np.arange(len(kinds), dtype=float), np.array(rows, dtype=np.float32), angles, 0.1, 30.0)
 
