@@ -62,8 +62,8 @@ def _window_turn(t: np.ndarray, yaw: np.ndarray, at: np.ndarray, window_s: float
 
 def gps_course(
     t: np.ndarray,
-    x: np.ndarray,
-    y: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
     odo_yaw: tuple[np.ndarray, np.ndarray],
     odo_forward: tuple[np.ndarray, np.ndarray],
     window_s: float,
@@ -71,12 +71,12 @@ def gps_course(
     min_speed_mps: float,
     max_turn_rad: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(t, course)`` at the fixes (s, strictly increasing ``t``; x/y in m)
-    where the course is the heading (module docstring); ``course`` is
-    wrapped to (-pi, pi]. ``odo_yaw`` is the odometry's ``(t, yaw)`` (s,
-    rad), ``odo_forward`` its ``(t, cumulative forward travel)`` (s, m)."""
-    vx = derive_stream(t, x, window_s, window)
-    vy = derive_stream(t, y, window_s, window)
+    """``(t, course)`` at the fixes (s, strictly increasing ``t``) where the
+    course is the heading (module docstring); ``vx``, ``vy`` (m/s) are the
+    regression slopes of the fixes' x and y over the window, as
+    ``gps_speed`` takes them; ``course`` is wrapped to (-pi, pi].
+    ``odo_yaw`` is the odometry's ``(t, yaw)`` (s, rad), ``odo_forward`` its
+    ``(t, cumulative forward travel)`` (s, m)."""
     course = np.arctan2(vy, vx)
     keep = np.hypot(vx, vy) >= min_speed_mps
     # The odometry must cover the whole window for its turn and direction to count.

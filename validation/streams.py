@@ -203,17 +203,16 @@ def _trajectory_streams(prefix: str, traj: PoseSeries, streams: dict[str, Stream
     streams[f"{prefix}_lateral"] = _clean(f"{prefix}_lateral", traj.t, lateral_travel(traj.x, traj.y, traj.yaw))
 
 
-def _window_speed(x: Stream, y: Stream, window_s: float, window: Window) -> np.ndarray:
-    """Norm of the regression slopes (Algorithm 2) of ``x`` and ``y`` over ``window_s``."""
-    return np.hypot(derive_stream(x.t, x.values, window_s, window), derive_stream(y.t, y.values, window_s, window))
+def _window_velocity(x: Stream, y: Stream, window_s: float, window: Window) -> tuple[np.ndarray, np.ndarray]:
+    """The regression slopes (Algorithm 2) of ``x`` and ``y`` over ``window_s``."""
+    return derive_stream(x.t, x.values, window_s, window), derive_stream(y.t, y.values, window_s, window)
 
 
-def _course_stream(x: Stream, y: Stream, streams: Mapping[str, Stream], window_s: float, window: Window,
-                   course: tuple[float, float]) -> Stream:
+def _course_stream(t: np.ndarray, velocity: tuple[np.ndarray, np.ndarray], streams: Mapping[str, Stream],
+                   window_s: float, window: Window, course: tuple[float, float]) -> Stream:
     yaw, forward = streams["odo_yaw"], streams["odo_forward"]
-    t, values = gps_course(x.t, x.values, y.values, (yaw.t, yaw.values), (forward.t, forward.values),
-                           window_s, window, *course)
-    return Stream(t, values, angular=True)
+    kept, values = gps_course(t, *velocity, (yaw.t, yaw.values), (forward.t, forward.values), window_s, window, *course)
+    return Stream(kept, values, angular=True)
 
 
 def validation_streams(
@@ -263,16 +262,17 @@ def validation_streams(
         o = recording.odometry
         x, y = _clean("odo_x", o.t, o.x), _clean("odo_y", o.t, o.y)
         if len(x.t) == len(y.t) and len(x.t) >= 2:
-            streams["odo_fix_speed"] = Stream(x.t, _window_speed(x, y, gps_speed_window_s, window))
+            streams["odo_fix_speed"] = Stream(x.t, np.hypot(*_window_velocity(x, y, gps_speed_window_s, window)))
     if recording.gps is not None:
         gps = recording.gps
         fix = np.asarray(gps.status) >= 0
         x = _clean("gps_x", gps.t[fix], gps.x[fix])
         y = _clean("gps_y", gps.t[fix], gps.y[fix])
         if len(x.t) == len(y.t) and len(x.t) >= 2:
-            streams["gps_speed"] = Stream(x.t, _window_speed(x, y, gps_speed_window_s, window))
+            velocity = _window_velocity(x, y, gps_speed_window_s, window)  # for the speed and the course
+            streams["gps_speed"] = Stream(x.t, np.hypot(*velocity))
             if "odo_forward" in streams:
-                streams["gps_course"] = _course_stream(x, y, streams, gps_speed_window_s, window, course)
+                streams["gps_course"] = _course_stream(x.t, velocity, streams, gps_speed_window_s, window, course)
         streams["gps_sigma"] = _clean("gps_sigma", gps.t[fix], gps.sigma[fix])
     logger.info("validation streams: %s", ", ".join(sorted(streams)))
     return streams
