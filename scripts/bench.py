@@ -525,4 +525,6 @@ def write_report(report: Report, out: Path) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from slam.errors import run_script
+
+    run_script("bench", main)

@@ -315,4 +315,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from slam.errors import run_script
+
+    run_script("bench_broad", main)

@@ -247,4 +247,6 @@ def table(rows: list[dict], rates: dict[str, float]) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    from slam.errors import run_script
+
+    run_script("bench_carmen_cuts", main)

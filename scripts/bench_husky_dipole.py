@@ -237,4 +237,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from slam.errors import run_script
+
+    run_script("bench_husky_dipole", main)

@@ -44,6 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from slam.config import load_config  # noqa: E402
 from slam.inject import inject  # noqa: E402
+from slam.inject.spec import parse_fault  # noqa: E402
 from slam.io.atomic import write_text  # noqa: E402
 from slam.io.datasets import data_root  # noqa: E402
 from slam.pipeline import run_map  # noqa: E402
@@ -85,6 +86,8 @@ def main() -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     for noisy in ("slam", "validation"):
         logging.getLogger(noisy).setLevel(logging.ERROR)
+    for fault in args.faults:  # every spec checked before any work
+        parse_fault(fault)
     bag = (args.data or data_root()) / "rosbag/test1_husky_2015.bag"
     config = load_config(args.config, ["validation.mode=on", "output.plots=false"])
     rows = []
@@ -125,4 +128,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from slam.errors import run_script
+
+    run_script("bench_husky_faults", main)

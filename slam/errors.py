@@ -9,3 +9,19 @@ a traceback is reserved for bugs.
 
 class GslamError(Exception):
     """A user-facing error: bad input, bad config, missing data."""
+
+
+def run_script(name: str, main) -> None:
+    """Run a script's ``main()`` and exit with its code; bad input (a
+    :class:`GslamError` or a validation config error) ends it with one line
+    on stderr and code 1, as the CLI does, instead of a traceback."""
+    import sys
+
+    from validation.errors import ValidationError
+
+    try:
+        code = main()
+    except (GslamError, ValidationError) as e:
+        print(f"{name}: error: {e}", file=sys.stderr)
+        sys.exit(1)
+    sys.exit(code or 0)
