@@ -1,6 +1,7 @@
 """The Husky bag (robot_localization's test1.bag): ungated vs gated mapping
 with gyro, IMU yaw as compass and wheel odometry, GPS as the reference only
-and, in a second variant, as a factor.
+and, in a second variant, as a factor; against the robust kernels of
+``configs/variants.yaml`` and the map without the compass.
 
     python scripts/bench_husky.py [--bag PATH] [--config configs/datasets/husky.yaml]
                                   [--out runs/bench_husky]
@@ -42,6 +43,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from slam.compare import load_variants  # noqa: E402
 from slam.config import PipelineConfig, load_config  # noqa: E402
 from slam.evaluation import ate  # noqa: E402
 from slam.geometry import wrap_angle  # noqa: E402
@@ -57,6 +59,7 @@ COURSE_LAG = 5            # fixes (2 s at 2.5 Hz)
 MIN_SPEED_M_S = 0.5
 WRONG_DEG = 15.0
 ROOT = Path(__file__).resolve().parents[1]
+KERNELS = ("huber", "cauchy", "dcs", "gnc_tls", "gnc_gm")  # ungated, in configs/variants.yaml
 
 
 @dataclass
@@ -235,6 +238,10 @@ def main(argv: list[str] | None = None) -> int:
         "gated": ["validation.mode=on"],
         "ungated + GPS factor": ["backend.factors.gps.enabled=true"],
         "gated + GPS factor": ["backend.factors.gps.enabled=true", "validation.mode=on"],
+        # The alternatives a user tries first: the robust kernels of `gslam
+        # compare` (configs/variants.yaml), and the map without the compass.
+        **load_variants(ROOT / "configs/variants.yaml", list(KERNELS)),
+        "without the compass": ["backend.factors.compass.enabled=false"],
     }
     for name, overrides in variants.items():
         cfg = load_config(args.config, ["output.progress=false", *overrides])
