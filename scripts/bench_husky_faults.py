@@ -22,7 +22,10 @@ detected and the delay, and the share of the *judged* steps that blame any
 sensor: after ``JUDGED_FROM_S``, outside the real drift and outside each
 label and the ``AFTER_LABEL_S`` after it. The first row maps the bag
 without a fault: its judged alarms are the validator's own false alarms
-(and the bag's real events: wheel slips at 317 and 350 s).
+(and the bag's real events: wheel slips at 317 and 350 s). Then the map:
+ATE against the bag's own GPS fixes (``scripts/bench_husky.py``; the
+injected fixes are not the reference) gated, ungated and with the best of
+the robust kernels of ``configs/variants.yaml`` on that bag.
 
 ``--faults`` injects others (``gslam inject`` syntax), to choose a config
 on faults other than the reported ones. Writes ``husky_faults.md``.
@@ -42,11 +45,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from scripts.bench_husky import KERNELS, ate_vs_gps  # noqa: E402
+from slam.compare import load_variants  # noqa: E402
 from slam.config import load_config  # noqa: E402
 from slam.inject import inject  # noqa: E402
 from slam.inject.spec import parse_fault  # noqa: E402
 from slam.io.atomic import write_text  # noqa: E402
 from slam.io.datasets import data_root  # noqa: E402
+from slam.io.readers import read_recording  # noqa: E402
 from slam.pipeline import run_map  # noqa: E402
 
 log = logging.getLogger("bench_husky_faults")
@@ -90,6 +96,11 @@ def main() -> None:
         parse_fault(fault)
     bag = (args.data or data_root()) / "rosbag/test1_husky_2015.bag"
     config = load_config(args.config, ["validation.mode=on", "output.plots=false"])
+    kernels = load_variants(ROOT / "configs/variants.yaml", list(KERNELS))
+    ungated = ["validation.mode=off", "output.plots=false"]
+    others = {"ungated": load_config(args.config, ungated),
+              **{name: load_config(args.config, [*ungated, *over]) for name, over in kernels.items()}}
+    gps = read_recording(bag, config.input).gps  # the reference, as recorded
     rows = []
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
@@ -102,6 +113,9 @@ def main() -> None:
                 run, labels = injected.run_dir, injected.faults
             res = run_map(run, config, tmp / f"map_{i}")
             m, v = res.metrics, res.validation
+            ate = {name: ate_vs_gps(run_map(run, c, tmp / f"map_{i}_{name}").trajectory, gps)[0]
+                   for name, c in others.items()}
+            best = min(kernels, key=ate.get)
             intervals = [iv for ivs in labels.values() for iv in ivs]
             share, steps = judged_alarms(v, intervals)
             delays = m.get("detection_delay_s") or {}
@@ -112,15 +126,19 @@ def main() -> None:
                 "detected": f"{m.get('faults_detected') or 0}/{(m.get('faults_detected') or 0) + (m.get('faults_missed') or 0)}",
                 "delay_s": min((d for d in delays.values() if d is not None), default=None),
                 "judged_alarms": share, "judged_steps": steps,
+                "ate_gated_m": ate_vs_gps(res.trajectory, gps)[0], "ate_ungated_m": ate["ungated"],
+                "best_kernel": best, "ate_kernel_m": ate[best],
             })
             log.info("%s", rows[-1])
     f = lambda x: "–" if x is None else f"{x:.3f}"  # noqa: E731
     out = io.StringIO()
     out.write(f"Config: {args.config}\n\n| fault | labelled | recall | precision | intervals detected | delay s | "
-              "judged steps blaming a sensor | judged steps |\n|---|---|---|---|---|---|---|---|\n")
+              "judged steps blaming a sensor | judged steps | ATE vs GPS gated m | ungated m | best kernel m |\n"
+              "|---|---|---|---|---|---|---|---|---|---|---|\n")
     for r in rows:
         out.write(f"| {r['fault']} | {r['label']} | {f(r['recall'])} | {f(r['precision'])} | {r['detected']} | "
-                  f"{f(r['delay_s'])} | {f(r['judged_alarms'])} | {r['judged_steps']} |\n")
+                  f"{f(r['delay_s'])} | {f(r['judged_alarms'])} | {r['judged_steps']} | {r['ate_gated_m']:.2f} | "
+                  f"{r['ate_ungated_m']:.2f} | {r['ate_kernel_m']:.2f} ({r['best_kernel']}) |\n")
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "husky_faults.md", out.getvalue())
     print(out.getvalue())

@@ -172,14 +172,15 @@ class GraphBuilder:
                     continue
                 meas = m.get(factor)
                 if factor == "gyro":
-                    noise = yaw_only_noise(meas.sigma[k] * w[0], self.robust["gyro"])
+                    noise = yaw_only_noise(meas.information_sigma[k] * w[0], self.robust["gyro"])
                     out.append(yaw_increment_factor(k, meas.value[k], noise))
                 else:
                     noise = gaussian(meas.sigma[k] * w, self.robust[factor])
                     out.append(between_factor(k, self._patched(factor, k, w, relative), noise))
                 self.counts[factor] += 1
         if self._available("compass", k) and np.isfinite(w := self._weight("compass", k)[0]):
-            out.append(yaw_prior_factor(k, m.compass.value[k], gaussian([m.compass.sigma[k] * w], self.robust["compass"])))
+            noise = gaussian([m.compass.information_sigma[k] * w], self.robust["compass"])
+            out.append(yaw_prior_factor(k, m.compass.value[k], noise))
             self.counts["compass"] += 1
         if self._available("gps", k) and np.any(np.isfinite(w := self._weight("gps", k))):
             out.append(position_prior_factor(k, m.gps.xy[k], gaussian(m.gps.sigma[k] * w, self.robust["gps"])))

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import platform
 import sys
@@ -106,6 +107,10 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         if not any(a.stream == lag.stream for a in res.applied):
             print(f"  time offset of {lag.stream} against {lag.reference}: {lag.offset_s:+.3f} s, RMS of the rate "
                   f"difference {-100 * lag.gain:+.0f} %: kept as configured, {lag.why_not() or 'proposed (see the file)'}")
+    if res.compass_noise is not None:
+        n = res.compass_noise
+        print(f"  compass factor: sd {math.degrees(n.sd_rad):.3g} deg against the gyro, correlated over "
+              f"{n.correlation_s:.3g} s: written to backend.factors.compass")
     print(f"wrote {res.out} (target {100 * res.target_per_observer:.3f} % of steps per observer): "
           f"gslam map RUN --config {res.out} --out DIR --gating on")
     return 0

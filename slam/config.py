@@ -230,9 +230,18 @@ class GyroFactorConfig(FactorConfig):
 
 
 class CompassFactorConfig(FactorConfig):
-    """Absolute-yaw prior from the compass heading at the keyframe."""
+    """Absolute-yaw prior from the compass heading at the keyframe.
+
+    ``correlation_s``: how long the compass's error stays alike (an AHRS
+    heading's or a magnetic field's slow wander: the e-folding time of its
+    autocorrelation, which ``gslam calibrate`` measures). Priors at
+    keyframes ``dt`` apart then each carry ``sigma_yaw_deg * sqrt(2 *
+    correlation_s / dt)`` (at least ``sigma_yaw_deg``): a stretch of ``T``
+    seconds holds about ``T / (2 * correlation_s)`` independent errors, and
+    its priors together say no more than those. Null: independent errors."""
 
     sigma_yaw_deg: float = Field(3.0, gt=0.0)
+    correlation_s: float | None = Field(None, gt=0.0)
 
 
 class ScanMatchingFactorConfig(FactorConfig):

@@ -115,11 +115,22 @@ class BetweenMeasurement:
 @dataclass
 class ScalarMeasurement:
     """One value per step (K,) with its sigma (K,) and validity (K,):
-    a yaw increment (gyro), an absolute yaw (compass), rad."""
+    a yaw increment (gyro), an absolute yaw (compass), rad.
+
+    ``factor_sigma`` (K,): the sigma its factors carry where successive
+    errors are alike (the compass's ``correlation_s``), so that a stretch of
+    factors holds the information of its independent errors; None: ``sigma``.
+    ``sigma`` stays the error of one measurement."""
 
     value: np.ndarray
     sigma: np.ndarray
     valid: np.ndarray
+    factor_sigma: np.ndarray | None = None
+
+    @property
+    def information_sigma(self) -> np.ndarray:
+        """The sigma of its factors: ``factor_sigma``, else ``sigma``."""
+        return self.sigma if self.factor_sigma is None else self.factor_sigma
 
 
 @dataclass
@@ -206,7 +217,17 @@ def _compass(rec: Recording, t: np.ndarray, cfg, max_gap_s: float) -> ScalarMeas
     c = rec.compass
     yaw = wrap_angle(np.interp(t, c.t, np.unwrap(c.yaw)))
     sigma = np.full(len(t), np.radians(cfg.sigma_yaw_deg))
-    return ScalarMeasurement(value=yaw, sigma=sigma, valid=covered(c.t, t, max_gap_s))
+    factor_sigma = None
+    if cfg.correlation_s is not None and len(t) > 1:
+        factor_sigma = sigma * np.sqrt(np.maximum(1.0, 2.0 * cfg.correlation_s / np.maximum(keyframe_spacing(t), 1e-3)))
+    return ScalarMeasurement(value=yaw, sigma=sigma, valid=covered(c.t, t, max_gap_s), factor_sigma=factor_sigma)
+
+
+def keyframe_spacing(t: np.ndarray) -> np.ndarray:
+    """The time each keyframe stands for: half the span to its two
+    neighbours (the one neighbour's whole span at the ends), s; n >= 2."""
+    gaps = np.diff(t)
+    return np.concatenate(([gaps[0]], 0.5 * (gaps[1:] + gaps[:-1]), [gaps[-1]]))
 
 
 def _gps(rec: Recording, t: np.ndarray, cfg) -> PositionMeasurement:
@@ -289,14 +310,17 @@ def measurement_residuals(meas: Measurements, reference: Trajectory) -> dict[str
     return out
 
 
-def measurement_sigmas(meas: Measurements) -> dict[str, np.ndarray]:
-    """The configured sigma of every measurement, (K, dofs) per factor type."""
+def measurement_sigmas(meas: Measurements, information: bool = False) -> dict[str, np.ndarray]:
+    """The configured sigma of every measurement, (K, dofs) per factor type:
+    the error of one measurement, or with ``information`` the sigma its
+    factor carries (:attr:`ScalarMeasurement.information_sigma`)."""
     out: dict[str, np.ndarray] = {}
     for factor in FACTOR_TYPES:
         m = meas.get(factor)
         if m is None:
             continue
-        sigma = np.asarray(m.sigma, dtype=float)
+        sigma = np.asarray(m.information_sigma if information and isinstance(m, ScalarMeasurement) else m.sigma,
+                           dtype=float)
         dofs = len(FACTOR_DOFS[factor])
         out[factor] = sigma if sigma.ndim == 2 else np.repeat(sigma[:, None], dofs, axis=1)
     return out

@@ -118,6 +118,8 @@ def recheck(
     values = _values(first.trajectory)
     residuals = measurement_residuals(meas, first.trajectory)
     sigmas = measurement_sigmas(meas)
+    # A mean of n neighbours is as sure as n factors say (correlated errors average down less).
+    shared = measurement_sigmas(meas, information=True)
 
     # 1. Absolute measurements, one by one, and the mean of their
     #    neighbours: a disturbance ramps up and down, and its shoulders are
@@ -129,7 +131,7 @@ def recheck(
             continue
         rows = np.flatnonzero(mask.any(axis=1) & np.isfinite(residuals[factor]).any(axis=1))
         counts = dict.fromkeys(FACTOR_DOFS[factor], 0)
-        res, sig = residuals[factor], sigmas[factor]
+        res, sig, info = residuals[factor], sigmas[factor], shared[factor]
         for k in rows:
             if k == 0 and factor in (*BETWEEN, "gyro"):
                 continue
@@ -138,7 +140,7 @@ def recheck(
             near = (np.abs(meas.t - meas.t[k]) <= half) & np.isfinite(res).all(axis=1)
             n = int(near.sum())
             mean = res[near].mean(axis=0)
-            z_mean = mean / np.sqrt((sig[near] ** 2).mean(axis=0) / n + est**2)
+            z_mean = mean / np.sqrt((info[near] ** 2).mean(axis=0) / n + est**2)
             agree = mask[k] & (np.abs(z) <= k_sigma) & (np.abs(z_mean) <= k_sigma)
             weights[factor][k, agree] = 1.0
             for d in np.flatnonzero(agree):

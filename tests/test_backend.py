@@ -132,3 +132,47 @@ def test_yaw_increment_factor_weighs_only_the_yaw_with_exact_jacobians():
     assert rows.shape == (1, 6)
     np.testing.assert_allclose(np.abs(rows[0]), np.abs(numeric), atol=1e-6)
     np.testing.assert_allclose(numeric, [0, 0, -10, 0, 0, 10], atol=1e-6)
+
+
+def test_compass_priors_say_no_more_than_the_independent_errors_of_their_stretch():
+    from slam.config import FactorsConfig
+    from slam.measurements import build_measurements
+    from slam.recording import Compass, Recording
+
+    t = np.arange(0.0, 20.0, 0.1)
+    rec = Recording("r", compass=Compass(t, np.zeros(len(t))))
+    keyframes = np.array([0.0, 0.5, 1.0, 2.0, 3.0])  # spacing 0.5, 0.5, 0.75, 1.0, 1.0 s
+    white = build_measurements(rec, keyframes, FactorsConfig.model_validate({"compass": {"sigma_yaw_deg": 4.0}}))
+    np.testing.assert_allclose(white.compass.information_sigma, np.radians(4.0))
+    slow = FactorsConfig.model_validate({"compass": {"sigma_yaw_deg": 4.0, "correlation_s": 2.0}})
+    compass = build_measurements(rec, keyframes, slow).compass
+    np.testing.assert_allclose(compass.information_sigma,
+                               np.radians(4.0) * np.sqrt(4.0 / np.array([0.5, 0.5, 0.75, 1.0, 1.0])))
+    np.testing.assert_allclose(compass.sigma, np.radians(4.0))  # one heading's error is what it was
+    # Correlated for less than half a keyframe spacing: independent, the sigma as configured.
+    short = FactorsConfig.model_validate({"compass": {"sigma_yaw_deg": 4.0, "correlation_s": 0.1}})
+    np.testing.assert_allclose(build_measurements(rec, keyframes, short).compass.information_sigma, np.radians(4.0))
+
+
+def test_a_correlated_compass_pulls_the_heading_less():
+    """Forty compass priors 10 deg off a stiff gyro chain whose start is
+    held at 0: independent, they move the heading most of the way;
+    correlated over the whole stretch, they say no more than one."""
+    from slam.config import FactorsConfig
+    from slam.measurements import build_measurements
+    from slam.recording import Compass, Gyro, Recording
+
+    t = np.arange(0.0, 21.0, 0.1)
+    rec = Recording("r", gyro=Gyro(t, np.zeros(len(t))), compass=Compass(t, np.full(len(t), np.radians(10.0))))
+    keyframes = np.arange(0.0, 20.0, 0.5)
+    cfg = BackendConfig.model_validate({"initial_pose": "origin", "initial_sigma_yaw_deg": 5.0})
+    yaw = {}
+    for name, corr in (("independent", None), ("correlated", 20.0)):
+        factors = FactorsConfig.model_validate({"compass": {"sigma_yaw_deg": 5.0, "correlation_s": corr},
+                                                "gyro": {"sigma_yaw_deg": 0.01, "sigma_yaw_per_s_deg": 0.0}})
+        meas = build_measurements(rec, keyframes, factors)
+        yaw[name] = np.degrees(optimise(meas, np.zeros(3), cfg, unit_weights(len(keyframes))).trajectory.yaw[-1])
+    # The start's prior (0 +- 5 deg) against 40 priors of 10 +- 5 deg: 10 * 40 / 41 deg. Correlated over
+    # 20 s, each carries 5 * sqrt(2 * 20 / 0.5) deg: together 1/50 of information against 1/25, 10 / 3 deg.
+    assert yaw["independent"] == pytest.approx(10.0 * 40 / 41, abs=0.05)
+    assert yaw["correlated"] == pytest.approx(10.0 / 3, abs=0.05)

@@ -114,6 +114,8 @@ def test_calibrate_writes_a_config_that_maps_other_runs(short_run, tmp_path, cap
     assert learnt["yaw_gyro_sm_res"]["sigma_floor"] != given["yaw_gyro_sm_res"]["sigma_floor"]
     assert learnt["speed_gps_odo"] == given["speed_gps_odo"]  # no GPS in the run: kept, and said so
     assert "speed_gps_odo: not calibrated" in text
+    # 10 s is too short to measure how long the compass's error lasts: its factor is kept.
+    assert config.backend.factors.compass == load_config(TELEMAX_CONFIG).backend.factors.compass
     # An earlier result is replaced; the config it maps with is the one written.
     assert main(["-q", "calibrate", str(short_run.run_dir), "--config", str(TELEMAX_CONFIG), "--clean", "0:10",
                  "--out", str(out)]) == 0
@@ -134,3 +136,58 @@ def test_calibrate_refuses_what_it_cannot_learn_from(short_run, tmp_path):
     no_model.write_text(yaml.safe_dump(tree))
     with pytest.raises(GslamError, match="validation.model"):
         calibrate([short_run.run_dir], no_model, tmp_path / "a.yaml")
+
+
+def heading_run(tau_s: float, sd_rad: float, seed: int = 0, duration_s: float = 600.0,
+                clean: tuple[float, float] | None = None) -> CalibrationRun:
+    """A turning robot's integrated gyro heading (with a bias: a line) and a
+    compass that reads it plus an error with correlation time ``tau_s``
+    (first-order Gauss-Markov, sd ``sd_rad``)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration_s, 0.1)
+    heading = 0.8 * np.sin(t / 13.0) + 0.3 * np.sin(t / 3.1)
+    a = np.exp(-0.1 / tau_s)
+    err = np.zeros(len(t))
+    err[0] = rng.normal(0.0, sd_rad)
+    for k in range(1, len(t)):
+        err[k] = a * err[k - 1] + rng.normal(0.0, sd_rad * np.sqrt(1.0 - a * a))
+    streams = {"gyro_yaw": Stream(t, heading + 0.001 * t), "compass_yaw": Stream(t, heading + err, angular=True)}
+    step_t = fixed_rate_steps(t[0], t[-1], RATE_HZ)
+    steps = resample_streams(streams, step_t, 0.5)
+    mask = np.ones(len(step_t), dtype=bool) if clean is None else (step_t >= clean[0]) & (step_t <= clean[1])
+    return CalibrationRun("heading", streams, steps, [], mask, clean is not None)
+
+
+@pytest.mark.parametrize("tau_s", [2.0, 10.0])
+def test_compass_noise_is_its_error_against_the_gyro_and_how_long_that_lasts(tau_s):
+    from slam.calibrate.noise import learn_compass_noise
+
+    runs = [heading_run(tau_s, 0.07, seed) for seed in range(3)]
+    noise = learn_compass_noise(runs, RATE_HZ)
+    assert noise.correlation_s == pytest.approx(tau_s, rel=0.25)
+    assert noise.sd_rad == pytest.approx(0.07, rel=0.2)
+    assert noise.stretches == 3 and noise.steps == sum(len(r.steps.t) for r in runs)
+    # A lower bound: over 4 correlation times the line takes in most of the slow error.
+    short = learn_compass_noise([heading_run(10.0, 0.07, clean=(0.0, 40.0))], RATE_HZ)
+    assert 0.0 < short.correlation_s < 5.0 and short.sd_rad < 0.07
+    # Under 30 s clean: nothing measured, the factor kept as configured.
+    assert learn_compass_noise([heading_run(10.0, 0.07, clean=(0.0, 25.0))], RATE_HZ) is None
+
+
+def test_calibrate_writes_the_compass_noise_into_the_factor(tmp_path):
+    from slam.calibrate import learn
+
+    tree = yaml.safe_load(TELEMAX_CONFIG.read_text())
+    tree["validation"]["model"] = str((TELEMAX_CONFIG.parent / tree["validation"]["model"]).resolve())
+    tree["validation"]["observers"]["relations"] = [
+        r for r in tree["validation"]["observers"]["relations"] if r["name"] == "yaw_compass_gyro"]
+    start = tmp_path / "start.yaml"
+    start.write_text(yaml.safe_dump(tree))
+    res = learn([heading_run(10.0, 0.07)], load_config(start))
+    out = tmp_path / "learnt.yaml"
+    out.write_text(res.text)
+    compass = load_config(out).backend.factors.compass
+    assert compass.correlation_s == pytest.approx(res.compass_noise.correlation_s, rel=1e-2)
+    assert compass.correlation_s == pytest.approx(10.0, rel=0.25)
+    assert compass.sigma_yaw_deg == pytest.approx(np.degrees(0.07), rel=0.2)
+    assert "# Compass heading minus the integrated gyro's" in res.text

@@ -17,7 +17,9 @@ from recorded runs instead of typed in by hand.
    against the gyro are found (:mod:`slam.calibrate.lags`); ``gslam
    calibrate`` adds the clear offsets to ``input.time_offsets_s``, reads
    the runs again with them and learns steps 2-3 anew, so the relations
-   are learnt on streams as the model's config will read them.
+   are learnt on streams as the model's config will read them. The
+   compass factor's noise is measured against the gyro: the error of one
+   heading and how long it stays alike (:mod:`slam.calibrate.noise`).
 4. The result is the input config with the learnt observers and the
    measured figures as comments (:mod:`slam.calibrate.write`), for the
    pass (offline or causal) the config names. Learnt on some runs, it is
@@ -32,6 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from slam.calibrate.lags import LagEstimate, learn_lags
+from slam.calibrate.noise import CompassNoise, learn_compass_noise
 from slam.calibrate.propose import Proposal, propose
 from slam.calibrate.runs import CalibrationRun, load_run, parse_clean
 from slam.calibrate.select import (CheckChoice, Choice, FieldGyroChoice, calibrate_field_gyro, calibrate_magnetometer,
@@ -64,6 +67,8 @@ class CalibrationResult:
     lags: list[LagEstimate]
     applied: list[LagEstimate] = field(default_factory=list)
     """The first pass's estimates when their clear offsets were added to the config and the runs learnt again."""
+    compass_noise: CompassNoise | None = None
+    """The compass factor's noise written to the config (None: kept as configured)."""
 
 
 def calibrate(
@@ -147,9 +152,10 @@ def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm:
                  "correlation %.2f, halves %+.3f / %+.3f s)%s", lag.stream, lag.reference, lag.offset_s,
                  lag.rms_before, lag.rms_after, lag.correlation, *lag.halves_s,
                  ": proposed" if lag.proposed else f": not proposed, {lag.why_not()}")
+    noise = learn_compass_noise(loaded, vcfg.rate_hz) if config.backend.factors.compass.enabled else None
     header = [*header, *_header(false_alarm, target, observers, vcfg.offline)]
-    text = calibrated_config(config, choices, mag, field, proposals, header, target, len(loaded), lags)
-    return CalibrationResult(None, choices, mag, field, proposals, target, text, lags)
+    text = calibrated_config(config, choices, mag, field, proposals, header, target, len(loaded), lags, noise)
+    return CalibrationResult(None, choices, mag, field, proposals, target, text, lags, compass_noise=noise)
 
 
 def _learnt_from(stretch) -> str:

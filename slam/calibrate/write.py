@@ -2,7 +2,9 @@
 out, with its observers replaced by the learnt ones and the measured
 figures beside each as comments, the streams' time offsets measured
 against the gyro among them. ``gslam map OTHER --config MODEL.yaml``
-uses it as it is; :func:`slam.config.load_config` reads it back."""
+uses it as it is; :func:`slam.config.load_config` reads it back. The
+compass factor's noise, where it was measured, replaces the configured
+one."""
 
 from __future__ import annotations
 
@@ -12,6 +14,7 @@ import numpy as np
 import yaml
 
 from slam.calibrate.lags import RATE_WINDOW_S, LagEstimate
+from slam.calibrate.noise import CompassNoise
 from slam.calibrate.propose import Proposal
 from slam.calibrate.select import CheckChoice, Choice, FieldGyroChoice
 from slam.config import PipelineConfig
@@ -82,6 +85,7 @@ def calibrated_config(
     target: float,
     runs: int,
     lags: Sequence[LagEstimate] = (),
+    compass_noise: CompassNoise | None = None,
 ) -> str:
     """The YAML text of the module docstring. ``choices`` maps every
     configured relation to its calibration (None: no run had its streams,
@@ -97,6 +101,12 @@ def calibrated_config(
     validation["observers"] = observers
     sections = config.model_dump(mode="json")
     sections["validation"] = validation
+    noise_note = []
+    if compass_noise is not None:
+        compass = sections["backend"]["factors"]["compass"]
+        compass["sigma_yaw_deg"] = float(f"{np.degrees(compass_noise.sd_rad):.3g}")
+        compass["correlation_s"] = float(f"{compass_noise.correlation_s:.3g}")
+        noise_note = [f"{_INDENT}# {line}" for line in _noise_comment(compass_noise, runs)]
     lag_note = [f"  # {line}" for line in _lag_comment(lags)]
     text = yaml.safe_dump(sections, sort_keys=False, allow_unicode=True, width=120, default_flow_style=None)
 
@@ -128,14 +138,18 @@ def calibrated_config(
         field_note = [f"{_INDENT}# field-gyro check: the field's change over {fg.window_s:g} s that the gyro's turn does "
                       f"not explain stays within {fg.tolerance_T * 1e6:.3g} uT on all but {_pct(target)} of "
                       f"{field_gyro.steps} learning steps (worst run)"]
-    lines = []
+    lines, section = [], ""
     for line in text.splitlines():
+        if line[:1].isalpha():
+            section = line.split(":")[0]
         if line.strip() == f"relations: {_PLACEHOLDER}":
             lines += block
         elif line.strip().startswith("magnetometer:") and line.startswith(_INDENT) and mag_note:
             lines += mag_note + [line]
         elif line.strip().startswith("field_gyro:") and line.startswith(_INDENT) and field_note:
             lines += field_note + [line]
+        elif section == "backend" and line.startswith(f"{_INDENT}compass:") and noise_note:
+            lines += noise_note + [line]
         elif line.startswith("  time_offsets_s:") and lag_note:
             lines += lag_note + [line]
         else:
@@ -157,3 +171,11 @@ def _lag_comment(lags: Sequence[LagEstimate]) -> list[str]:
                      f"{np.degrees(lag.rms_before):.3g} -> {np.degrees(lag.rms_after):.3g} deg/s "
                      f"({-100 * lag.gain:+.0f} %), correlation {lag.correlation:.2f} over {lag.steps} steps; {verdict}")
     return lines
+
+
+def _noise_comment(noise: CompassNoise, runs: int) -> list[str]:
+    return [f"Compass heading minus the integrated gyro's, less a line per clean stretch (slam.calibrate.noise), "
+            f"over {noise.steps} steps of {noise.stretches} stretch{'es' if noise.stretches > 1 else ''} "
+            f"({runs} run{'s' if runs > 1 else ''}): robust sd {np.degrees(noise.sd_rad):.3g} deg, autocorrelation",
+            f"below 1/e after {noise.correlation_s:.3g} s: priors at keyframes dt apart carry "
+            f"sigma_yaw_deg * sqrt(2 * correlation_s / dt)."]
