@@ -65,7 +65,7 @@ def huber_line(x: np.ndarray, y: np.ndarray, k: float = 1.345, iterations: int =
     return float(coef[0]), float(coef[1])
 
 
-def _dilate(mask: np.ndarray, steps: int) -> np.ndarray:
+def dilate(mask: np.ndarray, steps: int) -> np.ndarray:
     """``mask`` widened by ``steps`` on each side."""
     if steps <= 0 or not mask.any():
         return mask
@@ -153,7 +153,7 @@ def fit_rates(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, w
         band = np.maximum(spread, np.sqrt(noise**2 + (sigma_rel * ra) ** 2))
         out = m & (np.abs(res) > OUTLIER_SIGMAS * band)
         # A centred window reaches half its length either side of an outlier.
-        good = run.clean if run.declared else run.clean & ~_dilate(out, int(round(0.5 * window_s * rate_hz)))
+        good = run.clean if run.declared else run.clean & ~dilate(out, int(round(0.5 * window_s * rate_hz)))
         inliers.append(good)
     return RateFit(a, b, window_s, gain, intercept / window_s, noise, sigma_rel, corr, int(keep.sum()),
                    robust_sd(da[keep]), inliers)

@@ -3,7 +3,7 @@
 Over a stretch the gyro can be trusted for (its bias turns the integrated
 heading into a line), the compass heading minus the integrated gyro
 heading, less a line fitted to each clean stretch, is the compass's own
-error. Two figures describe it for the factor
+error (in runs learnt whole, the steps far off it are left out as faults). Two figures describe it for the factor
 (:class:`slam.config.CompassFactorConfig`):
 
 * its robust sd, the error of one heading;
@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slam.calibrate.fit import robust_sd
+from slam.calibrate.fit import OUTLIER_SIGMAS, dilate, huber_line, robust_sd
 from slam.calibrate.runs import CalibrationRun
 
 MIN_STRETCH_S = 30.0
@@ -47,13 +47,30 @@ class CompassNoise:
     stretches: int
 
 
-def _stretches(run: CalibrationRun, min_steps: int) -> list[np.ndarray]:
+def _usable(run: CalibrationRun, rate_hz: float) -> np.ndarray:
+    """The clean steps with both headings; in a run learnt whole (nothing
+    declared clean), less those more than ``OUTLIER_SIGMAS`` robust sds
+    off a Huber line through the difference, and a second either side:
+    a disturbance is a fault, not the compass's noise."""
+    s = run.steps
+    ok = run.clean & s.valid["compass_yaw"] & s.valid["gyro_yaw"]
+    if run.declared or ok.sum() < 3:
+        return ok
+    d = s.values["compass_yaw"][ok] - s.values["gyro_yaw"][ok]
+    slope, intercept = huber_line(s.t[ok], d)
+    r = d - slope * s.t[ok] - intercept
+    out = np.zeros(len(ok), dtype=bool)
+    out[ok] = np.abs(r - np.median(r)) > OUTLIER_SIGMAS * max(robust_sd(r), 1e-12)
+    return ok & ~dilate(out, int(round(rate_hz)))
+
+
+def _stretches(run: CalibrationRun, rate_hz: float, min_steps: int) -> list[np.ndarray]:
     """Compass minus gyro heading (rad), less a line, on each run of
-    consecutive clean steps where both are valid."""
+    consecutive usable steps."""
     s = run.steps
     if "compass_yaw" not in s.values or "gyro_yaw" not in s.values:
         return []
-    ok = run.clean & s.valid["compass_yaw"] & s.valid["gyro_yaw"]
+    ok = _usable(run, rate_hz)
     edges = np.flatnonzero(np.diff(np.concatenate(([0], ok.astype(np.int8), [0]))))
     out = []
     for a, b in zip(edges[::2], edges[1::2]):
@@ -81,7 +98,7 @@ def learn_compass_noise(runs: Sequence[CalibrationRun], rate_hz: float) -> Compa
     gyro over a clean stretch of ``MIN_STRETCH_S``, or where the
     autocorrelation stays above 1/e over the lags searched."""
     dt = 1.0 / rate_hz
-    pieces = [p for run in runs for p in _stretches(run, int(np.ceil(MIN_STRETCH_S / dt)))]
+    pieces = [p for run in runs for p in _stretches(run, rate_hz, int(np.ceil(MIN_STRETCH_S / dt)))]
     if not pieces:
         return None
     rho = _autocorrelation(pieces, int(MAX_LAG_FRACTION * max(len(p) for p in pieces)))
