@@ -219,11 +219,12 @@ def _compass(rec: Recording, t: np.ndarray, cfg, max_gap_s: float) -> ScalarMeas
     sigma = np.full(len(t), np.radians(cfg.sigma_yaw_deg))
     factor_sigma = None
     if cfg.correlation_s is not None and len(t) > 1:
-        factor_sigma = sigma * np.sqrt(np.maximum(1.0, 2.0 * cfg.correlation_s / np.maximum(keyframe_spacing(t), 1e-3)))
+        spacing = np.maximum(_keyframe_spacing(t), 1e-3)
+        factor_sigma = sigma * np.sqrt(np.maximum(1.0, 2.0 * cfg.correlation_s / spacing))
     return ScalarMeasurement(value=yaw, sigma=sigma, valid=covered(c.t, t, max_gap_s), factor_sigma=factor_sigma)
 
 
-def keyframe_spacing(t: np.ndarray) -> np.ndarray:
+def _keyframe_spacing(t: np.ndarray) -> np.ndarray:
     """The time each keyframe stands for: half the span to its two
     neighbours (the one neighbour's whole span at the ends), s; n >= 2."""
     gaps = np.diff(t)

@@ -3,7 +3,8 @@
 Over a stretch the gyro can be trusted for (its bias turns the integrated
 heading into a line), the compass heading minus the integrated gyro
 heading, less a line fitted to each clean stretch, is the compass's own
-error (in runs learnt whole, the steps far off it are left out as faults). Two figures describe it for the factor
+error (in runs learnt whole, the steps far off it are left out as
+faults). Two figures describe it for the factor
 (:class:`slam.config.CompassFactorConfig`):
 
 * its robust sd, the error of one heading;
