@@ -28,17 +28,20 @@ steps: those not learnt from, outside 5 s after each label, outside the
 real drift (195-215 s) and where the injection moved the heading by less
 than ``CLEAN_ERROR_DEG`` (the compass as recorded; the dipole's approach,
 off by 1-5 degrees, is neither a labelled fault nor clean). "Compass":
-steps whose most probable diagnosis blames IMU_YAW (the one sensor whose
-truth is known); "any": steps blaming any sensor or with no diagnosis.
+steps whose most probable diagnosis blames IMU_YAW before the compass's
+own fault (``REAL_FAULT_FROM_S``); "any": steps blaming any sensor but the
+compass in its own fault, or with no diagnosis. Two more ways learn on one
+half of the stretch where the compass is right (0-190 s, ``FOLDS``) and
+judge the other half, with one dipole injected there: the out-of-sample
+false alarms where the truth is known.
 A third share counts compass alarms only where the recorded compass is
 known to be right: the running median over ``COURSE_MEDIAN_S`` of its
 difference to the GPS course (``scripts/bench_husky.py``) within
-``WRONG_DEG``. After the turn at 190 s the AHRS heading stays 23-38 deg
-off the course to the end of the bag, so the judged steps after the real
-drift hold a real compass fault; an absolute reference (the GPS course
-relation) flags it, and the first two shares count that as false. That
-share shares the GPS fixes with the course relation: it is not an
-independent truth.
+``WRONG_DEG``. The course is noisy: after 195 s, where the compass
+stands 20-44 deg off the integrated gyro, that median still comes within
+15 deg at times, and alarms there count as false in this share. It
+shares the GPS fixes with the course relation: it is not an independent
+truth.
 Writes ``husky_dipole.md`` and ``husky_dipole.csv``. ``--faults`` injects
 other dipoles (``gslam inject`` syntax) to choose a config on without
 touching the reported ones; ``--sets`` and ``--passes`` run a subset.
@@ -76,9 +79,22 @@ log = logging.getLogger("bench_husky_dipole")
 ROOT = Path(__file__).resolve().parents[1]
 CLEAN_END_S = 180.0
 REAL_DRIFT = (195.0, 215.0)
+REAL_FAULT_FROM_S = 195.0
+"""The AHRS heading's own fault: it walks off at 195-215 s and stays 20-44 deg
+off the integrated gyro and the GPS course to the end of the bag (the map
+without the compass is 2.7 x closer to the fixes, ``scripts/bench_husky.py``).
+From here on a step that blames IMU_YAW is right, and one that blames another
+sensor or has no diagnosis is a false alarm."""
 AFTER_LABEL_S = 5.0
 CLEAN_ERROR_DEG = 1.0
 DIPOLES = ((240.0, 270.0), (320.0, 350.0))
+# The two folds of the stretch where the compass is right (before its own
+# fault at 190 s): learnt on one half, declared clean, with one dipole
+# injected into the other half and the alarms judged there.
+FOLDS = {
+    "0-95 s declared clean, judged 95-190 s": ((0.0, 95.0), (95.0, 190.0), "dipole@130:160,target=heading"),
+    "95-190 s declared clean, judged 0-95 s": ((95.0, 190.0), (0.0, 95.0), "dipole@40:70,target=heading"),
+}
 PASSES = ("causal", "offline")
 LEARNING = ("first 180 s, declared clean", "whole bag, robust (in-sample)", "first half, robust",
             "second half, robust")
@@ -109,6 +125,9 @@ def trend_config(config_path: Path, folder: Path) -> Path:
 def learning_steps(t: np.ndarray, how: str) -> tuple[np.ndarray, bool, np.ndarray]:
     """``(learnt, declared, judged)``: the steps learnt from, whether they
     are declared clean, and the steps whose alarms are judged."""
+    if how in FOLDS:
+        (a, b), (c, d), _ = FOLDS[how]
+        return (t >= a) & (t <= b), True, (t >= c) & (t <= d)
     half = 0.5 * (t[0] + t[-1])
     if how.startswith("first 180"):
         learnt = t <= CLEAN_END_S
@@ -142,15 +161,26 @@ def compass_right(recording, t: np.ndarray) -> np.ndarray:
     return np.abs(median) <= np.radians(WRONG_DEG)
 
 
+def false_alarms(v) -> tuple[np.ndarray, np.ndarray]:
+    """``(compass, any)`` per step: the most probable diagnosis blames IMU_YAW
+    before the compass's own fault (``REAL_FAULT_FROM_S``); it blames a sensor
+    other than the faulty compass, or there is none."""
+    t = v.step_t
+    real = t >= REAL_FAULT_FROM_S
+    blamed = [set(r.diagnoses[0]) if r.consistent else None for r in v.results]
+    any_alarm = np.array([b is None or bool(b - ({"IMU_YAW"} if f else set())) for b, f in zip(blamed, real)])
+    compass = np.array([b is not None and "IMU_YAW" in b for b in blamed]) & ~real
+    return compass, any_alarm
+
+
 def judged_alarms(v, labels, judged: np.ndarray, error: np.ndarray) -> tuple[float, float, int]:
-    """``(compass, any, steps)``: the shares of the judged clean steps (module
-    docstring) that blame IMU_YAW, and that blame anything or have no diagnosis."""
+    """``(compass, any)`` shares of the judged clean steps (module docstring)
+    with a false alarm (:func:`false_alarms`), and how many steps were judged."""
     t = v.step_t
     keep = judged & (error < np.radians(CLEAN_ERROR_DEG))
     for a, b in [*labels, REAL_DRIFT]:
         keep &= ~((t >= a) & (t <= b + AFTER_LABEL_S))
-    any_alarm = np.array([(not r.consistent) or bool(r.diagnoses[0]) for r in v.results])
-    compass = np.array([r.consistent and "IMU_YAW" in r.diagnoses[0] for r in v.results])
+    compass, any_alarm = false_alarms(v)
     if not keep.any():
         return float("nan"), float("nan"), 0
     return float(compass[keep].mean()), float(any_alarm[keep].mean()), int(keep.sum())
@@ -164,6 +194,7 @@ def main() -> None:
     ap.add_argument("--faults", nargs="+", default=[f"dipole@{a:g}:{b:g},target=heading" for a, b in DIPOLES])
     ap.add_argument("--sets", nargs="+", choices=list(SETS), default=list(SETS))
     ap.add_argument("--passes", nargs="+", choices=PASSES, default=list(PASSES))
+    ap.add_argument("--no-folds", action="store_true", help="only the dipoles of --faults, without the two clean-stretch folds")
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     for noisy in ("slam", "validation"):
@@ -172,49 +203,57 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
     t_all = time.perf_counter()
+    input_config = load_config(args.config).input
+    groups = [(args.faults, LEARNING)]
+    if not args.no_folds:
+        groups += [([fault], (how,)) for how, (_, _, fault) in FOLDS.items()]
+    labelled = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        input_config = load_config(args.config).input
-        injected = inject(bag, args.faults, tmp / "husky_dipole", config=input_config)
-        labels = injected.faults.get("IMU_YAW", [])
-        error = right = None
-        for pass_ in args.passes:
-            over = [f"validation.pass={pass_}"]
-            trend = trend_config(args.config, tmp)
-            bases = {name: args.config if SETS[name] is None else base_config(trend, SETS[name], tmp)
-                     for name in ["trend", *args.sets]}
-            first = load_config(bases["trend"], over)
-            whole = load_run(bag, first, validation_sections(first)[0], None)
-            for how in LEARNING:
-                learnt, declared, judged = learning_steps(whole.steps.t, how)
-                run = dataclasses.replace(whole, clean=learnt, declared=declared)
-                for name in args.sets:
-                    base = bases[name]
-                    config = load_config(base, over)
-                    learnt_path = tmp / f"cal_{len(rows)}.yaml"
-                    learnt_path.write_text(learn([run], config).text)
-                    res = run_map(injected.run_dir, load_config(learnt_path, [*over, "validation.mode=on",
-                                                                              "output.plots=false"]),
-                                  tmp / f"map_{len(rows)}")
-                    m, v = res.metrics, res.validation
-                    if error is None:
-                        error = injected_error(bag, injected.run_dir, input_config, v.step_t)
-                    step_judged = np.interp(v.step_t, whole.steps.t, judged.astype(float)) > 0.5
-                    compass, anything, steps = judged_alarms(v, labels, step_judged, error)
-                    if right is None:
-                        right = compass_right(read_recording(bag, input_config), v.step_t)
-                    compass_ok, _, steps_ok = judged_alarms(v, labels, step_judged & right, error)
-                    rows.append({
-                        "pass": pass_, "learnt": how, "set": name, "recall": m["isolation_recall"],
-                        "precision": m["isolation_precision"], "detected": m["faults_detected"],
-                        "intervals": m["faults_detected"] + m["faults_missed"],
-                        "delay_s": (m["detection_delay_s"] or {}).get("IMU_YAW"),
-                        "compass_false_alarms": round(compass, 4), "any_alarms": round(anything, 4),
-                        "judged_steps": steps, "compass_false_alarms_where_right": round(compass_ok, 4) if steps_ok else None,
-                        "judged_steps_compass_right": steps_ok, "compass_kept": m["factor_counts"]["compass"],
-                    })
-                    log.info("%s", rows[-1])
-    lab = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in labels)
+        for g, (faults, hows) in enumerate(groups):
+            injected = inject(bag, faults, tmp / f"husky_dipole_{g}", config=input_config)
+            labels = injected.faults.get("IMU_YAW", [])
+            labelled += labels
+            error = right = None
+            for pass_ in args.passes:
+                over = [f"validation.pass={pass_}"]
+                trend = trend_config(args.config, tmp)
+                bases = {name: args.config if SETS[name] is None else base_config(trend, SETS[name], tmp)
+                         for name in ["trend", *args.sets]}
+                first = load_config(bases["trend"], over)
+                whole = load_run(bag, first, validation_sections(first)[0], None)
+                for how in hows:
+                    learnt, declared, judged = learning_steps(whole.steps.t, how)
+                    run = dataclasses.replace(whole, clean=learnt, declared=declared)
+                    for name in args.sets:
+                        base = bases[name]
+                        config = load_config(base, over)
+                        learnt_path = tmp / f"cal_{len(rows)}.yaml"
+                        learnt_path.write_text(learn([run], config).text)
+                        res = run_map(injected.run_dir, load_config(learnt_path, [*over, "validation.mode=on",
+                                                                                  "output.plots=false"]),
+                                      tmp / f"map_{len(rows)}")
+                        m, v = res.metrics, res.validation
+                        if error is None:
+                            error = injected_error(bag, injected.run_dir, input_config, v.step_t)
+                        step_judged = np.interp(v.step_t, whole.steps.t, judged.astype(float)) > 0.5
+                        compass, anything, steps = judged_alarms(v, labels, step_judged, error)
+                        if right is None:
+                            right = compass_right(read_recording(bag, input_config), v.step_t)
+                        compass_ok, _, steps_ok = judged_alarms(v, labels, step_judged & right, error)
+                        rows.append({
+                            "pass": pass_, "learnt": how, "set": name, "faults": " ".join(faults),
+                            "recall": m["isolation_recall"],
+                            "precision": m["isolation_precision"], "detected": m["faults_detected"],
+                            "intervals": m["faults_detected"] + m["faults_missed"],
+                            "delay_s": (m["detection_delay_s"] or {}).get("IMU_YAW"),
+                            "compass_false_alarms": round(compass, 4), "any_alarms": round(anything, 4),
+                            "judged_steps": steps,
+                            "compass_false_alarms_where_right": round(compass_ok, 4) if steps_ok else None,
+                            "judged_steps_compass_right": steps_ok, "compass_kept": m["factor_counts"]["compass"],
+                        })
+                        log.info("%s", rows[-1])
+    lab = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in labelled)
     out = io.StringIO()
     out.write(f"Injected labels (IMU_YAW): {lab}\n\n")
     out.write("| pass | learnt from | observers | IMU_YAW recall | precision | intervals detected | delay s | "

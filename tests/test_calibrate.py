@@ -88,6 +88,23 @@ def test_cusum_relation_is_calibrated_like_a_residual_one():
     assert choice.met and choice.relation.kind == "cusum" and choice.relation.k_sigma >= 5.0
 
 
+def test_held_offset_relation_is_learnt_about_its_held_level():
+    """An offset relation held to a drift rate keeps it; its noise is the
+    spread about the held level, and the relation then sees a standing
+    error on a run not learnt from, for as long as it stands."""
+    off = RelationConfig(name="o", kind="offset", stream_a="odo_distance", stream_b="sm_distance", window_s=2.0,
+                         sigma_floor=1.0, level_window_s=60.0, level_max_rate=0.01, threshold=5, max_counter=25)
+    choice = calibrate_relation([distance_run(3), distance_run(4)], off, vcfg(off), target=0.002)
+    rel = choice.relation
+    assert choice.met and rel.level_max_rate == 0.01 and rel.gain == pytest.approx(0.9, abs=0.01)
+    assert rel.sigma_floor < 0.05  # the 1 cm noise, not the drift of the level
+    test = distance_run(5, [(100.0, 103.0)])  # 1.5 x for 3 s: the scan matcher 0.9 m ahead from then on
+    log = observe_steps(test.steps, [rel], (), "trailing", "project", False).relations[rel.name]
+    t = test.steps.t
+    assert log.no_match[t > 105.0].mean() > 0.95
+    assert log.no_match[t < 99.0].mean() < 0.005
+
+
 def test_parse_clean():
     assert parse_clean(None) is None
     assert parse_clean("0:120") == (0.0, 120.0)

@@ -310,6 +310,8 @@ def test_batch_and_online_agree(rule):
                        window_s=2.0, sigma_floor=0.02, level_window_s=20.0, threshold=3, max_counter=10),
         RelationConfig(name="cus", kind="cusum", stream_a="gyro_yaw", stream_b="compass_yaw",
                        window_s=2.0, sigma_floor=0.03, k_sigma=20.0, threshold=2, max_counter=10),
+        RelationConfig(name="held", kind="offset", stream_a="gyro_yaw", stream_b="compass_yaw", window_s=2.0,
+                       sigma_floor=0.02, level_window_s=20.0, level_max_rate=0.002, threshold=3, max_counter=10),
     ]
     checks = [MagnetometerCheck("mag", "IMU_YAW", ref.strength_T, ref.dip_rad, 5e-6, 0.1, 1.0)]
 
@@ -326,7 +328,7 @@ def test_batch_and_online_agree(rule):
         assert out.observations["mag"] == log.unary["mag"].plausibility(k)
     assert log.relations["capped"].no_match.any() and log.unary["mag"].implausible.any()
     assert log.relations["res"].no_match.any() and log.relations["off"].no_match.any()
-    assert log.relations["cus"].no_match.any()
+    assert log.relations["cus"].no_match.any() and log.relations["held"].no_match.any()
     cols = log.columns()
     assert cols["capped.counter"] is log.relations["capped"].counter and len(cols["t"]) == len(steps.t)
 
@@ -425,6 +427,35 @@ def test_offset_observer_sees_a_standing_offset_that_changes_miss():
     assert log.relations["res"].no_match[inside].mean() < 0.2  # only around the steps
     assert log.relations["off"].no_match[inside].all()
     assert not log.relations["off"].no_match[(t < 49) | (t > 81)].any()
+
+
+@pytest.mark.parametrize("offline", [True, False])
+def test_held_level_keeps_seeing_an_offset_that_stands(offline):
+    """A compass that walks 0.5 rad off over 10 s and stays there: a level
+    held to the gyro's drift keeps seeing it, in either pass, and follows
+    the gyro's own slow drift; the offline pass's free level moves onto the
+    offset within its window."""
+    t = np.arange(0.0, 300.0, 0.1)
+    gyro = 0.0002 * t  # a bias drift below the hold
+    compass = gyro + np.clip((t - 100.0) / 10.0, 0.0, 1.0) * 0.5
+    streams = {"gyro_yaw": Stream(t, gyro), "compass_yaw": Stream(t, compass, angular=True)}
+    common = dict(kind="offset", stream_a="gyro_yaw", stream_b="compass_yaw", window_s=2.0, sigma_floor=0.02,
+                  level_window_s=60.0, threshold=3)
+    free = RelationConfig(name="free", **common)
+    held = RelationConfig(name="held", level_max_rate=0.001, **common)
+    log = run_observers(streams, [free, held], t, window="centred" if offline else "trailing", offline=offline)
+    before, standing = t < 100.0, t > 115.0
+    assert not log.relations["held"].no_match[before].any()
+    assert log.relations["held"].no_match[standing].all()
+    if offline:
+        assert not log.relations["free"].no_match[t > 200.0].any()
+
+
+def test_held_level_only_on_offset_relations_with_a_level():
+    for bad in (dict(kind="residual"), dict(kind="offset", level_window_s=None)):
+        with pytest.raises(ValueError, match="level_max_rate"):
+            RelationConfig(name="r", stream_a="gyro_yaw", stream_b="compass_yaw", window_s=2.0, sigma_floor=0.02,
+                           level_max_rate=0.001, threshold=3, **bad)
 
 
 def test_cusum_observer_sees_a_standing_error_below_the_residual_band():

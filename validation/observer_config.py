@@ -65,7 +65,11 @@ class RelationConfig(_Strict):
     whose offset drifts slowly; :mod:`validation.quantitative`), or, with
     ``level_window_s: null``, of 0 (two absolute streams calibrated against
     each other: a compass, after its mounting yaw, against the GPS course).
-    An angular difference is wrapped to (-pi, pi] there.
+    An angular difference is wrapped to (-pi, pi] there. ``level_max_rate``
+    (stream b's units per second) holds the level: it is learnt from the
+    steps before each one, in either pass, and moves no faster than that,
+    the most the reference may drift (a gyro's bias). A compass that walks
+    off faster stays off until it comes back, however long it stands there.
 
     All feed Algorithm 3: ``threshold`` is th, in steps. Components default
     to the streams' own.
@@ -91,6 +95,7 @@ class RelationConfig(_Strict):
     k_sigma: float = Field(3.0, gt=0.0)
     cusum_drift: float = Field(0.5, ge=0.0)
     level_window_s: float | None = Field(60.0, gt=0.0)
+    level_max_rate: float | None = Field(None, gt=0.0)
     threshold: int = Field(ge=0)
     max_counter: int | None = Field(None, ge=1)
     warmup_s: float | None = Field(None, ge=0.0)
@@ -109,6 +114,8 @@ class RelationConfig(_Strict):
             raise ValueError(f"relation {self.name!r}: a trend relation needs a boundary")
         if self.kind != "trend" and self.sigma_floor is None:
             raise ValueError(f"relation {self.name!r}: a {self.kind} relation needs sigma_floor")
+        if self.level_max_rate is not None and (self.kind != "offset" or self.level_window_s is None):
+            raise ValueError(f"relation {self.name!r}: level_max_rate needs an offset relation with a level_window_s")
         return self
 
     @property

@@ -245,7 +245,8 @@ def observe_steps(
                 d = wrap_angle(d)
             level = np.zeros(m)
         else:
-            level = running_level(steps.t, d, valid, rel.level_window_s, window, rel.k_sigma * rel.sigma_floor)
+            level = running_level(steps.t, d, valid, rel.level_window_s, window, rel.k_sigma * rel.sigma_floor,
+                                  rel.level_max_rate)
         z, mismatch = offset_test(rel, d, np.where(valid, level, d))
         return np.where(valid, z, 0.0), mismatch & valid, valid
 
@@ -428,7 +429,7 @@ class ObserverBank:
                         mismatch = bool(offset_test(rel, np.array(d), np.array(0.0))[1])
                 else:
                     tracker = self._levels.setdefault(
-                        rel.name, RunningLevel(rel.level_window_s, rel.k_sigma * rel.sigma_floor)
+                        rel.name, RunningLevel(rel.level_window_s, rel.k_sigma * rel.sigma_floor, rel.level_max_rate)
                     )
                     if valid:
                         d = float(values[b]) - rel.gain * float(values[a])

@@ -33,7 +33,11 @@ lag by half a window otherwise), held while no step agrees. Windows do not
 reach across a gap in either stream. A step is a mismatch where
 ``|d - level|`` exceeds ``k_sigma * sigma_floor``. It sees what changes cannot: a compass
 that sits a few degrees off for minutes near steel, or comes back from a
-disturbance slowly. With ``level_window_s`` null the level is 0 and an
+disturbance slowly. A *held* level (``level_max_rate``) is learnt from the
+steps before each one in both passes (a centred window would straddle the
+disturbance it is to measure) and moves no faster than ``level_max_rate``
+a second: a difference that runs off faster than the reference can drift
+is a mismatch for as long as it stays off. With ``level_window_s`` null the level is 0 and an
 angular difference is wrapped: two absolute headings calibrated against
 each other (a compass and the GPS course) must agree, and an offset that
 stands for minutes is an error however slowly it came.
@@ -124,18 +128,19 @@ def _trailing_level(t: np.ndarray, d: np.ndarray, now: float, window_s: float) -
 
 
 def running_level(
-    t: np.ndarray, d: np.ndarray, valid: np.ndarray, window_s: float, window: Window, tolerance: float
+    t: np.ndarray, d: np.ndarray, valid: np.ndarray, window_s: float, window: Window, tolerance: float,
+    max_rate: float | None = None,
 ) -> np.ndarray:
     """Level of ``d`` at each step (module docstring); ``tolerance`` is the
-    largest distance from the level at which a step still agrees. NaN at
-    steps without data."""
+    largest distance from the level at which a step still agrees, and
+    ``max_rate`` (per second) holds it. NaN at steps without data."""
     out = np.full(len(t), np.nan)
     run = np.cumsum(np.concatenate(([True], valid[1:] != valid[:-1])))
-    if window == "trailing":
+    if window == "trailing" or max_rate is not None:
         level = None
         for k in range(len(t)):
             if k == 0 or run[k] != run[k - 1]:
-                level = RunningLevel(window_s, tolerance)
+                level = RunningLevel(window_s, tolerance, max_rate)
             if valid[k]:
                 out[k] = level.update(t[k], d[k])
         return out
@@ -198,19 +203,23 @@ def offset_test(rel: RelationConfig, d: np.ndarray, level: np.ndarray) -> tuple[
 class RunningLevel:
     """The trailing level of a difference, one step at a time (module
     docstring): the steps within ``tolerance`` of the level are learnt, the
-    others are not. A gap in the data starts it afresh."""
+    others are not; with ``max_rate`` the level moves no faster than that a
+    second. A gap in the data starts it afresh."""
 
-    def __init__(self, window_s: float, tolerance: float) -> None:
+    def __init__(self, window_s: float, tolerance: float, max_rate: float | None = None) -> None:
         self.window_s = window_s
         self.tolerance = tolerance
+        self.max_rate = max_rate
         self._t: deque[float] = deque()
         self._d: deque[float] = deque()
         self._level: float | None = None
+        self._level_t: float | None = None
 
     def reset(self) -> None:
         self._t.clear()
         self._d.clear()
         self._level = None
+        self._level_t = None
 
     def update(self, t: float, d: float) -> float:
         """The level at step ``t`` given its difference ``d``."""
@@ -221,5 +230,10 @@ class RunningLevel:
             self._t.popleft()
             self._d.popleft()
         if self._t:
-            self._level = _trailing_level(np.fromiter(self._t, float), np.fromiter(self._d, float), t, self.window_s)
+            level = _trailing_level(np.fromiter(self._t, float), np.fromiter(self._d, float), t, self.window_s)
+            if self.max_rate is not None and self._level is not None:
+                step = self.max_rate * (t - self._level_t)
+                level = min(max(level, self._level - step), self._level + step)
+            self._level = level
+        self._level_t = t
         return self._level

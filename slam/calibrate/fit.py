@@ -160,10 +160,12 @@ def fit_rates(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, w
 
 
 def fit_offset(runs: Sequence[CalibrationRun], a: str, b: str, gain: float, level_window_s: float | None,
-               window: Window, inliers: Sequence[np.ndarray]) -> tuple[float, float, int]:
+               window: Window, inliers: Sequence[np.ndarray],
+               max_rate: float | None = None) -> tuple[float, float, int]:
     """``(sd, median, steps)``: robust sd and median of ``b - gain * a``
     about its running median over ``level_window_s`` (the offset observer's
-    level) on the inlier steps, and how many there were;
+    level, held to ``max_rate`` where given) on the inlier steps, and how
+    many there were;
     with ``level_window_s`` None (a level of 0), of the difference itself,
     wrapped where a stream is an angle. A robust sd, because the difference
     of two absolute headings has heavy tails: the GPS course at walking
@@ -180,7 +182,7 @@ def fit_offset(runs: Sequence[CalibrationRun], a: str, b: str, gain: float, leve
                 d = wrap_angle(d)
             level = np.zeros(len(d))
         else:
-            level = running_level(s.t, d, valid, level_window_s, window, np.inf)
+            level = running_level(s.t, d, valid, level_window_s, window, np.inf, max_rate)
         keep = valid & good
         res.append((d - level)[keep])
     if not res or not sum(len(r) for r in res):

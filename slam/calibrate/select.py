@@ -20,8 +20,9 @@ A trend or residual relation tries windows of half, once and twice the
 configured ``window_s`` (none shorter than four samples of its sparser
 stream, each a whole number of step pairs) and keeps the one whose smallest visible change over a window is
 least (``b * w`` for a trend, ``k_sigma * sigma_floor`` for a residual).
-An offset relation keeps its window and ``level_window_s``: how long a
-standing offset may last and still be seen is the user's choice. One with
+An offset relation keeps its window, ``level_window_s`` and
+``level_max_rate``: how long a standing offset may last and still be seen,
+and how fast the reference may drift, are the user's choice. One with
 a level of 0 (``level_window_s`` null: two absolute streams) also keeps
 its gain, and its noise is the spread of the difference itself.
 ``th`` is first sought no longer than the configured one (how long an
@@ -164,7 +165,8 @@ def calibrate_relation(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg
             # Two absolute streams (a level of 0) keep their gain: a gain
             # fitted to their changes would scale a heading by it.
             gain = rel.gain if rel.level_window_s is None else sig(fit.gain)
-            noise, median, count = fit_offset(runs, a, b, gain, rel.level_window_s, vcfg.window, fit.inliers)
+            noise, median, count = fit_offset(runs, a, b, gain, rel.level_window_s, vcfg.window, fit.inliers,
+                                              rel.level_max_rate)
             bias = (median, count)
 
             def make(m: float, th: int) -> RelationConfig:

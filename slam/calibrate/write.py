@@ -65,7 +65,8 @@ def _relation_comment(c: Choice, target: float, runs: int) -> list[str]:
         lines.append(f"CUSUM of the residual in sds, forgetting {rel.cusum_drift:g} a step: limit k_sigma = {c.multiple:g}; "
                      f"sds grow by sigma_rel {rel.sigma_rel:.3g} of the motion")
     elif not absolute:
-        lines.append(f"difference about its {rel.level_window_s:g} s running level: {c.noise:.3g} {unit} "
+        held = "" if rel.level_max_rate is None else f", held to {rel.level_max_rate:g} {unit}/s"
+        lines.append(f"difference about its {rel.level_window_s:g} s running level{held}: {c.noise:.3g} {unit} "
                      f"(robust sd); band k_sigma = {c.multiple:g} sds")
     if fit.gain < 0 and not absolute:
         lines.append("WARNING: the streams turn opposite ways (negative gain): check input.frames")
