@@ -210,18 +210,22 @@ def main() -> None:
     labelled = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
+        trend = trend_config(args.config, tmp)
+        bases = {name: args.config if SETS[name] is None else base_config(trend, SETS[name], tmp)
+                 for name in ["trend", *args.sets]}
+        wholes = {}  # the original bag's calibration run, per pass
+        for pass_ in args.passes:
+            first = load_config(bases["trend"], [f"validation.pass={pass_}"])
+            wholes[pass_] = load_run(bag, first, validation_sections(first)[0], None)
+        right = None
         for g, (faults, hows) in enumerate(groups):
             injected = inject(bag, faults, tmp / f"husky_dipole_{g}", config=input_config)
             labels = injected.faults.get("IMU_YAW", [])
             labelled += labels
-            error = right = None
+            error = None
             for pass_ in args.passes:
                 over = [f"validation.pass={pass_}"]
-                trend = trend_config(args.config, tmp)
-                bases = {name: args.config if SETS[name] is None else base_config(trend, SETS[name], tmp)
-                         for name in ["trend", *args.sets]}
-                first = load_config(bases["trend"], over)
-                whole = load_run(bag, first, validation_sections(first)[0], None)
+                whole = wholes[pass_]
                 for how in hows:
                     learnt, declared, judged = learning_steps(whole.steps.t, how)
                     run = dataclasses.replace(whole, clean=learnt, declared=declared)
