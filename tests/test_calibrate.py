@@ -12,6 +12,7 @@ from slam.calibrate import calibrate, parse_clean
 from slam.calibrate.fit import fit_rates
 from slam.calibrate.runs import CalibrationRun
 from slam.calibrate.select import calibrate_relation
+from slam.calibrate.write import _relation_comment
 from slam.cli import main
 from slam.config import load_config
 from slam.errors import GslamError
@@ -103,6 +104,22 @@ def test_held_offset_relation_is_learnt_about_its_held_level():
     t = test.steps.t
     assert log.no_match[t > 105.0].mean() > 0.95
     assert log.no_match[t < 99.0].mean() < 0.005
+
+
+def test_trend_relation_keeps_its_mismatch_margin():
+    """The margin is the user's; the search counts mismatches as the
+    observer does (with it), and the config says so."""
+    trend = RelationConfig(name="d", stream_a="odo_distance", stream_b="sm_distance", boundary=0.1, window_s=2.0,
+                           boundary_b=0.09, mismatch_margin=1.0, threshold=5, max_counter=25)
+    runs = [distance_run(3), distance_run(4)]
+    choice = calibrate_relation(runs, trend, vcfg(trend), target=0.002)
+    rel = choice.relation
+    assert choice.met and rel.mismatch_margin == 1.0
+    for run in runs:
+        log = observe_steps(run.steps, [rel], (), "trailing", "project", False).relations[rel.name]
+        assert log.no_match[log.valid].mean() <= 0.002
+    text = "\n".join(_relation_comment(choice, 0.002, 2))
+    assert "a mismatch counts where the slopes part by more than 1 b" in text
 
 
 def test_parse_clean():

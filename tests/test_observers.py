@@ -312,6 +312,7 @@ def test_batch_and_online_agree(rule):
                        window_s=2.0, sigma_floor=0.03, k_sigma=20.0, threshold=2, max_counter=10),
         RelationConfig(name="held", kind="offset", stream_a="gyro_yaw", stream_b="compass_yaw", window_s=2.0,
                        sigma_floor=0.02, level_window_s=20.0, level_max_rate=0.002, threshold=3, max_counter=10),
+        DEFAULT_RELATIONS[0].model_copy(update={"name": "margin", "mismatch_margin": 1.0, "threshold": 3}),
     ]
     checks = [MagnetometerCheck("mag", "IMU_YAW", ref.strength_T, ref.dip_rad, 5e-6, 0.1, 1.0)]
 
@@ -329,6 +330,7 @@ def test_batch_and_online_agree(rule):
     assert log.relations["capped"].no_match.any() and log.unary["mag"].implausible.any()
     assert log.relations["res"].no_match.any() and log.relations["off"].no_match.any()
     assert log.relations["cus"].no_match.any() and log.relations["held"].no_match.any()
+    assert log.relations["margin"].no_match.any()
     cols = log.columns()
     assert cols["capped.counter"] is log.relations["capped"].counter and len(cols["t"]) == len(steps.t)
 
@@ -492,3 +494,33 @@ def test_cusum_starts_again_after_a_gap():
     assert mismatch.tolist() == [False, False, True, True, False, False, False, True, True, True]
     stat, _ = cusum(np.concatenate([z, -np.ones(3)]), np.ones(13, dtype=bool), drift=0.5, limit=4.0)
     np.testing.assert_allclose(stat[8:], [8.0, 8.0, 6.5, 5.0, 3.5])  # capped at twice the limit
+
+
+@pytest.mark.parametrize("offline", [True, False])
+def test_mismatch_margin_ignores_slopes_that_straddle_the_boundary(offline):
+    """Gyro turning at 0.9 b and compass at 1.1 b: their symbols are 0 and
+    +, a mismatch at every step for the paper's comparison, though the two
+    agree to a fifth of b. With a margin of 1 b they match; a compass that
+    turns 3 b faster for 10 s is flagged either way."""
+    b = 0.05
+    t = np.arange(0.0, 100.0, 0.1)
+    gyro = 0.9 * b * t
+    compass = 1.1 * b * t + 3.0 * b * np.clip(t - 50.0, 0.0, 10.0)
+    streams = {"gyro_yaw": Stream(t, gyro), "compass_yaw": Stream(t, compass, angular=True)}
+    common = dict(stream_a="compass_yaw", stream_b="gyro_yaw", boundary=b, window_s=2.0, threshold=5, max_counter=25)
+    paper = RelationConfig(name="paper", **common)
+    margin = RelationConfig(name="margin", mismatch_margin=1.0, **common)
+    log = run_observers(streams, [paper, margin], t, window="centred" if offline else "trailing", offline=offline)
+    agree = ((t > 10.0) & (t < 48.0)) | (t > 66.0)
+    assert log.relations["paper"].no_match[agree].mean() > 0.95
+    assert not log.relations["margin"].no_match[agree].any()
+    apart = (t > 53.0) & (t < 59.0)
+    assert log.relations["margin"].no_match[apart].all() and log.relations["paper"].no_match[apart].all()
+    trace = log.relations["margin"]
+    assert set(np.unique(trace.symbol_b[agree])) == {0}  # the log keeps the symbols as abstracted
+
+
+def test_mismatch_margin_only_on_trend_relations():
+    with pytest.raises(ValueError, match="mismatch_margin"):
+        RelationConfig(name="r", kind="residual", stream_a="gyro_yaw", stream_b="compass_yaw", window_s=2.0,
+                       sigma_floor=0.02, mismatch_margin=1.0, threshold=3)

@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
 import pydantic
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -71,6 +72,14 @@ class RelationConfig(_Strict):
     the most the reference may drift (a gyro's bias). A compass that walks
     off faster stays off until it comes back, however long it stands there.
 
+    ``mismatch_margin`` (trend only; null, the default, is the paper's
+    Algorithm 3, which compares the symbols alone): two symbols that differ
+    count as a mismatch only where the two slopes, each in units of its
+    boundary, differ by more than this. Slopes of 0.9 b and 1.1 b have
+    symbols ``0`` and ``+`` yet agree to a fifth of b; with a margin of 1
+    the streams must part by at least b, the smallest change the relation
+    is meant to see, before the counter climbs.
+
     All feed Algorithm 3: ``threshold`` is th, in steps. Components default
     to the streams' own.
     ``warmup_s`` (default ``2 * window_s``): a stream's trend takes part only
@@ -101,6 +110,7 @@ class RelationConfig(_Strict):
     warmup_s: float | None = Field(None, ge=0.0)
     boundary_a: float | None = Field(None, gt=0.0)
     boundary_b: float | None = Field(None, gt=0.0)
+    mismatch_margin: float | None = Field(None, gt=0.0)
     component_a: Component | None = None
     component_b: Component | None = None
 
@@ -114,6 +124,8 @@ class RelationConfig(_Strict):
             raise ValueError(f"relation {self.name!r}: a trend relation needs a boundary")
         if self.kind != "trend" and self.sigma_floor is None:
             raise ValueError(f"relation {self.name!r}: a {self.kind} relation needs sigma_floor")
+        if self.mismatch_margin is not None and self.kind != "trend":
+            raise ValueError(f"relation {self.name!r}: mismatch_margin is for trend relations only")
         if self.level_max_rate is not None and (self.kind != "offset" or self.level_window_s is None):
             raise ValueError(f"relation {self.name!r}: level_max_rate needs an offset relation with a level_window_s")
         return self
@@ -125,6 +137,15 @@ class RelationConfig(_Strict):
     @property
     def boundaries(self) -> tuple[float, float]:
         return (self.boundary_a or self.boundary, self.boundary_b or self.boundary)
+
+    def compared(self, symbol_a, symbol_b, slope_a, slope_b):
+        """Stream b's symbols as Algorithm 3 compares them: with a
+        ``mismatch_margin``, a's symbol where the two slopes agree within it."""
+        if self.mismatch_margin is None:
+            return symbol_b
+        ba, bb = self.boundaries
+        close = np.abs(np.asarray(slope_a) / ba - np.asarray(slope_b) / bb) <= self.mismatch_margin
+        return np.where(close, symbol_a, symbol_b).astype(np.asarray(symbol_b).dtype)
 
     @property
     def warmup(self) -> float:

@@ -21,7 +21,8 @@ from validation.observer_config import RelationConfig
 class RelationTrace:
     """One relation observer over all steps (arrays of length m). A residual
     relation's ``symbol_a`` is 1 on a mismatch (``symbol_b`` 0) and ``z`` its
-    normalised residual; a trend relation has no ``z``."""
+    normalised residual; a trend relation has no ``z`` and keeps its two
+    slopes (``slope_a``, ``slope_b``: Algorithm 2's r1)."""
 
     relation: RelationConfig
     symbol_a: np.ndarray
@@ -30,6 +31,15 @@ class RelationTrace:
     counter: np.ndarray
     no_match: np.ndarray
     z: np.ndarray | None = None
+    slope_a: np.ndarray | None = None
+    slope_b: np.ndarray | None = None
+
+    def compared(self) -> tuple[np.ndarray, np.ndarray]:
+        """The symbols as Algorithm 3 compares them
+        (:meth:`RelationConfig.compared`)."""
+        if self.slope_a is None or self.slope_b is None:
+            return self.symbol_a, self.symbol_b
+        return self.symbol_a, self.relation.compared(self.symbol_a, self.symbol_b, self.slope_a, self.slope_b)
 
     def observation(self, k: int) -> Observation | None:
         if not self.valid[k]:

@@ -73,7 +73,7 @@ from validation.quantitative import (
 )
 from validation.sequential import Cusum, cusum
 from validation.streams import ANGULAR_STREAMS, STREAM_NAMES, StepStreams, Stream, resample_streams
-from validation.trends import Rule, Trend, TrendEstimator, Window, abstract_stream
+from validation.trends import Rule, Trend, TrendEstimator, TrendSample, Window, abstract_stream
 
 __all__ = [
     # Algorithm 3 and the observers defined here
@@ -88,6 +88,8 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
+_NO_TREND = TrendSample(0.0, 0.0, 0.0, Trend.ZERO)
+"""A stream without a trend at this step (its relation makes no observation)."""
 
 
 # --- Algorithm 3 ------------------------------------------------------------
@@ -210,20 +212,22 @@ def observe_steps(
     ``offline`` dates every alarm by its evidence (:func:`evidence`)."""
     m = len(steps.t)
     missing = np.zeros(m, dtype=bool)
-    cache: dict[tuple[str, float, float], np.ndarray] = {}
+    cache: dict[tuple[str, float, float], tuple[np.ndarray, np.ndarray]] = {}
 
-    def symbols(key: tuple[str, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    def symbols(key: tuple[str, float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A stream's symbols, its slopes (r1) and where it has data."""
         name, window_s, boundary = key
         if name not in steps.values:
-            return np.zeros(m, dtype=np.int8), missing
+            return np.zeros(m, dtype=np.int8), np.zeros(m), missing
         valid = steps.valid[name]
         if key not in cache:
-            sym = np.zeros(m, dtype=np.int8)
-            sym[valid] = abstract_stream(
+            sym, slope = np.zeros(m, dtype=np.int8), np.zeros(m)
+            trend = abstract_stream(
                 steps.t[valid], steps.values[name][valid], boundary, window_s, window, rule, steps.angular[name]
-            ).symbol
-            cache[key] = sym
-        return cache[key], valid
+            )
+            sym[valid], slope[valid] = trend.symbol, trend.r1
+            cache[key] = sym, slope
+        return *cache[key], valid
 
     def residual(rel: RelationConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         a, b = rel.streams
@@ -257,15 +261,17 @@ def observe_steps(
             if rel.kind == "cusum":
                 z, mismatch = cusum(z, valid, rel.cusum_drift, rel.k_sigma)
             sym_a, sym_b = mismatch.astype(np.int8), np.zeros(m, dtype=np.int8)
+            slope_a = slope_b = None
         else:
             z = None
-            sym_a, valid_a = symbols(_trend_key(rel, 0))
-            sym_b, valid_b = symbols(_trend_key(rel, 1))
+            sym_a, slope_a, valid_a = symbols(_trend_key(rel, 0))
+            sym_b, slope_b, valid_b = symbols(_trend_key(rel, 1))
             valid = held(steps.t, valid_a, rel.warmup) & held(steps.t, valid_b, rel.warmup)
-        counter, no_match = observe(sym_a, sym_b, rel.threshold, valid, rel.max_counter)
+        compared_b = sym_b if slope_a is None else rel.compared(sym_a, sym_b, slope_a, slope_b)
+        counter, no_match = observe(sym_a, compared_b, rel.threshold, valid, rel.max_counter)
         if offline:
-            no_match = evidence(sym_a, sym_b, rel.threshold, valid, rel.max_counter)
-        rel_traces[rel.name] = RelationTrace(rel, sym_a, sym_b, valid, counter, no_match, z)
+            no_match = evidence(sym_a, compared_b, rel.threshold, valid, rel.max_counter)
+        rel_traces[rel.name] = RelationTrace(rel, sym_a, sym_b, valid, counter, no_match, z, slope_a, slope_b)
         logger.debug("%s: no_match on %d of %d valid steps", rel.name, int(no_match.sum()), int(valid.sum()))
 
     unary_traces: dict[str, UnaryTrace] = {}
@@ -373,7 +379,7 @@ class ObserverBank:
 
         # 1. Trends of every stream with data at this step, and the windowed
         #    changes of the residual relations' streams.
-        current: dict[tuple[str, float, float], Trend] = {}
+        current: dict[tuple[str, float, float], TrendSample] = {}
         changes: dict[tuple[str, float], float | None] = {}
         for rel in self.relations:
             if rel.kind == "offset":
@@ -396,7 +402,7 @@ class ObserverBank:
                     est = self._estimators[key] = TrendEstimator(
                         key[1], key[2], self.angular.get(key[0], False), self.rule
                     )
-                current[key] = est.update(t, float(values[key[0]])).symbol
+                current[key] = est.update(t, float(values[key[0]]))
 
         # 2. Relations (Algorithm 3), once both streams are warm.
         for name, since in self._present_since.items():
@@ -443,9 +449,11 @@ class ObserverBank:
             else:
                 ka, kb = _trend_key(rel, 0), _trend_key(rel, 1)
                 valid = warm(ka[0], rel.warmup) and warm(kb[0], rel.warmup)
-                sym = (current.get(ka, Trend.ZERO), current.get(kb, Trend.ZERO))
+                sa, sb = current.get(ka, _NO_TREND), current.get(kb, _NO_TREND)
+                sym = (sa.symbol, sb.symbol)
             counter = self._counters[rel.name]
-            observations[rel.name] = counter.update(int(sym[0]), int(sym[1]), valid)
+            compared = sym[1] if rel.kind != "trend" else rel.compared(sa.symbol, sb.symbol, sa.r1, sb.r1)
+            observations[rel.name] = counter.update(int(sym[0]), int(compared), valid)
             symbols[rel.name] = sym
             counters[rel.name] = counter.counter
 

@@ -81,7 +81,7 @@ class Choice:
 def _traces(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg: ValidationConfig):
     for run in runs:
         trace = observe_steps(run.steps, [rel], (), vcfg.window, vcfg.observers.rule, False).relations[rel.name]
-        yield trace.symbol_a, trace.symbol_b, trace.valid
+        yield *trace.compared(), trace.valid
 
 
 def _first_threshold(runs, rel: RelationConfig, vcfg: ValidationConfig, inliers, target: float,

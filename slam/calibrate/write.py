@@ -59,6 +59,8 @@ def _relation_comment(c: Choice, target: float, runs: int) -> list[str]:
     if rel.kind == "trend":
         lines.append(f"slopes differ by {c.noise:.3g} {unit}/s (robust sd): b = {c.multiple:g} x that; "
                      f"smallest visible change {c.visible:.3g} {unit} over the window")
+        if rel.mismatch_margin is not None:
+            lines.append(f"a mismatch counts where the slopes part by more than {rel.mismatch_margin:g} b")
     elif rel.kind == "residual":
         lines.append(f"band k_sigma = {c.multiple:g} sds, growing by sigma_rel {rel.sigma_rel:.3g} of the motion")
     elif rel.kind == "cusum":
