@@ -8,7 +8,9 @@ a step where the two symbols differ and falls by one (not below zero) where
 they agree; the observation is ``NO_MATCH`` while the counter exceeds the
 relation's threshold ``th`` and ``MATCH`` otherwise. (The listing's
 ``count = counter + 1`` is read as the counter's own increment.) The
-comparison is strict: ``+`` against ``0`` is a mismatch. A step where either
+comparison is strict: ``+`` against ``0`` is a mismatch, unless the
+relation sets a ``mismatch_margin`` (not the paper's): then only where the
+two slopes also part by more than it (:meth:`RelationConfig.compared`). A step where either
 stream has no data makes no observation and leaves the counter unchanged;
 trends are computed over the steps where the stream has data, so a gap
 shortens the next windows as at the start; the relation observes nothing
