@@ -76,6 +76,7 @@ from slam.io.atomic import write_text  # noqa: E402
 from slam.io.datasets import data_root  # noqa: E402
 from slam.io.readers import read_recording  # noqa: E402
 from slam.pipeline import run_map  # noqa: E402
+from validation.streams import validation_streams  # noqa: E402
 
 log = logging.getLogger("bench_husky_dipole")
 ROOT = Path(__file__).resolve().parents[1]
@@ -174,12 +175,12 @@ def compass_walks(recording) -> list[tuple[float, float]]:
     against both). Alarms there are neither false nor labelled: the bench
     does not judge them. On the bag: one walk of 8.5 deg at 57-65 s, and
     others after 189 s, in the AHRS heading's own fault."""
-    gyro, compass, odo = recording.gyro, recording.compass, recording.odometry
+    streams = validation_streams(recording)
+    gyro, compass, odo = (streams[name] for name in ("gyro_yaw", "compass_yaw", "odo_yaw"))
     t = np.arange(max(gyro.t[0], compass.t[0], odo.t[0]), min(gyro.t[-1], compass.t[-1], odo.t[-1]), 0.1)
-    gyro_yaw = np.interp(t, gyro.t, np.concatenate(([0.0], np.cumsum(0.5 * (gyro.rate[1:] + gyro.rate[:-1])
-                                                                       * np.diff(gyro.t)))))
-    against = np.interp(t, compass.t, np.unwrap(compass.yaw)) - gyro_yaw
-    witness = np.interp(t, odo.t, np.unwrap(odo.yaw)) - gyro_yaw
+    gyro_yaw = np.interp(t, gyro.t, gyro.values)
+    against = np.interp(t, compass.t, np.unwrap(compass.values)) - gyro_yaw
+    witness = np.interp(t, odo.t, np.unwrap(odo.values)) - gyro_yaw
     n = int(round(WALK_S / 0.1))
     walk = ((np.abs(against[n:] - against[:-n]) > np.radians(WALK_DEG))
             & (np.abs(witness[n:] - witness[:-n]) < np.radians(WITNESS_DEG)))
