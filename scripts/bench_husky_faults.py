@@ -22,7 +22,9 @@ detected and the delay, and the share of the *judged* steps with a false
 alarm: after ``JUDGED_FROM_S``, outside the real drift and outside each
 label and the ``AFTER_LABEL_S`` after it, a step that blames a sensor, or
 has no diagnosis, except the compass from 195 s on, where the AHRS heading
-stays off to the end of the bag (``bench_husky_dipole.REAL_FAULT_FROM_S``). The first row maps the bag
+stays off to the end of the bag (``bench_husky_dipole.REAL_FAULT_FROM_S``),
+and the GPS where the recorded fixes wander off on their own
+(``bench_husky_dipole.gps_wanders``). The first row maps the bag
 without a fault: its judged alarms are the validator's own false alarms
 (and the bag's real events: wheel slips at 317 and 350 s). Then the map:
 ATE against the bag's own GPS fixes (``scripts/bench_husky.py``; the
@@ -48,7 +50,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from scripts.bench_husky import KERNELS, ate_vs_gps  # noqa: E402
-from scripts.bench_husky_dipole import AFTER_LABEL_S, REAL_DRIFT, false_alarms  # noqa: E402
+from scripts.bench_husky_dipole import AFTER_LABEL_S, REAL_DRIFT, false_alarms, gps_wanders  # noqa: E402
 from slam.compare import load_variants  # noqa: E402
 from slam.config import load_config  # noqa: E402
 from slam.inject import inject  # noqa: E402
@@ -72,15 +74,16 @@ FAULTS = (
 )
 
 
-def judged_alarms(validation, labels: list[tuple[float, float]]) -> tuple[float, int]:
+def judged_alarms(validation, labels: list[tuple[float, float]], wanders=()) -> tuple[float, int]:
     """``(share, steps)``: of the judged steps (module docstring), the share
     whose most probable diagnosis blames a sensor other than the compass in
-    its own fault, or that have none (``bench_husky_dipole.false_alarms``)."""
+    its own fault and the GPS in its own ``wanders``, or that have none
+    (``bench_husky_dipole.false_alarms``)."""
     t = validation.step_t
     keep = t > JUDGED_FROM_S
     for a, b in [*labels, REAL_DRIFT]:
         keep &= ~((t >= a) & (t <= b + AFTER_LABEL_S))
-    alarm = false_alarms(validation)[1]
+    alarm = false_alarms(validation, wanders)[1]
     return (float(alarm[keep].mean()) if keep.any() else float("nan")), int(keep.sum())
 
 
@@ -102,7 +105,9 @@ def main() -> None:
     ungated = ["validation.mode=off", "output.plots=false"]
     others = {"ungated": load_config(args.config, ungated),
               **{name: load_config(args.config, [*ungated, *over]) for name, over in kernels.items()}}
-    gps = read_recording(bag, config.input).gps  # the reference, as recorded
+    recorded = read_recording(bag, config.input)
+    gps = recorded.gps  # the reference, as recorded
+    wanders = gps_wanders(recorded)
     rows = []
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
@@ -119,7 +124,7 @@ def main() -> None:
                    for name, c in others.items()}
             best = min(kernels, key=ate.get)
             intervals = [iv for ivs in labels.values() for iv in ivs]
-            share, steps = judged_alarms(v, intervals)
+            share, steps = judged_alarms(v, intervals, wanders)
             delays = m.get("detection_delay_s") or {}
             rows.append({
                 "fault": fault or "none (the bag as recorded)",
