@@ -172,6 +172,17 @@ def compass_right(recording, t: np.ndarray) -> np.ndarray:
     return np.abs(median) <= np.radians(WRONG_DEG)
 
 
+def _intervals(t0: np.ndarray, t1: np.ndarray, flagged: np.ndarray) -> list[tuple[float, float]]:
+    """The union of the flagged spans ``[t0, t1]`` (``t0`` ascending)."""
+    out: list[tuple[float, float]] = []
+    for a, b in zip(t0[flagged], t1[flagged]):
+        if out and a <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], float(b)))
+        else:
+            out.append((float(a), float(b)))
+    return out
+
+
 def compass_walks(recording) -> list[tuple[float, float]]:
     """Where the recorded compass walks off on its own: intervals over
     which, within ``WALK_S``, its heading minus the integrated gyro's moves
@@ -189,25 +200,7 @@ def compass_walks(recording) -> list[tuple[float, float]]:
     n = int(round(WALK_S / 0.1))
     walk = ((np.abs(against[n:] - against[:-n]) > np.radians(WALK_DEG))
             & (np.abs(witness[n:] - witness[:-n]) < np.radians(WITNESS_DEG)))
-    edges = np.diff(np.concatenate(([0], walk.astype(int), [0])))
-    walks: list[tuple[float, float]] = []
-    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-        start, end = float(t[a]), float(t[b - 1 + n])  # the windows that moved, whole
-        if walks and start <= walks[-1][1]:
-            start = walks.pop()[0]
-        walks.append((start, end))
-    return walks
-
-
-def _intervals(t0: np.ndarray, t1: np.ndarray, flagged: np.ndarray) -> list[tuple[float, float]]:
-    """The union of the flagged spans ``[t0, t1]`` (``t0`` ascending)."""
-    out: list[tuple[float, float]] = []
-    for a, b in zip(t0[flagged], t1[flagged]):
-        if out and a <= out[-1][1]:
-            out[-1] = (out[-1][0], max(out[-1][1], float(b)))
-        else:
-            out.append((float(a), float(b)))
-    return out
+    return _intervals(t[:-n], t[n:], walk)  # the windows that moved, whole
 
 
 def gps_wanders(recording) -> list[tuple[float, float]]:
@@ -219,8 +212,8 @@ def gps_wanders(recording) -> list[tuple[float, float]]:
     robust sds above the median departure over the bag. Two witnesses that
     share no sensor with the fixes agree, and the fixes move against both.
     A step that blames the GPS there is not a false alarm. On the bag: 27-36,
-    51-59, 325-329, 331-336 and 387-394 s; at 28-35 s the fixes run 28-41 deg off the
-    gyro's heading at 1.4-1.8 m/s while the wheels turn at 0.9-1.1 m/s."""
+    51-59, 325-329, 331-336 and 387-394 s; at 28-35 s the fixes run 28-41 deg
+    off the gyro's heading at 1.4-1.8 m/s while the wheels turn at 0.9-1.1 m/s."""
     streams = validation_streams(recording)
     gyro, forward = streams["gyro_yaw"], streams["odo_forward"]
     gps = recording.gps
@@ -228,15 +221,14 @@ def gps_wanders(recording) -> list[tuple[float, float]]:
     heading = np.interp(mid, gyro.t, gyro.values)
     step = np.diff(forward.values)
     track = np.concatenate(([0.0], np.cumsum(step * np.exp(1j * heading))))  # dead reckoning, complex x + iy
-    i = np.arange(len(gps.t))
     j = np.searchsorted(gps.t, gps.t + WANDER_S)
-    inside = (j < len(gps.t)) & (gps.t >= forward.t[0])
-    i, j = i[inside], j[inside]
-    inside = gps.t[j] <= forward.t[-1]
-    i, j = i[inside], j[inside]
+    i = np.flatnonzero((j < len(gps.t)) & (gps.t >= forward.t[0]))
+    j = j[i]
+    ends = gps.t[j] <= forward.t[-1]
+    i, j = i[ends], j[ends]
     fixes = (gps.x[j] - gps.x[i]) + 1j * (gps.y[j] - gps.y[i])
-    dead = np.interp(gps.t[j], forward.t, track.real) - np.interp(gps.t[i], forward.t, track.real)
-    dead = dead + 1j * (np.interp(gps.t[j], forward.t, track.imag) - np.interp(gps.t[i], forward.t, track.imag))
+    at = lambda t: np.interp(t, forward.t, track.real) + 1j * np.interp(t, forward.t, track.imag)  # noqa: E731
+    dead = at(gps.t[j]) - at(gps.t[i])
     centre = 0.5 * (gps.t[i] + gps.t[j])
     moving = np.abs(dead) > 0.5  # m over the span: a direction of travel to turn by
     turn = np.exp(1j * np.angle(fixes * np.conj(dead)))
