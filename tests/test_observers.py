@@ -15,6 +15,7 @@ from validation.observers import (
     MagnetometerCheck,
     MismatchCounter,
     ObserverBank,
+    excise_spans,
     ObserversConfig,
     RelationConfig,
     evidence,
@@ -524,3 +525,16 @@ def test_mismatch_margin_only_on_trend_relations():
     with pytest.raises(ValueError, match="mismatch_margin"):
         RelationConfig(name="r", kind="residual", stream_a="gyro_yaw", stream_b="compass_yaw", window_s=2.0,
                        sigma_floor=0.02, mismatch_margin=1.0, threshold=3)
+
+
+def test_excise_spans_takes_out_the_change_over_each_span_from_its_end_on():
+    d = np.array([0.0, 0.0, 1.0, 2.0, 3.0, 3.0, 3.0, 5.0, 5.0])
+    valid = np.ones(len(d), dtype=bool)
+    # Over steps 1-4 the difference rose by 3: gone from step 4 on; the later
+    # change (step 7) stays.
+    np.testing.assert_array_equal(excise_spans(d, valid, [(1, 4)]), [0, 0, 1, 2, 0, 0, 0, 2, 2])
+    # Spans add up in time order; an end without data leaves the span alone.
+    np.testing.assert_array_equal(excise_spans(d, valid, [(1, 4), (6, 7)]), [0, 0, 1, 2, 0, 0, 0, 0, 0])
+    gap = valid.copy()
+    gap[4] = False
+    np.testing.assert_array_equal(excise_spans(d, gap, [(1, 4)]), d)

@@ -18,7 +18,9 @@ from slam.recording import Compass, Gyro, MagneticReference, Recording, Trajecto
 from tests.synthetic import DEFAULT_TURNS, bump_error, field_body, sample_times, true_yaw, yaw_rate
 from validation.gating import GatingAction, GatingConfig
 from validation.streams import fixed_rate_steps
-from validation.validator import keyframe_weights, run_validation, step_scales
+from validation.diagnosis import Diagnoser
+from validation.model import Observation
+from validation.validator import integrated_fault_spans, keyframe_weights, run_validation, step_scales
 
 INF = math.inf
 INC, INFL, EXC = GatingAction.INCLUDE, GatingAction.INFLATE, GatingAction.EXCLUDE
@@ -152,34 +154,48 @@ DURATION = 100.0
 KEYFRAMES = np.arange(0.0, 99.0 + 1e-9, 0.5)
 
 
-def drift_recording(seed: int = 0) -> tuple[Recording, Trajectory]:
+def drift_recording(seed: int = 0, sm_yaw_step: tuple[float, float, float] | None = None) -> tuple[Recording, Trajectory]:
     """A robot driving at 0.5 m/s through the default turns (20-30 s,
     40-50 s) with compass, gyro, odometry and scan matching; the compass
     heading drifts away during ``DRIFT`` (its field stays plausible).
-    Returns the recording and the scan-matching trajectory."""
+    ``sm_yaw_step`` (start s, end s, rad) instead turns the scan matcher's
+    heading by that much over that span, for good, and leaves the compass
+    right. Returns the recording and the scan-matching trajectory."""
     rng = np.random.default_rng(seed)
     tf = np.arange(0.0, DURATION + 1e-9, 0.01)
     yaw = true_yaw(tf, DEFAULT_TURNS, 0.5)
-    x = np.concatenate(([0.0], np.cumsum(0.25 * (np.cos(yaw[1:]) + np.cos(yaw[:-1])) * 0.01)))
-    y = np.concatenate(([0.0], np.cumsum(0.25 * (np.sin(yaw[1:]) + np.sin(yaw[:-1])) * 0.01)))
 
-    def trajectory(rate_hz: float) -> Trajectory:
+    def path(heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x = np.concatenate(([0.0], np.cumsum(0.25 * (np.cos(heading[1:]) + np.cos(heading[:-1])) * 0.01)))
+        y = np.concatenate(([0.0], np.cumsum(0.25 * (np.sin(heading[1:]) + np.sin(heading[:-1])) * 0.01)))
+        return x, y
+
+    x, y = path(yaw)
+
+    def trajectory(rate_hz: float, step: tuple[float, float, float] | None = None) -> Trajectory:
         t = sample_times(DURATION, rate_hz, rng)
-        noisy = np.interp(t, tf, yaw) + rng.normal(0.0, 0.002, len(t))
-        return Trajectory(t, np.interp(t, tf, x), np.interp(t, tf, y), wrap_angle(noisy))
+        seen, px, py = yaw, x, y
+        if step is not None:  # a chained heading error turns the path after it too
+            seen = yaw + step[2] * np.clip((tf - step[0]) / (step[1] - step[0]), 0.0, 1.0)
+            px, py = path(seen)
+        noisy = np.interp(t, tf, seen) + rng.normal(0.0, 0.002, len(t))
+        return Trajectory(t, np.interp(t, tf, px), np.interp(t, tf, py), wrap_angle(noisy))
 
     ref = MagneticReference(48.5e-6, np.radians(64.5))
     tc = sample_times(DURATION, 20.0, rng)
     true_c = np.interp(tc, tf, yaw)
-    heading = true_c + rng.normal(0.0, 0.01, len(tc)) + bump_error(tc, DRIFT, 0.1)
+    heading = true_c + rng.normal(0.0, 0.01, len(tc))
+    if sm_yaw_step is None:
+        heading += bump_error(tc, DRIFT, 0.1)
     compass = Compass(tc, wrap_angle(heading), field_body(true_c, ref.strength_T, ref.dip_rad))
     tg = sample_times(DURATION, 100.0, rng)
     gyro = Gyro(tg, yaw_rate(tg, DEFAULT_TURNS) + rng.normal(0.0, 0.002, len(tg)))
     rec = Recording(
         "drift", compass=compass, gyro=gyro, odometry=trajectory(20.0),
-        faults={"IMU_YAW": [DRIFT]}, magnetic_reference=ref,
+        faults={"IMU_YAW": [DRIFT]} if sm_yaw_step is None else {"SM_YAW": [sm_yaw_step[:2]]},
+        magnetic_reference=ref,
     )
-    return rec, trajectory(10.0)
+    return rec, trajectory(10.0, sm_yaw_step)
 
 
 @pytest.fixture(scope="module")
@@ -262,6 +278,33 @@ def test_lookback_extends_the_causal_exclusion_back(drift):
         np.testing.assert_array_equal(out.weights[f], expected[f])
 
 
+GLITCH = (60.0, 61.0, 0.3)  # s, s, rad: the scan matcher's heading turns 17 deg in a second, for good
+
+
+def test_offset_forgets_what_the_integrated_stream_summed_while_blamed(monkeypatch):
+    """The scan matcher's heading jumps once and stays off: its chained yaw
+    carries the step for good. The gyro witnesses it, so scan matching is
+    blamed for the jump; afterwards the causal offset observer of the
+    compass against the scan matcher's yaw (its trailing level learns only
+    from agreeing steps) would see a standing offset and blame the compass
+    for the rest of the run. It takes out the change the scan matcher
+    summed while blamed, so the compass stays in."""
+    rec, sm = drift_recording(sm_yaw_step=GLITCH)
+    vcfg, gcfg = sections("on", "validation.pass=causal")
+    out = validate(rec, sm, vcfg, gcfg)
+    after = out.step_t > GLITCH[1] + 10.0  # the counters drain
+    blamed = np.array([r.consistent and "IMU_YAW" in r.diagnoses[0] for r in out.results])
+    sm_blamed = np.array([r.consistent and bool({"SM_YAW", "SM"} & r.diagnoses[0]) for r in out.results])
+    assert sm_blamed[(out.step_t >= GLITCH[0]) & (out.step_t <= GLITCH[1] + 2.0)].any()
+    assert not blamed[after].any()
+    assert not compass_excluded(out)[KEYFRAMES > GLITCH[1] + 10.0 + gcfg.holdoff_s].any()
+    # Without it, the compass is blamed long after the jump: the test can fail.
+    monkeypatch.setattr("validation.validator.MAX_EXCISE_PASSES", 0)
+    stale = validate(rec, sm, vcfg, gcfg)
+    blamed = np.array([r.consistent and "IMU_YAW" in r.diagnoses[0] for r in stale.results])
+    assert blamed[after].mean() > 0.5
+
+
 def test_validation_csv_columns_and_rows(drift):
     rec, sm = drift
     vcfg, gcfg = sections("on")
@@ -333,3 +376,24 @@ def test_oracle_without_faults_gates_nothing(drift):
     assert all(np.all(w == 1.0) for w in out.weights.values())
     assert out.metrics["alarm_fraction"] == 0.0
     assert out.metrics["isolation_precision"] is None and out.metrics["isolation_recall"] is None
+
+
+def test_integrated_fault_spans_cover_the_blame_of_the_integrated_side_only():
+    """Scan matching blamed at steps 5-8, the compass at 12-14: the offset of
+    compass against scan-matching yaw gets one span, from the look-back
+    before the first blamed step to the first step after; the compass is
+    the absolute side and gets none, nor does the compass-gyro offset."""
+    vcfg, _ = sections("on")
+    d = Diagnoser(vcfg.model)
+    clear = d.diagnose({})
+    sm = d.diagnose({"yaw_gyro_sm": Observation.NO_MATCH, "yaw_compass_sm": Observation.NO_MATCH,
+                     "yaw_compass_gyro": Observation.MATCH})
+    compass = d.diagnose({"yaw_compass_gyro": Observation.NO_MATCH, "yaw_compass_sm": Observation.NO_MATCH,
+                          "yaw_gyro_sm": Observation.MATCH})
+    assert sm.diagnoses[0] <= {"SM", "SM_YAW"} and compass.diagnoses[0] == {"IMU_YAW"}
+    results = [clear] * 5 + [sm] * 4 + [clear] * 3 + [compass] * 3 + [clear] * 5
+    t = np.arange(len(results)) * 0.1
+    spans = integrated_fault_spans(vcfg.observers.relations, vcfg.model, t, results, lookback_s=0.3)
+    assert spans == {"yaw_compass_sm_off": [(2, 9)]}
+    assert integrated_fault_spans(vcfg.observers.relations, vcfg.model, t, results, 0.0) == {
+        "yaw_compass_sm_off": [(5, 9)]}

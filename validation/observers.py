@@ -207,11 +207,15 @@ def observe_steps(
     window: Window = "trailing",
     rule: Rule = "paper",
     offline: bool = False,
+    excised: Mapping[str, Sequence[tuple[int, int]]] | None = None,
 ) -> ObserverLog:
     """Run every observer over streams already resampled onto the steps.
 
     ``window`` and ``rule`` choose Algorithms 1-2's window and rule;
-    ``offline`` dates every alarm by its evidence (:func:`evidence`)."""
+    ``offline`` dates every alarm by its evidence (:func:`evidence`).
+    ``excised`` gives offset relations spans of steps ``(k0, k1)`` whose
+    change of the difference is taken out from ``k1`` on
+    (:func:`excise_spans`)."""
     m = len(steps.t)
     missing = np.zeros(m, dtype=bool)
     cache: dict[tuple[str, float, float], tuple[np.ndarray, np.ndarray]] = {}
@@ -246,6 +250,8 @@ def observe_steps(
             return np.zeros(m), np.zeros(m, dtype=bool), missing
         valid = steps.valid[a] & steps.valid[b]
         d = np.where(valid, steps.values[b] - rel.gain * steps.values[a], 0.0)
+        if excised and rel.name in excised:
+            d = excise_spans(d, valid, excised[rel.name])
         if rel.level_window_s is None:  # two absolute streams: the level is 0
             if steps.angular[a] or steps.angular[b]:
                 d = wrap_angle(d)
@@ -290,6 +296,18 @@ def observe_steps(
             implausible = _whole_runs(deviant, implausible)
         unary_traces[check.name] = UnaryTrace(check.name, check.component, valid, deviant, implausible)
     return ObserverLog(steps.t, rel_traces, unary_traces)
+
+
+def excise_spans(d: np.ndarray, valid: np.ndarray, spans: Sequence[tuple[int, int]]) -> np.ndarray:
+    """``d`` with the change over each span ``(k0, k1)`` (step indices, in
+    time order) taken out of every step from ``k1`` on: what an integrated
+    stream summed while its sensor was faulty. Spans whose ends have no data
+    are left alone."""
+    d = d.copy()
+    for k0, k1 in spans:
+        if k1 < len(d) and valid[k0] and valid[k1]:
+            d[k1:] = np.where(valid[k1:], d[k1:] - (d[k1] - d[k0]), d[k1:])
+    return d
 
 
 def _whole_runs(deviant: np.ndarray, held_mask: np.ndarray) -> np.ndarray:

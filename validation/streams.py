@@ -95,6 +95,12 @@ STREAM_COMPONENT: dict[str, str] = {
 }
 STREAM_NAMES: tuple[str, ...] = get_args(StreamName) + get_args(QualityStreamName)
 ANGULAR_STREAMS: frozenset[str] = frozenset({"compass_yaw", "sm_yaw", "odo_yaw", "gps_course"})
+INTEGRATED_STREAMS: frozenset[str] = frozenset({
+    "gyro_yaw", "sm_yaw", "odo_yaw", "odo_distance", "sm_distance", "odo_forward", "sm_forward", "odo_lateral",
+    "sm_lateral",
+})
+"""Streams that sum their sensor's increments: a fault of the sensor stays in
+them for good (an offset relation forgets it once the fault is over)."""
 
 
 class PoseSeries(Protocol):

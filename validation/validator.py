@@ -29,9 +29,12 @@ from validation.diagnosis import Diagnoser, DiagnosisResult
 from validation.gating import Actions, Gate, factor_scales, offline_actions, oracle_actions
 from validation.metrics import validation_metrics
 from validation.coverage import observer_coverage, require_observations, warn_low_coverage
-from validation.observer_config import field_gyro_stream, gps_course_limits
+from validation.model import SystemModel
+from validation.observer_config import RelationConfig, field_gyro_stream, gps_course_limits
 from validation.observers import ObserverLog, observe_steps, unary_checks
-from validation.streams import PoseSeries, SensorSet, fixed_rate_steps, resample_streams, validation_streams
+from validation.streams import (
+    INTEGRATED_STREAMS, PoseSeries, SensorSet, fixed_rate_steps, resample_streams, validation_streams,
+)
 
 log = logging.getLogger(__name__)
 
@@ -155,6 +158,51 @@ def keyframe_weights(step_t: np.ndarray, scales: dict[str, np.ndarray], keyframe
     return weights
 
 
+MAX_EXCISE_PASSES = 4
+"""Observer passes that re-read offset relations after their integrated
+side's faults (:func:`integrated_fault_spans`)."""
+
+
+def diagnose_log(diagnoser: Diagnoser, observer_log: ObserverLog) -> list[DiagnosisResult]:
+    """Each step's diagnosis (each distinct observation pattern diagnosed once)."""
+    patterns, index = observer_log.patterns()
+    diagnosed = [diagnoser.diagnose(p) for p in patterns]
+    return [diagnosed[i] for i in index]
+
+
+def integrated_fault_spans(
+    relations: Sequence[RelationConfig],
+    model: SystemModel,
+    step_t: np.ndarray,
+    results: Sequence[DiagnosisResult],
+    lookback_s: float,
+) -> dict[str, list[tuple[int, int]]]:
+    """Per offset relation with a level, the spans of steps ``(k0, k1)`` over
+    which the sensor of one of its integrated streams was blamed: from
+    ``lookback_s`` before the first blamed step to the first step after.
+    An integrated stream keeps whatever its sensor summed while faulty; the
+    relation takes that change out (:func:`validation.observers.excise_spans`),
+    as the gate takes out the sensor's factors, so that an offset left behind
+    by a past fault of the integrated side is not blamed on its partner."""
+    blamed_sets = [frozenset(c for s in r.diagnoses[0] for c in (s, *model.modalities(s))) if r.consistent else None
+                   for r in results]
+    out: dict[str, list[tuple[int, int]]] = {}
+    for rel in relations:
+        if rel.kind != "offset" or rel.level_window_s is None:
+            continue
+        comps = {c for s, c in zip(rel.streams, rel.components) if s in INTEGRATED_STREAMS}
+        blamed = np.array([b is not None and bool(comps & b) for b in blamed_sets])
+        if not blamed.any():
+            continue
+        edges = np.diff(np.concatenate(([False], blamed, [False])).astype(np.int8))
+        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        first = np.searchsorted(step_t, step_t[starts] - lookback_s - 1e-9, side="left")
+        spans = [(int(a), int(b)) for a, b in zip(first, ends) if b < len(step_t)]
+        if spans:
+            out[rel.name] = spans
+    return out
+
+
 def run_validation(
     sensors: SensorSet,
     sm_poses: PoseSeries | None,
@@ -190,9 +238,19 @@ def run_validation(
         warn_low_coverage(coverage, obs.min_coverage)
         require_observations(coverage)
         diagnoser = Diagnoser(config.model)
-        patterns, index = observer_log.patterns()
-        diagnosed = [diagnoser.diagnose(p) for p in patterns]
-        results = [diagnosed[i] for i in index]
+        results = diagnose_log(diagnoser, observer_log)
+        # An offset relation against an integrated stream forgets what that
+        # stream summed while its sensor was blamed; that can change later
+        # blame, so again until the spans settle.
+        lookback = gating.lookback_s if not config.offline else 0.0
+        excised: dict[str, list[tuple[int, int]]] = {}
+        for _ in range(MAX_EXCISE_PASSES):
+            spans = integrated_fault_spans(obs.relations, config.model, step_t, results, lookback)
+            if spans == excised:
+                break
+            excised = spans
+            observer_log = observe_steps(steps, obs.relations, checks, window, obs.rule, config.offline, excised)
+            results = diagnose_log(diagnoser, observer_log)
         if config.offline:
             actions = offline_actions(gating, results)
         else:
