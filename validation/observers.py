@@ -357,7 +357,9 @@ class ObserverBank:
     """Every observer, one validation step at a time (causal).
 
     Streams with equal (name, window, boundary) share one trend estimator,
-    as in :func:`observe_steps`, whose results this reproduces.
+    as in :func:`observe_steps`, whose results this reproduces (without
+    ``excised`` spans: those come from the diagnosis of earlier steps, which
+    :func:`validation.validator.run_validation` feeds back).
     """
 
     def __init__(

@@ -14,6 +14,7 @@ true fault intervals.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import logging
 import time
@@ -248,8 +249,10 @@ def run_validation(
             spans = integrated_fault_spans(obs.relations, config.model, step_t, results, lookback)
             if spans == excised:
                 break
+            changed = [r for r in obs.relations if spans.get(r.name) != excised.get(r.name)]
             excised = spans
-            observer_log = observe_steps(steps, obs.relations, checks, window, obs.rule, config.offline, excised)
+            again = observe_steps(steps, changed, (), window, obs.rule, config.offline, excised)
+            observer_log = dataclasses.replace(observer_log, relations=observer_log.relations | again.relations)
             results = diagnose_log(diagnoser, observer_log)
         if config.offline:
             actions = offline_actions(gating, results)
