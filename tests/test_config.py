@@ -249,7 +249,7 @@ SHIPPED = sorted([*(REPO / "configs").glob("*.yaml"), *(REPO / "configs" / "data
 
 
 @pytest.mark.parametrize("mode", ["off", "on", "oracle"])
-@pytest.mark.parametrize("config", [p for p in SHIPPED if p.name != "variants.yaml"], ids=lambda p: p.name)
+@pytest.mark.parametrize("config", [p for p in SHIPPED if p.name not in ("variants.yaml", "bench_variants.yaml")], ids=lambda p: p.name)
 def test_every_shipped_config_round_trips_with_every_section_spelled_out(tmp_path, config, mode):
     try:
         cfg = load_config(config, [f"validation.mode={mode}"])
@@ -325,3 +325,18 @@ def test_missing_file_is_named(tmp_path):
     with pytest.raises(GslamError) as e:
         load_config(tmp_path / "nope.yaml")
     assert "nope.yaml" in one_line(e) and "cannot read" in str(e.value)
+
+
+@pytest.mark.parametrize("name", ["variants.yaml", "bench_variants.yaml"])
+def test_shipped_variants_are_valid_overrides(name):
+    """Every variant of the shipped variant files loads on the shipped config;
+    the benchmark's file holds compare's variants unchanged, and two more."""
+    from slam.compare import load_variants
+
+    variants = load_variants(REPO / "configs" / name)
+    for overrides in variants.values():
+        load_config(REPO / "configs" / "telemax.yaml", overrides)
+    if name == "bench_variants.yaml":
+        shipped = load_variants(REPO / "configs" / "variants.yaml")
+        assert {k: variants[k] for k in shipped} == shipped
+        assert set(variants) - set(shipped) == {"gated_nocal", "gated_cauchy"}
