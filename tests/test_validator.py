@@ -397,3 +397,17 @@ def test_integrated_fault_spans_cover_the_blame_of_the_integrated_side_only():
     assert spans == {"yaw_compass_sm_off": [(2, 9)]}
     assert integrated_fault_spans(vcfg.observers.relations, vcfg.model, t, results, 0.0) == {
         "yaw_compass_sm_off": [(5, 9)]}
+
+
+def test_integrated_fault_spans_merge_where_the_look_back_overlaps():
+    """Two bursts of scan-matching blame 0.3 s apart, with a look-back of
+    0.5 s: one span, so no change is taken out twice."""
+    vcfg, _ = sections("on")
+    d = Diagnoser(vcfg.model)
+    clear = d.diagnose({})
+    sm = d.diagnose({"yaw_gyro_sm": Observation.NO_MATCH, "yaw_compass_sm": Observation.NO_MATCH,
+                     "yaw_compass_gyro": Observation.MATCH})
+    results = [clear] * 8 + [sm] * 2 + [clear] * 3 + [sm] * 2 + [clear] * 5
+    t = np.arange(len(results)) * 0.1
+    spans = integrated_fault_spans(vcfg.observers.relations, vcfg.model, t, results, lookback_s=0.5)
+    assert spans == {"yaw_compass_sm_off": [(3, 15)]}

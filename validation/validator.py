@@ -198,7 +198,12 @@ def integrated_fault_spans(
         edges = np.diff(np.concatenate(([False], blamed, [False])).astype(np.int8))
         starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
         first = np.searchsorted(step_t, step_t[starts] - lookback_s - 1e-9, side="left")
-        spans = [(int(a), int(b)) for a, b in zip(first, ends) if b < len(step_t)]
+        spans: list[tuple[int, int]] = []
+        for a, b in zip(first.tolist(), ends.tolist()):
+            if spans and a <= spans[-1][1]:  # the look-back reaches into the span before: one span
+                a = spans.pop()[0]
+            spans.append((a, b))
+        spans = [(a, b) for a, b in spans if b < len(step_t)]
         if spans:
             out[rel.name] = spans
     return out
