@@ -185,14 +185,20 @@ def integrated_fault_spans(
     relation takes that change out (:func:`validation.observers.excise_spans`),
     as the gate takes out the sensor's factors, so that an offset left behind
     by a past fault of the integrated side is not blamed on its partner."""
-    blamed_sets = [frozenset(c for s in r.diagnoses[0] for c in (s, *model.modalities(s))) if r.consistent else None
-                   for r in results]
     out: dict[str, list[tuple[int, int]]] = {}
-    for rel in relations:
-        if rel.kind != "offset" or rel.level_window_s is None:
-            continue
+    offsets = [r for r in relations if r.kind == "offset" and r.level_window_s is not None]
+    if not offsets:
+        return out
+    # Steps share a result per observation pattern: each pattern's blame once.
+    blame_of: dict[int, frozenset[str]] = {}
+    for r in results:
+        if id(r) not in blame_of:
+            top = r.diagnoses[0] if r.consistent else ()
+            blame_of[id(r)] = frozenset(c for s in top for c in (s, *model.modalities(s)))
+    blamed_sets = [blame_of[id(r)] for r in results]
+    for rel in offsets:
         comps = {c for s, c in zip(rel.streams, rel.components) if s in INTEGRATED_STREAMS}
-        blamed = np.array([b is not None and bool(comps & b) for b in blamed_sets])
+        blamed = np.array([bool(comps & b) for b in blamed_sets])
         if not blamed.any():
             continue
         edges = np.diff(np.concatenate(([False], blamed, [False])).astype(np.int8))
