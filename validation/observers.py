@@ -310,13 +310,17 @@ def excise_spans(d: np.ndarray, valid: np.ndarray, spans: Sequence[tuple[int, in
     return d
 
 
+def mask_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(starts, ends)``: the first step of every run of True in ``mask``
+    and the step after its last."""
+    d = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
+    return np.flatnonzero(~d[:-1] & d[1:]), np.flatnonzero(d[:-1] & ~d[1:])
+
+
 def _whole_runs(deviant: np.ndarray, held_mask: np.ndarray) -> np.ndarray:
     """Every run of ``deviant`` that reaches ``held_mask`` anywhere, whole."""
     out = np.zeros(len(deviant), dtype=bool)
-    d = np.concatenate(([False], deviant, [False]))
-    starts = np.flatnonzero(~d[:-1] & d[1:])
-    ends = np.flatnonzero(d[:-1] & ~d[1:])
-    for a, b in zip(starts, ends):
+    for a, b in zip(*mask_runs(deviant)):
         if held_mask[a:b].any():
             out[a:b] = True
     return out

@@ -32,7 +32,7 @@ from validation.metrics import validation_metrics
 from validation.coverage import observer_coverage, require_observations, warn_low_coverage
 from validation.model import SystemModel
 from validation.observer_config import RelationConfig, field_gyro_stream, gps_course_limits
-from validation.observers import ObserverLog, observe_steps, unary_checks
+from validation.observers import ObserverLog, mask_runs, observe_steps, unary_checks
 from validation.streams import (
     INTEGRATED_STREAMS, PoseSeries, SensorSet, fixed_rate_steps, resample_streams, validation_streams,
 )
@@ -201,8 +201,7 @@ def integrated_fault_spans(
         blamed = np.array([bool(comps & b) for b in blamed_sets])
         if not blamed.any():
             continue
-        edges = np.diff(np.concatenate(([False], blamed, [False])).astype(np.int8))
-        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        starts, ends = mask_runs(blamed)
         first = np.searchsorted(step_t, step_t[starts] - lookback_s - 1e-9, side="left")
         spans: list[tuple[int, int]] = []
         for a, b in zip(first.tolist(), ends.tolist()):
