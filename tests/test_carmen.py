@@ -104,6 +104,17 @@ def test_flaser_angles_ranges_and_range_max(tmp_path):
     np.testing.assert_allclose(np.degrees(s.angles), [-90.0, -45.0, 0.0, 45.0, 90.0])
 
 
+@pytest.mark.parametrize("fov", ["100", "1.745329"])
+def test_field_of_view_param_in_degrees_or_radians(tmp_path, fov):
+    """CARMEN writes the field of view in degrees; csail writes 3.14159,
+    radians. Either way a 100 deg scanner's beams span 100 deg."""
+    lines = three_scan_log()
+    lines.insert(1, f"PARAM laser_front_laser_fov {fov} host 0")
+    lines = [ln.replace("FLASER 4 1.000 2.000 3.000 81.910", "FLASER 5 1.000 2.000 3.000 4.000 81.910") for ln in lines]
+    s = read_carmen(write(tmp_path / "fov.log", lines)).scans
+    np.testing.assert_allclose(np.degrees(s.angles), [-50.0, -25.0, 0.0, 25.0, 50.0], atol=1e-4)
+
+
 def test_robotlaser1_has_its_own_angles(tmp_path):
     lines = []
     for k, pose in enumerate(CORRECTED):

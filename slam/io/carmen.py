@@ -17,7 +17,8 @@ What becomes of them:
   ``180 / n`` deg for an even count (180, 360 beams: the last beam is one
   step short of +90 deg) and ``180 / (n - 1)`` deg for an odd count (181,
   361: both ends included), as CARMEN and GMapping read them; PARAM
-  ``laser_front_laser_fov`` changes the 180 deg. ROBOTLASER1 lines carry
+  ``laser_front_laser_fov`` changes the 180 deg (in degrees, or in radians
+  where the value is at most 2 pi: csail writes 3.14159). ROBOTLASER1 lines carry
   their own start angle, step and maximum range. ``range_max``: PARAM
   ``robot_front_laser_max`` if given, else just below the largest reading of
   the log (1 % less), because these logs encode "no return" as the
@@ -139,8 +140,16 @@ def _count(parts: list[str], i: int, where: str, expected: str) -> int:
     return n
 
 
-def _flaser_angles(n: int, fov_deg: float) -> np.ndarray:
-    fov = np.radians(fov_deg)
+def _fov_rad(value: float) -> float:
+    """PARAM ``laser_front_laser_fov`` in radians. CARMEN writes degrees
+    (180, 100), but some logs write radians (csail: 3.14159 for its 180 deg
+    SICK at 0.5 deg resolution); a field of view of at most 2 pi "degrees"
+    is no scanner's, so such a value is taken as radians."""
+    return value if value <= 2.0 * np.pi + 1e-6 else float(np.radians(value))
+
+
+def _flaser_angles(n: int, fov_param: float) -> np.ndarray:
+    fov = _fov_rad(fov_param)
     step = fov / (n - 1) if n % 2 == 1 and n > 1 else fov / n
     return -fov / 2.0 + step * np.arange(n)
 
