@@ -28,7 +28,7 @@ Sections (every figure is the median of ``--repeats`` runs unless stated):
   keyframes around graph sizes of 1k and 10k, for several relinearisation
   settings; then with the run's loop closures (``configs/telemax.yaml``'s
   ``loops``), each added at the keyframe that closes it.
-* ``diagnosis``: time per step of :class:`validation.diagnosis.Diagnoser`
+* ``diagnosis``: time per step of :class:`validation.diagnosis.reiter.Diagnoser`
   on the shipped 5-sensor model (the observations of the ``telemax_lab``
   run) and on synthetic models of 4, 8, 16 and 32 components; cold (each
   pattern seen for the first time) and memoised (the same patterns again).
@@ -388,7 +388,7 @@ def bench_isam2(report: Report, cache: Path, out: Path, laps: int, repeats: int)
 def synthetic_model(n: int):
     """A model of ``n`` components C0..C{n-1}: relations between neighbours on
     a ring and two apart, each with failure masking (CORR)."""
-    from validation.model import SystemModel
+    from validation.diagnosis.model import SystemModel
 
     comps = [f"C{i}" for i in range(n)]
     relations = {f"r{i}_{(i + d) % n}": (comps[i], comps[(i + d) % n]) for d in (1, 2) for i in range(n)
@@ -400,7 +400,7 @@ def synthetic_model(n: int):
 def synthetic_patterns(model, count: int, seed: int = 0) -> list[dict]:
     """Distinct observation patterns: 0-2 faulty components; a relation
     touching one shows no_match with probability 0.8."""
-    from validation.model import Observation
+    from validation.diagnosis.model import Observation
 
     rng = np.random.default_rng(seed)
     seen, out = set(), []
@@ -420,7 +420,7 @@ def synthetic_patterns(model, count: int, seed: int = 0) -> list[dict]:
 def time_diagnosis(model, patterns: list[dict], repeats: int) -> tuple[float, float]:
     """Median time per step (s): cold (a fresh diagnoser, every pattern new)
     and memoised (the same patterns again)."""
-    from validation.diagnosis import Diagnoser
+    from validation.diagnosis.reiter import Diagnoser
 
     cold, warm = [], []
     for _ in range(repeats):

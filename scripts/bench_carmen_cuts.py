@@ -59,7 +59,7 @@ from slam.io.datasets import data_root  # noqa: E402
 from slam.io.readers import read_recording  # noqa: E402
 from slam.measurements import interpolate_poses, relative_poses  # noqa: E402
 from slam.pipeline import MappingPipeline  # noqa: E402
-from validation.checks import ScanDegeneracyCheck, unary_checks  # noqa: E402
+from validation.observers.checks import ScanDegeneracyCheck, unary_checks  # noqa: E402
 
 log = logging.getLogger("bench_carmen_cuts")
 ROOT = Path(__file__).resolve().parents[1]

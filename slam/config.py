@@ -456,7 +456,7 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
     try:
         vcfg, gcfg = _parse_sections(config.validation, config.gating)
         if config.loops.enabled and vcfg.mode == "on":
-            from validation.loop_gating import check_model
+            from validation.loops.gating import check_model
 
             check_model(vcfg.model)
     except SectionError as e:

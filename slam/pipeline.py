@@ -331,7 +331,7 @@ class MappingPipeline:
             return
         from slam.backend import _robust_kernel
         from slam.loops.factors import LoopFactors
-        from validation.loops import observe_loops
+        from validation.loops.observer import observe_loops
 
         start = time.perf_counter()
         self.loop_search = search = self.find_loops()
@@ -354,7 +354,7 @@ class MappingPipeline:
 
     def _gate_loops(self, obs) -> None:
         from slam.config import validation_sections
-        from validation.loop_gating import gate_loops, oracle_loops
+        from validation.loops.gating import gate_loops, oracle_loops
 
         vcfg, gcfg = validation_sections(self.config)
         if vcfg.mode == "oracle":
@@ -436,7 +436,7 @@ class MappingPipeline:
         out["chain_scale"] = round(obs.chain_scale, 3)
         truth = self._keyframe_truth()
         if truth is not None:
-            from validation.loop_gating import loop_is_true
+            from validation.loops.gating import loop_is_true
 
             ev = self.config.evaluation
             ok = [loop_is_true(v.loop, truth, ev.sm_fault_trans_m, np.radians(ev.sm_fault_yaw_deg)) for v in obs.verdicts]

@@ -18,8 +18,8 @@ from slam.config import load_config
 from slam.errors import GslamError
 from slam.pipeline import run_map
 from validation.config import ValidationConfig
-from validation.observer_config import RelationConfig
 from validation.observers import observe_steps
+from validation.observers.config import RelationConfig
 from validation.streams import Stream, fixed_rate_steps, resample_streams
 
 RATE_HZ = 10.0

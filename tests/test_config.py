@@ -10,7 +10,7 @@ import yaml
 
 from slam.config import PipelineConfig, dump_config, load_config, load_yaml, parse_override, validation_sections
 from slam.errors import GslamError
-from validation.model import load_model
+from validation.diagnosis.model import load_model
 
 REPO = Path(__file__).resolve().parents[1]
 TELEMAX = REPO / "configs" / "telemax.yaml"

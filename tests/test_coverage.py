@@ -11,9 +11,9 @@ import pytest
 
 from slam.recording import Recording, Trajectory
 from validation.config import parse_sections
-from validation.coverage import observer_coverage, require_observations, warn_low_coverage
 from validation.errors import ValidationError
 from validation.observers import RelationConfig, observe_steps
+from validation.observers.coverage import observer_coverage, require_observations, warn_low_coverage
 from validation.streams import Stream, resample_streams, stream_max_gap
 
 DISTANCE = RelationConfig(name="distance_odo_sm", stream_a="odo_distance", stream_b="sm_distance",
@@ -70,7 +70,7 @@ def test_coverage_names_the_relation_and_the_reason(caplog):
     assert "it spans" in coverage["distance_odo_sm"].reason
     assert coverage["yaw_odo_sm"].fraction == 0.0
     assert "stream odo_yaw is absent: the run has no odometry" in coverage["yaw_odo_sm"].reason
-    with caplog.at_level(logging.WARNING, logger="validation.coverage"):
+    with caplog.at_level(logging.WARNING, logger="validation.observers.coverage"):
         messages = warn_low_coverage(coverage, 0.5)
     assert len(messages) == 2 and all(m in caplog.text for m in messages)
     assert "observer distance_odo_sm has a valid observation on 2" in caplog.text

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from validation.diagnosis import Diagnoser, DiagnosisResult, corr_name
+from validation.diagnosis.model import Observation, Plausibility, SystemModel, load_model
+from validation.diagnosis.reiter import Diagnoser, DiagnosisResult, corr_name
 from validation.errors import ValidationError
-from validation.model import Observation, Plausibility, SystemModel, load_model
 
 M, N = Observation.MATCH, Observation.NO_MATCH
 PLAUS, IMPL = Plausibility.PLAUSIBLE, Plausibility.IMPLAUSIBLE

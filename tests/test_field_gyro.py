@@ -7,10 +7,10 @@ import pytest
 
 from slam.calibrate.runs import CalibrationRun
 from slam.calibrate.select import calibrate_field_gyro
-from validation.checks import FieldGyroCheck, unary_checks
-from validation.field_gyro import field_change
-from validation.observer_config import FieldGyroCheckConfig, field_gyro_stream, observers_config
+from validation.observers.checks import FieldGyroCheck, unary_checks
+from validation.observers.config import FieldGyroCheckConfig, field_gyro_stream, observers_config
 from validation.streams import fixed_rate_steps, resample_streams, validation_streams
+from validation.streams.field_gyro import field_change
 
 EARTH = np.array([15e-6, 0.0, -40e-6])  # horizontal 15 uT north-ish, dipping down
 

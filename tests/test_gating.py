@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from slam.measurements import FACTOR_DOFS
-from validation.diagnosis import Diagnoser, DiagnosisResult
+from validation.diagnosis.model import Observation, Plausibility, load_model
+from validation.diagnosis.reiter import Diagnoser, DiagnosisResult
 from validation.errors import ValidationError
 from validation.gating import (
     Gate,
@@ -21,7 +22,6 @@ from validation.gating import (
     offline_actions,
     oracle_actions,
 )
-from validation.model import Observation, Plausibility, load_model
 
 INC, INF, EXC = GatingAction.INCLUDE, GatingAction.INFLATE, GatingAction.EXCLUDE
 TELEMAX = Path(__file__).resolve().parents[1] / "configs" / "validation" / "telemax_model.yaml"

@@ -1,5 +1,5 @@
-"""The GPS course stream (validation/course.py) and the compass's offset
-relation against it with a level of 0 (validation/quantitative.py), learnt
+"""The GPS course stream (validation/streams/course.py) and the compass's offset
+relation against it with a level of 0 (validation/observers/quantitative.py), learnt
 by calibrate (slam/calibrate)."""
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ from slam.calibrate.runs import CalibrationRun
 from slam.calibrate.select import calibrate_relation
 from slam.calibrate.write import _flow
 from validation.config import ValidationConfig
-from validation.diagnosis import Diagnoser
-from validation.model import Observation, load_model
-from validation.observer_config import RelationConfig
+from validation.diagnosis.model import Observation, load_model
+from validation.diagnosis.reiter import Diagnoser
 from validation.observers import ObserverBank, run_observers
+from validation.observers.config import RelationConfig
 from validation.streams import Stream, fixed_rate_steps, resample_streams, validation_streams
 
 FIX_SIGMA_M = 0.5

@@ -23,9 +23,9 @@ from slam.loops.file_loops import file_loops
 from slam.loops.registration import build_point_map, register, scan_normals
 from slam.measurements import BetweenMeasurement, Measurements
 from slam.recording import PlaceMatches
-from validation.loop_cliques import maximum_clique
-from validation.loop_gating import gate_loops
-from validation.loops import chi2_quantile, observe_loops
+from validation.loops.cliques import maximum_clique
+from validation.loops.gating import gate_loops
+from validation.loops.observer import chi2_quantile, observe_loops
 
 
 # --- helpers ---------------------------------------------------------------
@@ -282,7 +282,7 @@ def test_gnc_drops_a_false_loop_the_observer_let_through():
 
 def test_a_rejected_loop_makes_loop_the_diagnosis_and_gates_the_next():
     from validation.gating import GatingConfig
-    from validation.model import SystemModel
+    from validation.diagnosis.model import SystemModel
 
     truth, chain, true_loop, false_loop = square_case()
     model = SystemModel(components=("ODO", "LOOP"), unary_checks={"loop_consistency": "LOOP"})
@@ -304,7 +304,7 @@ def test_a_rejected_loop_makes_loop_the_diagnosis_and_gates_the_next():
 def test_validation_model_without_loop_is_an_error():
     from validation.errors import ValidationError
     from validation.gating import GatingConfig
-    from validation.model import SystemModel
+    from validation.diagnosis.model import SystemModel
 
     truth, chain, true_loop, _ = square_case()
     obs = observe_loops(chain, [true_loop], ObserverConfig(min_support=0))

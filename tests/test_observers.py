@@ -7,8 +7,8 @@ import pytest
 
 from slam.recording import Compass, Gps, Gyro, MagneticReference, Recording, Trajectory
 from tests.synthetic import field_body, yaw_scenario
+from validation.diagnosis.model import Observation, Plausibility
 from validation.errors import ValidationError
-from validation.model import Observation, Plausibility
 from validation.observers import (
     DEFAULT_RELATIONS,
     GpsQualityCheck,
@@ -485,7 +485,7 @@ def test_cusum_observer_sees_a_standing_error_below_the_residual_band():
 
 
 def test_cusum_starts_again_after_a_gap():
-    from validation.sequential import cusum
+    from validation.observers.sequential import cusum
 
     z = np.full(10, 2.0)
     valid = np.ones(10, dtype=bool)

@@ -16,11 +16,11 @@ from slam.pipeline import run_map
 from slam.recording import Scans
 from tests.conftest import TELEMAX_CONFIG
 from tests.synthetic import wall_ranges
-from validation.checks import ScanDegeneracyCheck, scan_streams, unary_checks
+from validation.diagnosis.model import Plausibility
 from validation.errors import ValidationError
-from validation.model import Plausibility
 from validation.observers import ObserversConfig, observe_steps
-from validation.observer_config import observers_config
+from validation.observers.checks import ScanDegeneracyCheck, scan_streams, unary_checks
+from validation.observers.config import observers_config
 from validation.streams import resample_streams
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from validation.diagnosis import DiagnosisResult
+from validation.diagnosis.reiter import DiagnosisResult
 from validation.gating import GatingAction, GatingConfig, oracle_actions
 from validation.metrics import validation_metrics
 

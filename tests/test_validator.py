@@ -16,9 +16,9 @@ from slam.geometry import wrap_angle
 from slam.measurements import FACTOR_DOFS
 from slam.recording import Compass, Gyro, MagneticReference, Recording, Trajectory
 from tests.synthetic import DEFAULT_TURNS, bump_error, field_body, sample_times, true_yaw, yaw_rate
-from validation.diagnosis import Diagnoser
+from validation.diagnosis.model import Observation
+from validation.diagnosis.reiter import Diagnoser
 from validation.gating import GatingAction, GatingConfig
-from validation.model import Observation
 from validation.streams import fixed_rate_steps
 from validation.validator import integrated_fault_spans, keyframe_weights, run_validation, step_scales
 

@@ -31,11 +31,11 @@ from typing import Any, Literal, Mapping
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from validation.diagnosis.model import SystemModel
 from validation.gating import GatingConfig, check_components
-from validation.model import SystemModel, validate_mapping
-from validation.observer_config import ObserversConfig, observers_config
+from validation.observers.config import ObserversConfig, observers_config
 from validation.trends import Window
-from validation.yamlio import load_yaml
+from validation.yamlio import load_yaml, validate_mapping
 
 GatingMode = Literal["off", "on", "oracle", "interval_oracle"]
 Pass = Literal["offline", "causal"]

@@ -35,11 +35,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from validation.diagnosis.model import SystemModel
 from validation.errors import ValidationError
-from validation.model import SystemModel, validate_mapping
+from validation.yamlio import validate_mapping
 
 if TYPE_CHECKING:  # the solver behind the diagnosis loads once there is one to make
-    from validation.diagnosis import DiagnosisResult
+    from validation.diagnosis.reiter import DiagnosisResult
 
 log = logging.getLogger(__name__)
 

@@ -43,7 +43,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from validation.diagnosis import DiagnosisResult
+from validation.diagnosis.reiter import DiagnosisResult
 from validation.gating import Actions, GatingAction
 
 

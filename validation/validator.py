@@ -24,15 +24,15 @@ from functools import cached_property
 
 import numpy as np
 
-from validation.checks import MagneticReference, ScanGeometrySeries, scan_streams
 from validation.config import GatingConfig, ValidationConfig
-from validation.diagnosis import Diagnoser, DiagnosisResult
+from validation.diagnosis.model import SystemModel
+from validation.diagnosis.reiter import Diagnoser, DiagnosisResult
 from validation.gating import Actions, Gate, factor_scales, offline_actions, oracle_actions
 from validation.metrics import validation_metrics
-from validation.coverage import observer_coverage, require_observations, warn_low_coverage
-from validation.model import SystemModel
-from validation.observer_config import RelationConfig, field_gyro_stream, gps_course_limits
 from validation.observers import ObserverLog, mask_runs, observe_steps, unary_checks
+from validation.observers.checks import MagneticReference, ScanGeometrySeries, scan_streams
+from validation.observers.config import RelationConfig, field_gyro_stream, gps_course_limits
+from validation.observers.coverage import observer_coverage, require_observations, warn_low_coverage
 from validation.streams import (
     INTEGRATED_STREAMS, PoseSeries, SensorSet, fixed_rate_steps, resample_streams, validation_streams,
 )
@@ -182,7 +182,7 @@ def integrated_fault_spans(
     which the sensor of one of its integrated streams was blamed: from
     ``lookback_s`` before the first blamed step to the first step after.
     An integrated stream keeps whatever its sensor summed while faulty; the
-    relation takes that change out (:func:`validation.observers.excise_spans`),
+    relation takes that change out (:func:`validation.observers.relations.excise_spans`),
     as the gate takes out the sensor's factors, so that an offset left behind
     by a past fault of the integrated side is not blamed on its partner."""
     out: dict[str, list[tuple[int, int]]] = {}

@@ -1,4 +1,5 @@
-"""Reading the validation package's YAML files (models, observer configs).
+"""Reading the validation package's YAML files (models, observer configs)
+into typed models.
 
 The one loader of the package: a file that is not readable text or not a
 YAML mapping is a one-line :class:`ValidationError` naming the file and,
@@ -8,9 +9,11 @@ where the parser knows it, the line.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
+import pydantic
 import yaml
+from pydantic import BaseModel
 
 from validation.errors import ValidationError
 
@@ -40,3 +43,21 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ValidationError(f"{path}: expected a mapping at the top level")
     return data
+
+
+_M = TypeVar("_M", bound=BaseModel)
+
+
+def validate_mapping(model_type: type[_M], data: Any, source: str) -> _M:
+    """Validate ``data`` as ``model_type``; bad input raises a one-line
+    :class:`ValidationError` naming ``source`` and the offending key."""
+    try:
+        return model_type.model_validate(data)
+    except pydantic.ValidationError as e:
+        first = e.errors()[0]
+        loc = ".".join(str(p) for p in first["loc"])
+        if first["type"] == "extra_forbidden":
+            raise ValidationError(f"{source}: unknown key '{loc}'") from None
+        msg = first["msg"].removeprefix("Value error, ")
+        where = f"{loc}: " if loc else ""
+        raise ValidationError(f"{source}: {where}{msg}") from None

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from slam.calibrate.runs import CalibrationRun
-from validation.quantitative import running_level, window_changes, wrap_angle
+from validation.observers.quantitative import running_level, window_changes, wrap_angle
 from validation.trends import Window, derive_stream
 
 MAD_TO_SD = 1.4826

@@ -21,8 +21,8 @@ from slam.calibrate.runs import CalibrationRun
 from slam.calibrate.fit import fit_rates
 from slam.calibrate.select import Choice, calibrate_relation, candidate_windows
 from validation.config import ValidationConfig
-from validation.model import SystemModel
-from validation.observer_config import RelationConfig
+from validation.diagnosis.model import SystemModel
+from validation.observers.config import RelationConfig
 from validation.streams import STREAM_COMPONENT
 
 MIN_CORRELATION = 0.9

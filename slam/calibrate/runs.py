@@ -19,10 +19,10 @@ import numpy as np
 from slam.config import PipelineConfig
 from slam.errors import GslamError
 from slam.pipeline import MappingPipeline
-from validation.checks import UnaryCheck
 from validation.config import ValidationConfig
-from validation.observer_config import field_gyro_stream, gps_course_limits
 from validation.observers import unary_checks
+from validation.observers.checks import UnaryCheck
+from validation.observers.config import field_gyro_stream, gps_course_limits
 from validation.streams import StepStreams, Stream, fixed_rate_steps, resample_streams, validation_streams
 
 log = logging.getLogger(__name__)

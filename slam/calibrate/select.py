@@ -7,7 +7,7 @@ a trend relation, of the windowed residual for a residual relation, of
 the difference about its running level for an offset relation. The
 boundary is then a multiple of that noise (``b = c * noise`` for a trend,
 ``k_sigma`` for the others) and Algorithm 3's threshold ``th`` a number of
-steps; the observer itself (:func:`validation.observers.observe_steps`,
+steps; the observer itself (:func:`validation.observers.relations.observe_steps`,
 with the pass the config names) runs on the learning steps for each
 candidate, smallest multiple first and, for each, smallest ``th`` first.
 The first candidate whose ``NO_MATCH`` steps are at most the target share
@@ -41,8 +41,8 @@ import numpy as np
 from slam.calibrate.fit import RateFit, fit_offset, fit_rates, fit_slopes, robust_sd
 from slam.calibrate.runs import CalibrationRun
 from validation.config import ValidationConfig
-from validation.observer_config import FieldGyroCheckConfig, MagnetometerCheckConfig, RelationConfig
 from validation.observers import evidence, observe, observe_steps
+from validation.observers.config import FieldGyroCheckConfig, MagnetometerCheckConfig, RelationConfig
 
 log = logging.getLogger(__name__)
 

@@ -19,7 +19,7 @@ from slam.calibrate.propose import Proposal
 from slam.calibrate.select import CheckChoice, Choice, FieldGyroChoice
 from slam.config import PipelineConfig
 from slam.io.outdir import result_file_mark
-from validation.observer_config import RelationConfig
+from validation.observers.config import RelationConfig
 
 _PLACEHOLDER = "__relations__"
 _INDENT = "    "

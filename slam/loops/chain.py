@@ -35,7 +35,7 @@ import numpy as np
 from slam.backend import dof_weights
 from slam.geometry import wrap_angle
 from slam.measurements import Measurements
-from validation.chain import (  # noqa: F401  (the chain's algebra, used through this module too)
+from validation.loops.chain import (  # noqa: F401  (the chain's algebra, used through this module too)
     J,
     Chain,
     between,

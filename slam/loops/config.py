@@ -10,7 +10,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from validation.loop_model import ObserverConfig
+from validation.loops.constraint import ObserverConfig
 
 
 class _Strict(BaseModel):

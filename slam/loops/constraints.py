@@ -1,6 +1,6 @@
 """A loop constraint: a relative pose between two non-consecutive keyframes
-(defined with the loop observer, :mod:`validation.loop_model`)."""
+(defined with the loop observer, :mod:`validation.loops.constraint`)."""
 
-from validation.loop_model import LoopConstraint
+from validation.loops.constraint import LoopConstraint
 
 __all__ = ["LoopConstraint"]

@@ -1,6 +1,6 @@
 """Consistency-based diagnosis (Reiter) of the validation model with a SAT solver.
 
-SD (see :mod:`validation.model`) is encoded once as CNF over the variables
+SD (see :mod:`validation.diagnosis.model`) is encoded once as CNF over the variables
 ok(S), match(r) and plausible(k). Each *assumable* gets a selector literal:
 ``¬AB(S)`` for every component and ``CORR(match(r))`` for every failure-masking
 rule with ``corr: true``. A set of retracted assumables is a diagnosis when
@@ -36,8 +36,8 @@ from pysat.examples.hitman import Hitman
 from pysat.formula import IDPool
 from pysat.solvers import Solver
 
+from validation.diagnosis.model import Observation, Plausibility, SystemModel
 from validation.errors import ValidationError
-from validation.model import Observation, Plausibility, SystemModel
 
 log = logging.getLogger(__name__)
 

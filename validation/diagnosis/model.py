@@ -41,13 +41,10 @@ from __future__ import annotations
 
 from enum import Enum
 from pathlib import Path
-from typing import Any, TypeVar
 
-import pydantic
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from validation.errors import ValidationError
-from validation.yamlio import load_yaml
+from validation.yamlio import load_yaml, validate_mapping
 
 DEFAULT_PRIOR = 0.01
 """Fault probability of a component the model gives no prior for."""
@@ -166,24 +163,6 @@ class SystemModel(_Strict):
     def observables(self) -> tuple[str, ...]:
         """Names an observation may refer to: relations, then unary checks."""
         return tuple(self.relations) + tuple(self.unary_checks)
-
-
-_M = TypeVar("_M", bound=BaseModel)
-
-
-def validate_mapping(model_type: type[_M], data: Any, source: str) -> _M:
-    """Validate ``data`` as ``model_type``; bad input raises a one-line
-    :class:`ValidationError` naming ``source`` and the offending key."""
-    try:
-        return model_type.model_validate(data)
-    except pydantic.ValidationError as e:
-        first = e.errors()[0]
-        loc = ".".join(str(p) for p in first["loc"])
-        if first["type"] == "extra_forbidden":
-            raise ValidationError(f"{source}: unknown key '{loc}'") from None
-        msg = first["msg"].removeprefix("Value error, ")
-        where = f"{loc}: " if loc else ""
-        raise ValidationError(f"{source}: {where}{msg}") from None
 
 
 def load_model(path: str | Path) -> SystemModel:

@@ -49,7 +49,7 @@ from collections import deque
 
 import numpy as np
 
-from validation.observer_config import RelationConfig
+from validation.observers.config import RelationConfig
 from validation.trends import Window
 
 

@@ -1,9 +1,9 @@
 """Configuration of the observers: relations, unary checks and their defaults.
 
 :class:`RelationConfig` describes one relation observer (Algorithm 3,
-:mod:`validation.observers`); :class:`MagnetometerCheckConfig`,
+:mod:`validation.observers.relations`); :class:`MagnetometerCheckConfig`,
 :class:`FieldGyroCheckConfig`, :class:`GpsCheckConfig` and
-:class:`ScanCheckConfig` the unary checks (:mod:`validation.checks`);
+:class:`ScanCheckConfig` the unary checks (:mod:`validation.observers.checks`);
 :class:`ObserversConfig` nests them all with the resampling gaps, and
 :func:`observers_config` / :func:`load_observers_config` validate a mapping
 or a YAML file into it with one-line errors.
@@ -21,10 +21,9 @@ import pydantic
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from validation.errors import ValidationError
-from validation.model import validate_mapping
 from validation.streams import STREAM_COMPONENT, STREAM_NAMES, StreamName
 from validation.trends import Rule, Window
-from validation.yamlio import load_yaml
+from validation.yamlio import load_yaml, validate_mapping
 
 Component = str
 """A component of the system model (checked against the model's list)."""
@@ -57,13 +56,13 @@ class RelationConfig(_Strict):
     ``kind: cusum`` takes the residual relation's normalised residual and
     accumulates it in a two-sided CUSUM that forgets ``cusum_drift`` sds a
     step; a step is a mismatch while the sum exceeds ``k_sigma`` (its
-    decision limit, in sds; :mod:`validation.sequential`). It sees a
+    decision limit, in sds; :mod:`validation.observers.sequential`). It sees a
     standing error smaller than a residual relation's band.
 
     ``kind: offset`` compares the streams themselves: ``b - gain * a`` must
     stay within ``k_sigma * sigma_floor`` of its median over
     ``level_window_s`` (an absolute heading against an integrated one,
-    whose offset drifts slowly; :mod:`validation.quantitative`), or, with
+    whose offset drifts slowly; :mod:`validation.observers.quantitative`), or, with
     ``level_window_s: null``, of 0 (two absolute streams calibrated against
     each other: a compass, after its mounting yaw, against the GPS course).
     An angular difference is wrapped to (-pi, pi] there. ``level_max_rate``
@@ -198,7 +197,7 @@ class MagnetometerCheckConfig(_Strict):
 class FieldGyroCheckConfig(_Strict):
     """The field's change over ``window_s`` that the gyro's turn does not
     explain, each end averaged over ``smooth_s``, against ``tolerance_T``
-    (:mod:`validation.field_gyro`). Off unless enabled: it needs the
+    (:mod:`validation.streams.field_gyro`). Off unless enabled: it needs the
     magnetometer's field and a gyro on one clock."""
 
     enabled: bool = False
@@ -257,7 +256,7 @@ class ObserversConfig(_Strict):
 
     ``min_coverage``: an observer with a valid observation on a smaller
     share of the steps is reported with a warning that says why
-    (:mod:`validation.coverage`).
+    (:mod:`validation.observers.coverage`).
 
     ``window``: the trend windows of Algorithm 2, ``centred`` on each sample
     (the paper's; it needs the samples after it, so offline validation only)
@@ -269,7 +268,7 @@ class ObserversConfig(_Strict):
     ``odo_fix_speed`` and ``gps_course``; the course counts where the speed
     is at least ``gps_course_min_speed_mps`` (the travel over the window
     several times the fixes' noise) and the odometry turns by at most
-    ``gps_course_max_turn_deg`` over the window (:mod:`validation.course`).
+    ``gps_course_max_turn_deg`` over the window (:mod:`validation.streams.course`).
     """
 
     window: Window | None = None

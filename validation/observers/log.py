@@ -1,8 +1,8 @@
 """The observers' per-step log: trends, counters and observations.
 
 :class:`RelationTrace` holds one relation observer (Algorithm 3,
-:mod:`validation.observers`) over every validation step,
-:class:`UnaryTrace` one unary check (:mod:`validation.checks`), and
+:mod:`validation.observers.relations`) over every validation step,
+:class:`UnaryTrace` one unary check (:mod:`validation.observers.checks`), and
 :class:`ObserverLog` all of them with the step times; it gives the
 observations at one step (for diagnosis) and flat columns (for the CSV log).
 """
@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from validation.model import Observation, Plausibility
-from validation.observer_config import RelationConfig
+from validation.diagnosis.model import Observation, Plausibility
+from validation.observers.config import RelationConfig
 
 
 @dataclass

@@ -16,7 +16,7 @@ sensor does. Its change over a short trailing window,
 
 (window ``w``, smoothing ``s`` against the magnetometer's noise) is the
 stream ``mag_field_change`` (T); the unary check
-(:class:`validation.checks.FieldGyroCheck`) flags the compass where it
+(:class:`validation.observers.checks.FieldGyroCheck`) flags the compass where it
 exceeds a tolerance. Unlike the field's strength and dip against the run's
 start, it needs no reference that the sensor's residual calibration error
 moves over a run (a hand-held board turned over shows 2-5 uT), only the

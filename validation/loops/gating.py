@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from validation.loop_model import LoopConstraint
-from validation.loops import LoopObservation, LoopVerdict, count_reasons, position_only
+from validation.loops.constraint import LoopConstraint
+from validation.loops.observer import LoopObservation, LoopVerdict, count_reasons, position_only
 
 LOOP_COMPONENT = "LOOP"
 LOOP_CHECK = "loop_consistency"
@@ -69,9 +69,9 @@ def gate_loops(
     """Diagnose LOOP per validation step from the observer's verdicts and
     gate the loops (see the module docstring); updates ``obs`` in place.
     ``offline``: each step's own diagnosis decides, without hold-off."""
-    from validation.diagnosis import Diagnoser
+    from validation.diagnosis.reiter import Diagnoser
     from validation.gating import Gate, GatingAction, GatingConfig, action_scale, suspicion
-    from validation.model import Plausibility
+    from validation.diagnosis.model import Plausibility
 
     check_model(model)
     steps = _step_of(step_t, keyframe_t[[v.loop.j for v in obs.verdicts]]) if obs.verdicts else np.zeros(0, int)
@@ -125,7 +125,7 @@ def loop_is_true(loop: LoopConstraint, truth: np.ndarray, max_trans_m: float, ma
     ``max_trans_m`` and ``max_yaw_rad``; a position-only loop, whose stated
     sigma is usually larger, within three of its sigmas (at least
     ``max_trans_m``)."""
-    from validation.chain import between
+    from validation.loops.chain import between
 
     if position_only(loop):
         sigma = 1.0 / np.sqrt(max(loop.information[0, 0], 1e-12))

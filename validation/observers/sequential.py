@@ -1,6 +1,6 @@
 """Sequential relation observers: a CUSUM on a relation's windowed residual.
 
-A residual relation (:mod:`validation.quantitative`) judges each step on its
+A residual relation (:mod:`validation.observers.quantitative`) judges each step on its
 own: ``|z| > k_sigma`` with ``z`` the normalised residual of the two streams'
 changes over a window. An error smaller than ``k_sigma`` sds, but standing
 (a scale a few percent off, a heading that creeps), never crosses it. A

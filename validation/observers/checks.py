@@ -6,7 +6,7 @@ against the gyro's, the GPS receiver's reported sigma, a laser scan's
 returns and the conditioning of its registration); it says
 ``IMPLAUSIBLE`` once the deviation has lasted
 ``hold_s`` and ``PLAUSIBLE`` otherwise. :func:`unary_checks` builds the
-enabled checks from :class:`~validation.observer_config.ObserversConfig`;
+enabled checks from :class:`~validation.observers.config.ObserversConfig`;
 :func:`held` applies the hold time over a whole run.
 """
 
@@ -19,7 +19,7 @@ from typing import Protocol
 
 import numpy as np
 
-from validation.observer_config import SCAN_AXES, ObserversConfig
+from validation.observers.config import SCAN_AXES, ObserversConfig
 from validation.streams import Stream
 
 logger = logging.getLogger(__name__)
@@ -57,7 +57,7 @@ class MagnetometerCheck:
 @dataclass(frozen=True)
 class FieldGyroCheck:
     """The field's change the gyro's turn does not explain (T) against a
-    tolerance (:mod:`validation.field_gyro`)."""
+    tolerance (:mod:`validation.streams.field_gyro`)."""
 
     name: str
     component: str

@@ -23,7 +23,7 @@ odo_fix_speed  ODO_DIST  the odometry's speed derived as gps_speed is: the
                          slope of its x and y over the same window, m/s
 gps_course     GPS       direction of travel from the same slopes, rad
                          (angular), only where it is the heading
-                         (:mod:`validation.course`)
+                         (:mod:`validation.streams.course`)
 ============== ========= ===================================================
 
 The sensors come in as any object with the attributes of
@@ -33,11 +33,11 @@ not depend on the pipeline that reads them.
 Quality streams for the unary checks: ``mag_strength`` (T) and ``mag_dip``
 (rad, positive downward, assuming a level robot) from the raw compass field,
 ``mag_field_change`` (T; the field's change the gyro's turn does not
-explain, :mod:`validation.field_gyro`) when asked for, and ``gps_sigma``
+explain, :mod:`validation.streams.field_gyro`) when asked for, and ``gps_sigma``
 (m). Fixes with a negative status carry no position and are left out.
 The scan check's ``scan_degenerate_{dist,lat,yaw}`` (1 where a scan cannot
 constrain that motion, else 0) come from the front-end's figures per scan
-(:func:`validation.checks.scan_streams`).
+(:func:`validation.observers.checks.scan_streams`).
 
 Streams are then resampled onto the validation step times by linear
 interpolation (angles unwrapped first, so the result is continuous) with a
@@ -53,9 +53,9 @@ from typing import Literal, Protocol, get_args
 
 import numpy as np
 
-from validation.course import gps_course
 from validation.errors import ValidationError
-from validation.field_gyro import field_change
+from validation.streams.course import gps_course
+from validation.streams.field_gyro import field_change
 from validation.trends import Window, derive_stream
 
 logger = logging.getLogger(__name__)

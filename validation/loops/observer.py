@@ -2,7 +2,7 @@
 chain, and with the other loops?
 
 **Chain check** (Kimera-RPGO's "odometry check"). A loop from keyframe i to
-j disagrees with the chain by ``W`` (validation.chain.world_discrepancy);
+j disagrees with the chain by ``W`` (validation.loops.chain.world_discrepancy);
 under the chain's linearised error model ``W`` is zero-mean with covariance
 ``S(i, j) + N`` (the chain's steps in (i, j] plus the loop's own noise). The
 loop passes when ``W^T (S + N)^-1 W`` is within the chi-square quantile at
@@ -23,7 +23,7 @@ interval but not the other (the shared drift cancels), so its covariance is
 normalised residual is within the quantile at ``pcm_probability``. Position-
 only loops cannot close a cycle (their yaw is unknown): such a pair is tested
 jointly against the chain (4 dof, shared steps correlated). The loops kept
-are a maximum clique of the consistency graph (validation.loop_cliques).
+are a maximum clique of the consistency graph (validation.loops.cliques).
 A pair whose cycle runs over a long stretch of chain is consistent almost
 whatever its loops say; a pair over a short one (two loops of one revisit)
 is a strict test. So a loop is kept only with at least ``min_support`` other
@@ -33,7 +33,7 @@ rejected as ``support``. PCM looks at the whole run at once (offline); the
 chain check is causal.
 
 LOOP in the diagnosis and the gate, and the oracle, are in
-validation.loop_gating.
+validation.loops.gating.
 """
 
 from __future__ import annotations
@@ -44,9 +44,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from validation.chain import Chain, J, world_covariance, world_discrepancy
-from validation.loop_model import LoopConstraint, ObserverConfig
-from validation.loop_cliques import maximum_clique
+from validation.loops.chain import Chain, J, world_covariance, world_discrepancy
+from validation.loops.cliques import maximum_clique
+from validation.loops.constraint import LoopConstraint, ObserverConfig
 
 WEAK_VARIANCE = 1e6
 """Variance given to a direction a loop does not measure."""

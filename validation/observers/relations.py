@@ -31,9 +31,9 @@ deviation that lasted ``hold_s`` is implausible over its whole run.
 :func:`run_observers` runs every observer over a whole run;
 :class:`ObserverBank` does the same one step at a time (trailing windows),
 with the same results as the batch run with trailing windows. The unary
-plausibility checks live in :mod:`validation.checks`, the configuration in
-:mod:`validation.observer_config` and the per-step log in
-:mod:`validation.observer_log`; their names are re-exported here.
+plausibility checks live in :mod:`validation.observers.checks`, the configuration in
+:mod:`validation.observers.config` and the per-step log in
+:mod:`validation.observers.log`; :mod:`validation.observers` exports them all.
 """
 
 from __future__ import annotations
@@ -44,27 +44,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from validation.checks import (
+from validation.diagnosis.model import Observation, Plausibility
+from validation.observers.checks import (
     _HOLD_EPS_S,
-    GpsQualityCheck,
-    MagnetometerCheck,
     UnaryCheck,
     held,
-    unary_checks,
 )
-from validation.model import Observation, Plausibility
-from validation.observer_config import (
-    DEFAULT_RELATIONS,
-    Component,
-    GpsCheckConfig,
-    MagnetometerCheckConfig,
-    ObserversConfig,
+from validation.observers.config import (
     RelationConfig,
-    load_observers_config,
-    observers_config,
 )
-from validation.observer_log import ObserverLog, RelationTrace, UnaryTrace
-from validation.quantitative import (
+from validation.observers.log import ObserverLog, RelationTrace, UnaryTrace
+from validation.observers.quantitative import (
     RunningLevel,
     WindowChange,
     offset_test,
@@ -73,21 +63,12 @@ from validation.quantitative import (
     window_changes,
     wrap_angle,
 )
-from validation.sequential import Cusum, cusum
+from validation.observers.sequential import Cusum, cusum
 from validation.streams import ANGULAR_STREAMS, STREAM_NAMES, StepStreams, Stream, resample_streams
 from validation.trends import Rule, Trend, TrendEstimator, TrendSample, Window, abstract_stream
 
-__all__ = [
-    # Algorithm 3 and the observers defined here
-    "MismatchCounter", "ObserverBank", "StepObservations", "evidence", "observe", "observe_steps", "run_observers",
-    # re-exported from validation.observer_config
-    "Component", "DEFAULT_RELATIONS", "GpsCheckConfig", "MagnetometerCheckConfig", "ObserversConfig",
-    "RelationConfig", "load_observers_config", "observers_config",
-    # re-exported from validation.observer_log
-    "ObserverLog", "RelationTrace", "UnaryTrace",
-    # re-exported from validation.checks
-    "GpsQualityCheck", "MagnetometerCheck", "UnaryCheck", "held", "unary_checks",
-]
+__all__ = ["MismatchCounter", "ObserverBank", "StepObservations", "evidence", "excise_spans", "mask_runs",
+           "observe", "observe_steps", "run_observers"]
 
 logger = logging.getLogger(__name__)
 _NO_TREND = TrendSample(0.0, 0.0, 0.0, Trend.ZERO)

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from validation.errors import ValidationError
-from validation.observer_config import RelationConfig
-from validation.observer_log import ObserverLog
+from validation.observers.config import RelationConfig
+from validation.observers.log import ObserverLog
 from validation.streams import StepStreams, Stream
 
 logger = logging.getLogger(__name__)
