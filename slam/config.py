@@ -213,7 +213,7 @@ class OdometryFactorConfig(FactorConfig):
     ``learn_scale``: with validation on (or an oracle), where the scan
     matcher's forward motion is gated, the odometry's distance is corrected
     by its scale against scan matching, learnt over the stretches where
-    validation keeps both; see :mod:`slam.selfcal`."""
+    validation keeps both; see :mod:`slam.odometry_scale`."""
 
     learn_scale: bool = False
     sigma_xy_m: float = Field(0.01, gt=0.0)

@@ -10,7 +10,7 @@ none.
 
 Two steps run beside the others on the second core (``concurrent``, the
 default): KISS-ICP registers the scans while the other topics are read and
-the next steps prepared (:mod:`slam.prefetch`), and the figures are drawn
+the next steps prepared (:mod:`slam.scan_matching`), and the figures are drawn
 while the numeric results are written (:mod:`slam.io.plot_writer`). Both
 are the same code on the same data as in the plain order
 (``concurrent=False``), so the results are the same bytes. gtsam and
@@ -35,7 +35,7 @@ from slam.frontend import FrontendResult, ScanProjector, run_frontend
 from slam.io.outdir import result_folder
 from slam.io.plot_writer import MapFigures, PlotWriter
 from slam.measurements import Measurements, build_measurements, interpolate_poses, select_keyframes
-from slam.prefetch import BackgroundScanMatching, import_next_steps
+from slam.scan_matching import BackgroundScanMatching, import_next_steps
 from slam.recording import Recording, Trajectory
 
 if TYPE_CHECKING:
@@ -132,7 +132,7 @@ class MappingPipeline:
                 self.build_measurements()
                 self.validate()
                 self.learn_odometry_scale()
-                self.second_pass()
+                self.recheck()
                 self.close_loops()
                 self.optimise()
                 self.start_figures(tmp)
@@ -273,13 +273,13 @@ class MappingPipeline:
         """With ``backend.factors.odometry.learn_scale`` and validation on
         (or an oracle), the odometry stands in for the scan matcher with the
         scan matcher's scale: its distance is corrected by the scale learnt
-        where validation keeps both (:mod:`slam.selfcal`), on the steps where
+        where validation keeps both (:mod:`slam.odometry_scale`), on the steps where
         the scan matcher's forward motion is gated. Elsewhere the graph fuses
         the two as they are. Without validation nothing says where the scan
         matcher can be trusted, and nothing is learnt."""
         from slam.backend import dof_weights
         from slam.config import validation_sections
-        from slam.selfcal import odometry_scale
+        from slam.odometry_scale import odometry_scale
 
         odo, sm = self.measurements.odometry, self.measurements.scan_matching
         if not self.config.backend.factors.odometry.learn_scale or odo is None or sm is None:
@@ -294,8 +294,8 @@ class MappingPipeline:
             "steps_corrected": int(stand_in.sum()),
         }
 
-    def second_pass(self) -> None:
-        """Offline validation's second pass: keep the blamed measurements
+    def recheck(self) -> None:
+        """Offline validation's recheck: keep the blamed measurements
         that agree with the other sensors (:mod:`slam.recheck`)."""
         from slam.config import validation_sections
         from slam.recheck import recheck

@@ -1,11 +1,11 @@
-"""The second pass of offline validation: every measurement the diagnosis
+"""The recheck of offline validation: every measurement the diagnosis
 blamed is checked against what the other sensors say.
 
-The first pass (:mod:`validation.validator`) blames components over
+The diagnosis (:mod:`validation.validator`) blames components over
 stretches of time, and gates every measurement of a blamed component there.
 Within a blamed stretch a measurement can still be right. So:
 
-1. The graph is optimised with the first pass's weights: the estimate of
+1. The graph is optimised with the diagnosis's weights: the estimate of
    the sensors that were not blamed, with its marginal covariances.
 2. Each gated degree of freedom of each absolute measurement (compass
    headings, GPS fixes: ``gating.recheck_factors``) is compared with that
@@ -56,7 +56,7 @@ BETWEEN = ("odometry", "scan_matching")
 
 @dataclass
 class RecheckResult:
-    """The second pass's weights, the baselines it kept, and counts for
+    """The recheck's weights, the baselines it kept, and counts for
     ``metrics.json``."""
 
     weights: FactorWeights
@@ -107,7 +107,7 @@ def recheck(
     backend: BackendConfig,
     gating: GatingConfig,
 ) -> RecheckResult:
-    """The second pass (module docstring); ``weights`` are the first pass's."""
+    """The recheck (module docstring); ``weights`` are the diagnosis's."""
     k_sigma = gating.keep_k_sigma
     weights = {f: dof_weights(w, f).copy() for f, w in weights.items()}
     gated = {f: w > 1.0 for f, w in weights.items() if meas.get(f) is not None}
@@ -171,13 +171,13 @@ def recheck(
                 if abs(z) <= k_sigma:
                     constraints.append(RelativeConstraint(c.i, c.j, delta, c.sigma, c.kind, c.label))
     metrics = {
-        "second_pass": {
-            "kept_after_recheck": kept,
+        "recheck": {
+            "kept": kept,
             "baselines_tried": tried,
             "baselines_kept": len(constraints),
         }
     }
-    log.info("second pass: kept %s, %d of %d baselines", kept, len(constraints), tried)
+    log.info("recheck: kept %s, %d of %d baselines", kept, len(constraints), tried)
     return RecheckResult(weights, constraints, metrics)
 
 

@@ -3,7 +3,7 @@
 KISS-ICP's ``register_frame`` first filters a scan's points by range and
 thins them on two voxel grids, which depends on that scan alone, and then
 registers the result against its local map, which depends on every scan
-before. When scan matching runs in a second process (:mod:`slam.prefetch`),
+before. When scan matching runs in a second process (:mod:`slam.scan_matching`),
 the first half runs where the scans are read, :data:`CHUNK` scans at a time
 handed over as they are made, and the scan-matching process runs only the
 second (:meth:`slam.frontend.ScanMatcher.register_voxelized`): a tenth of

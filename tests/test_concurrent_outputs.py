@@ -1,7 +1,7 @@
 """The concurrent pipeline writes what the plain one writes.
 
 ``gslam map`` matches scans and draws figures in a second process
-(slam.background, slam.prefetch, slam.io.plot_writer) and writes its large
+(slam.background, slam.scan_matching, slam.io.plot_writer) and writes its large
 files vectorised (map.ply with numpy, TUM files a block of lines at a
 time). Each test compares against the plain path: the same run mapped with
 ``concurrent=False``, open3d's PLY writer, a TUM writer that formats one
@@ -213,16 +213,16 @@ def _parent_of(pid: int) -> int | None:
 
 @needs_fork
 def test_an_error_preparing_the_scans_reaches_the_caller(short_run, monkeypatch):
-    import slam.prefetch as prefetch
+    import slam.scan_matching as scan_matching
 
     def broken(scans, config, guesses):
         yield from ()
         raise ValueError("voxel grid refused")
 
-    monkeypatch.setattr(prefetch, "prepared_chunks", broken)
+    monkeypatch.setattr(scan_matching, "prepared_chunks", broken)
     config = load_config(TELEMAX_CONFIG)
     rec = read_recording(short_run.run_dir, config.input)
-    sm = prefetch.BackgroundScanMatching(config.frontend, concurrent=True)
+    sm = scan_matching.BackgroundScanMatching(config.frontend, concurrent=True)
     sm.give(rec.scans)
     with pytest.raises(ValueError, match="voxel grid refused"):
         sm.result(rec.scans)

@@ -14,7 +14,7 @@
 ``validation.pass`` decides how ``on`` runs:
 
 * ``offline`` (a recorded run): trend windows centred on each step, every
-  alarm dated by its evidence, and a second pass that keeps the blamed
+  alarm dated by its evidence, and a recheck that keeps the blamed
   measurements that agree with the other sensors (``gating.keep_k_sigma``);
 * ``causal``: as it would run on the robot, from past data only: trailing
   windows, the counters' delay, hold-off and look-back.

@@ -108,7 +108,7 @@ class GatingConfig(BaseModel):
     robot, iSAM2 removes them when the decision is made,
     ``removeFactorIndices``). 0 is the paper's behaviour.
 
-    Offline validation only, the second pass (null ``keep_k_sigma``: none,
+    Offline validation only, the recheck (null ``keep_k_sigma``: none,
     every blamed measurement stays gated). A blamed measurement of the
     ``recheck_factors`` types (absolute ones: compass headings, GPS fixes)
     whose residual against the estimate of the other sensors is within

@@ -29,7 +29,7 @@ from slam.scan_prep import PreparedHeader, prepared_chunks, register_prepared
 
 # What the steps after scan matching import, loaded while it runs.
 NEXT_STEPS = (
-    "slam.backend", "slam.truth", "slam.evaluation", "slam.selfcal", "slam.recheck", "validation.validator",
+    "slam.backend", "slam.truth", "slam.evaluation", "slam.odometry_scale", "slam.recheck", "validation.validator",
     "slam.io.tum",
     "numpy.ma",  # numpy's median loads it on first use
 )
