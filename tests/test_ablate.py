@@ -260,7 +260,7 @@ def test_jobs_sharing_reading_and_scan_matching_are_grouped(tmp_path, short_scen
 
 
 def test_shared_jobs_write_what_jobs_on_their_own_write(finished, tmp_path):
-    from slam.ablate.runner import run_job
+    from slam.ablate.worker import run_job
     from slam.ablate.sharing import run_jobs
 
     spec_path, res = finished

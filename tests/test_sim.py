@@ -13,7 +13,8 @@ import yaml
 from slam.errors import GslamError
 from slam.geometry import enu_from_geodetic
 from slam.sim import load_scenario, simulate, simulate_scenario
-from slam.sim.faults import compass_heading_error, intervals_from_mask, scan_constraint
+from slam.sim.faults import compass_heading_error, intervals_from_mask
+from slam.sim.world import scan_constraint
 from slam.sim.magnetics import MU0_OVER_4PI, body_field, dip_angle, dipole_field, reference
 from slam.sim.robot import Motion, plan_motion
 from slam.sim.scenario import (

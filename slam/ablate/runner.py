@@ -20,8 +20,6 @@ of one folder (the kernel drops it when a process dies, even by kill -9).
 
 from __future__ import annotations
 
-import fcntl
-import json
 import logging
 import multiprocessing
 import os
@@ -39,9 +37,10 @@ from typing import Any
 import yaml
 from tqdm import tqdm
 
-from slam.ablate.jobs import Job, SimulatedInput, expand_jobs
+from slam.ablate.jobs import Job, expand_jobs
 from slam.ablate.sharing import run_jobs, share_groups
 from slam.ablate.spec import AblationSpec
+from slam.ablate.worker import FileLock, JobOutcome, is_finished
 from slam.errors import GslamError
 from slam.io.atomic import write_text
 from slam.io.outdir import TEMP_TAG, open_container
@@ -54,17 +53,6 @@ class Backend(str, Enum):
 
     LOCAL = "local"
     RAY = "ray"
-
-
-@dataclass(frozen=True)
-class JobOutcome:
-    """What one job did: ``error`` is None on success; ``time_s`` is the
-    wall time in the worker (s), ``simulate_s`` the part spent simulating."""
-
-    id: str
-    error: str | None
-    time_s: float
-    simulate_s: float = 0.0
 
 
 @dataclass
@@ -83,33 +71,6 @@ class AblationResult:
     summary: Any = None
 
 
-# --- one job (runs in a worker process) ------------------------------------------
-
-
-def is_finished(out_dir: Path, job: Job) -> bool:
-    return (out_dir / "jobs" / job.id / "metrics.json").exists()
-
-
-def ensure_input(out_dir: Path, sim: SimulatedInput) -> float:
-    """Simulate ``sim`` into ``out_dir/inputs/<key>/`` unless it is there;
-    the wall time spent (s). The simulator builds it beside its place and
-    renames it in."""
-    from slam.sim import simulate_scenario
-    from slam.sim.scenario import Scenario
-
-    target = out_dir / "inputs" / sim.key
-    if (target / "truth.json").exists():
-        return 0.0
-    t = time.perf_counter()
-    target.parent.mkdir(parents=True, exist_ok=True)
-    # Workers wanting the same input wait for the first rather than
-    # simulating it twice.
-    with _FileLock(target.parent / f".{sim.key}.lock", blocking=True):
-        if not (target / "truth.json").exists():
-            simulate_scenario(Scenario.model_validate(sim.scenario), target)
-    return time.perf_counter() - t
-
-
 def dispatch_order(jobs: list[Job]) -> list[Job]:
     """Jobs round-robin over their inputs, so workers starting together
     simulate different inputs instead of waiting for the same one."""
@@ -120,35 +81,6 @@ def dispatch_order(jobs: list[Job]) -> list[Job]:
         keyed.append((rank.get(key, 0), i, job))
         rank[key] = rank.get(key, 0) + 1
     return [job for _, _, job in sorted(keyed, key=lambda k: (k[0], k[1]))]
-
-
-def run_job(job: Job, out_dir: str | Path) -> JobOutcome:
-    """Run one job into ``out_dir/jobs/<id>/``; never raises for a failing
-    job: its error goes to ``out_dir/failed/<id>.json`` and the outcome."""
-    from slam.config import load_config
-    from slam.pipeline import run_map
-
-    out_dir = Path(out_dir)
-    t = time.perf_counter()
-    failed = out_dir / "failed" / f"{job.id}.json"
-    sim_s = 0.0
-    try:
-        if job.simulated is not None:
-            sim_s = ensure_input(out_dir, job.simulated)
-        config = load_config(job.config_path, list(job.overrides))
-        run_map(job.input_dir(out_dir), config, out_dir / "jobs" / job.id)
-    except Exception as e:  # noqa: BLE001 - a failing job must not stop the sweep
-        error = record_failure(out_dir, job, e)
-        return JobOutcome(job.id, error, time.perf_counter() - t, sim_s)
-    failed.unlink(missing_ok=True)
-    return JobOutcome(job.id, None, time.perf_counter() - t, sim_s)
-
-
-def record_failure(out_dir: Path, job: Job, e: Exception) -> str:
-    """Write ``out_dir/failed/<id>.json`` with the one-line error; return it."""
-    error = f"{type(e).__name__}: {e}".splitlines()[0]
-    write_text(out_dir / "failed" / f"{job.id}.json", json.dumps({"id": job.id, "error": error}, indent=2) + "\n")
-    return error
 
 
 def _quiet_worker() -> None:
@@ -274,7 +206,7 @@ def run_ablation(
     inputs += [j.input_path for j in jobs if j.input_path is not None]
     out_dir = open_container(out_dir, "ablate", inputs, force).resolve()
     workers = max(1, workers or os.cpu_count() or 1)
-    with _FileLock(out_dir / ".lock"):
+    with FileLock(out_dir / ".lock"):
         _clean_leftovers(out_dir)
         write_text(out_dir / "spec.yaml", yaml.safe_dump(spec.model_dump(mode="json"), sort_keys=False))
         result = AblationResult(out_dir, jobs)
@@ -303,30 +235,6 @@ def run_ablation(
         result.summary = write_summary(out_dir, jobs, spec)
     result.wall_s = time.perf_counter() - t0
     return result
-
-
-class _FileLock:
-    """An exclusive ``flock`` on ``path`` (released when the process ends,
-    however it ends). Not blocking: a held lock raises GslamError."""
-
-    def __init__(self, path: Path, blocking: bool = False):
-        self.path = path
-        self.blocking = blocking
-        self.fd: int | None = None
-
-    def __enter__(self) -> "_FileLock":
-        self.fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o644)
-        try:
-            fcntl.flock(self.fd, fcntl.LOCK_EX | (0 if self.blocking else fcntl.LOCK_NB))
-        except BlockingIOError:
-            os.close(self.fd)
-            raise GslamError(f"{self.path.parent}: another gslam ablate is running on this folder") from None
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self.fd is not None:
-            fcntl.flock(self.fd, fcntl.LOCK_UN)
-            os.close(self.fd)
 
 
 def _clean_leftovers(out_dir: Path) -> None:

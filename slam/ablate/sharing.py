@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 from slam.ablate.jobs import Job
+from slam.ablate.worker import JobOutcome, ensure_input, record_failure
 
 
 def sharing_key(job: Job, config) -> str:
@@ -64,9 +65,8 @@ def share_groups(jobs: list[Job], workers: int) -> list[list[Job]]:
 def run_jobs(jobs: list[Job], out_dir: str | Path) -> list:
     """Run ``jobs`` (one group) one after the other into ``out_dir``,
     reusing the first successful job's recording and front-end; a failing
-    job is recorded as :func:`slam.ablate.runner.run_job` records it and
+    job is recorded as :func:`slam.ablate.worker.run_job` records it and
     the others continue."""
-    from slam.ablate.runner import JobOutcome, ensure_input, record_failure
     from slam.config import load_config
     from slam.pipeline import MappingPipeline
 

@@ -65,31 +65,6 @@ def compass_heading_error(
     return np.asarray(wrap_angle(heading_from_magnetometer(true_body_field, declination_rad) - yaw))
 
 
-def scan_constraint(
-    ranges: np.ndarray, hit: np.ndarray, beam_yaw: np.ndarray, normals: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Number of returns (n,), smallest eigenvalue (n,) of the normalised
-    point-to-line information matrix of each scan and its unit eigenvector
-    (n, 3) (world x, world y, turn), as in the module docstring.
-
-    ``ranges`` (n, B) noise-free m (inf without a return); ``hit`` (n, B)
-    indices of the segments hit; ``beam_yaw`` (n, B) world angle of each
-    beam, rad; ``normals`` (S, 2) unit wall normals, world frame. The
-    eigenvalues do not depend on the frame, so everything stays in the world.
-    """
-    ok = np.isfinite(ranges) & (hit >= 0)
-    count = ok.sum(axis=1)
-    r = np.where(ok, ranges, 0.0)
-    px, py = r * np.cos(beam_yaw), r * np.sin(beam_yaw)
-    n = normals[np.where(ok, hit, 0)]
-    scale = np.where(count > 0, r.sum(axis=1) / np.maximum(count, 1), 1.0)
-    rot = (px * n[..., 1] - py * n[..., 0]) / scale[:, None]
-    rows = np.stack([n[..., 0], n[..., 1], rot], axis=-1) * ok[..., None]
-    info = np.einsum("nbi,nbj->nij", rows, rows) / ranges.shape[1]
-    values, vectors = np.linalg.eigh(info)
-    return count, values[:, 0], vectors[:, :, 0]
-
-
 SM_MODALITIES = ("SM_DIST", "SM_LAT", "SM_YAW")
 
 

@@ -13,7 +13,6 @@ from typing import Any
 import numpy as np
 
 from slam.geometry import geodetic_from_enu
-from slam.sim.faults import scan_constraint
 from slam.recording import MagneticReference
 from slam.sim.magnetics import body_field
 from slam.sim.robot import Motion
@@ -26,7 +25,7 @@ from slam.sim.scenario import (
     MagnetometerConfig,
     OdometryConfig,
 )
-from slam.sim.world import World, distance_to_segments
+from slam.sim.world import World, distance_to_segments, scan_constraint
 
 
 def sample_times(duration_s: float, rate_hz: float) -> np.ndarray:
@@ -43,7 +42,7 @@ class LaserData:
     closer than ``range_min``; ``angles`` (B,) rad in the laser frame (= body
     frame, the laser sits at the robot centre). From the noise-free scan:
     ``returns`` (n,) the number of returns, ``min_eigenvalue`` (n,) the
-    degeneracy measure of :func:`slam.sim.faults.scan_constraint` and
+    degeneracy measure of :func:`slam.sim.world.scan_constraint` and
     ``weak_direction`` (n, 3) its eigenvector (world x, world y, turn)."""
 
     t: np.ndarray
