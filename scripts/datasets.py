@@ -12,12 +12,10 @@ missing or differs.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from slam.io.datasets import CHECKSUMS, DATASETS, FileStatus, data_root, verify  # noqa: E402
+from slam.io.datasets import CHECKSUMS, DATASETS, FileStatus, data_root, verify
 
 
 def _list() -> int:

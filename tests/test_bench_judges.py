@@ -1,18 +1,13 @@
 """The Husky benches' judges of the recording's own faults
-(``scripts/bench_husky_dipole.py``): they must find a fault the witnesses
-agree on, and nothing where the sensors agree."""
+(``scripts/bench/judges.py``): they must find a fault the witnesses agree
+on, and nothing where the sensors agree."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from scripts.bench_husky_dipole import gps_wanders  # noqa: E402
-from slam.recording import Gps, Gyro, Recording, Trajectory  # noqa: E402
+from scripts.bench.judges import gps_wanders
+from slam.recording import Gps, Gyro, Recording, Trajectory
 
 
 def _straight_run(wander_m: float) -> Recording:

@@ -321,14 +321,14 @@ def test_a_reader_that_leaves_early_gets_no_error(short_run):
 
 
 @pytest.mark.parametrize("argv", [
-    ["bench_husky_faults.py", "--faults", "bogus@1:2"],   # checked before any work
-    ["bench_husky_faults.py", "--data", "{tmp}"],          # no bag there
-    ["bench_speed.py", "--repeats", "0"],
+    ["husky_faults", "--faults", "bogus@1:2"],   # checked before any work
+    ["husky_faults", "--data", "{tmp}"],          # no bag there
+    ["speed", "--repeats", "0"],
 ])
-def test_scripts_fail_on_bad_input_with_one_line(argv, tmp_path):
-    script, *args = argv
-    done = subprocess.run([sys.executable, f"scripts/{script}", *(a.format(tmp=tmp_path) for a in args)],
+def test_benchmarks_fail_on_bad_input_with_one_line(argv, tmp_path):
+    name, *args = argv
+    done = subprocess.run([sys.executable, "-m", "scripts.bench", name, *(a.format(tmp=tmp_path) for a in args)],
                           cwd=REPO, capture_output=True, text=True, timeout=120)
     assert done.returncode == 1
     lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"{script[:-3]}: "), done.stderr
+    assert len(lines) == 1 and lines[0].startswith(f"bench {name}: "), done.stderr

@@ -1,7 +1,7 @@
 """The scenarios beyond the lab, each cut to its first legs: the fault the
 scenario is about happens there, validation blames the right modality, and
 gating maps it better than no validation and than a Cauchy kernel (the
-benchmark over whole runs and ten seeds is scripts/bench_gating.py)."""
+benchmark over whole runs and ten seeds is python -m scripts.bench gating)."""
 
 from __future__ import annotations
 

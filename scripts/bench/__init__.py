@@ -1,0 +1,11 @@
+"""The benchmark harness: every benchmark and tuning run of the project, run
+from the repository root as
+
+    python -m scripts.bench NAME [ARGS ...]
+    python -m scripts.bench NAME --help
+    python -m scripts.bench --help          # the list
+
+Each benchmark is a module here with a ``main(argv)``; what they share
+(paths, the robust-kernel list, config building) is in :mod:`.common`, and
+the judges of a real recording's own faults in :mod:`.judges`.
+"""
