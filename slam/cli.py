@@ -327,8 +327,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_out(m, "result folder", required=True)
     m.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (repeatable)")
     m.add_argument("--gating", choices=["off", "on", "oracle", "interval_oracle"], default=None,
-                   help="off: every factor in; on: causal sensor validation gates factors; "
-                        "oracle: gate with the true fault intervals (default: the config's validation.mode)")
+                   help="off: every factor in; on: sensor validation gates factors (offline or causal as "
+                        "validation.pass says; offline by default); oracle: the tight oracle, from ground truth: "
+                        "each degree of freedom of a measurement off by more than validation.oracle_k_sigma sigmas "
+                        "is excluded; interval_oracle: each component's factors gated over its true fault "
+                        "intervals (default: the config's validation.mode)")
     m.set_defaults(func=_cmd_map)
 
     c = _sub(sub, "compare", "run ungated, gated, oracle and robust-kernel variants on the same run",

@@ -21,11 +21,12 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, model_validator
 
 from slam.errors import GslamError
 from slam.loops.config import LoopsConfig
 from slam.io.yamlfile import SAFE_LOADER, check_finite, load_yaml, non_finite, read_text_file, yaml_number
+from validation.yamlio import Strict
 
 __all__ = [  # the YAML helpers are used through this module too
     "PipelineConfig", "check_finite", "describe_validation_error", "dump_config", "load_config", "load_yaml",
@@ -33,10 +34,6 @@ __all__ = [  # the YAML helpers are used through this module too
 ]
 
 log = logging.getLogger(__name__)
-
-
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
 
 # --- input ---------------------------------------------------------------

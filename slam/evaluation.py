@@ -238,13 +238,6 @@ def rpe(
     return result
 
 
-def final_error(est: Trajectory, ref: Trajectory, max_dt: float = DEFAULT_MAX_DT_S) -> float:
-    """Distance between the last associated positions, m, without alignment
-    (the estimate is anchored to the reference's first pose)."""
-    m_est, m_ref = _matched(est, ref, max_dt)
-    return float(np.hypot(m_est.x[-1] - m_ref.x[-1], m_est.y[-1] - m_ref.y[-1]))
-
-
 def _delta_key(delta_m: float) -> str:
     return f"{delta_m:g}m"
 

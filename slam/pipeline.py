@@ -23,7 +23,7 @@ import json
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -67,7 +67,6 @@ class _Timings:
     prepare_s: float = 0.0  # beside scan matching: imports, the files that do not need the estimate
     frontend_wait_s: float = 0.0  # waiting for scan matching in the second process
     plots_wait_s: float = 0.0  # waiting for the figures in the second process
-    extra: dict[str, float] = field(default_factory=dict)
 
 
 class MappingPipeline:

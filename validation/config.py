@@ -3,7 +3,8 @@
 ``validation.mode`` decides how factors are gated:
 
 * ``off``: no validation; every factor enters with its configured noise.
-* ``on``: causal validation, step by step, as it would run on the robot.
+* ``on``: sensor validation gates the factors, offline or causal as
+  ``validation.pass`` says (below; offline by default).
 * ``oracle``: the tight oracle, from ground truth: every degree of freedom
   of every measurement whose error exceeds ``oracle_k_sigma`` times its
   sigma is excluded, all others kept. The bound validation aims at.
@@ -29,23 +30,23 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Literal, Mapping
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import ConfigDict, Field, field_validator
 
 from validation.diagnosis.model import SystemModel
 from validation.gating import GatingConfig, check_components
 from validation.observers.config import ObserversConfig, observers_config
 from validation.trends import Window
-from validation.yamlio import load_yaml, validate_mapping
+from validation.yamlio import StrictFrozen, load_yaml, validate_mapping
 
 GatingMode = Literal["off", "on", "oracle", "interval_oracle"]
 Pass = Literal["offline", "causal"]
 
 
-class ValidationConfig(BaseModel):
+class ValidationConfig(StrictFrozen):
     """``rate_hz``: validation steps per second; observers' thresholds are
     counted in these steps."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+    model_config = ConfigDict(populate_by_name=True)
 
     mode: GatingMode = "off"
     pass_: Pass = Field("offline", alias="pass")

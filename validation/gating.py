@@ -33,11 +33,11 @@ from enum import Enum
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field, field_validator
 
 from validation.diagnosis.model import SystemModel
 from validation.errors import ValidationError
-from validation.yamlio import validate_mapping
+from validation.yamlio import StrictFrozen, validate_mapping
 
 if TYPE_CHECKING:  # the solver behind the diagnosis loads once there is one to make
     from validation.diagnosis.reiter import DiagnosisResult
@@ -89,7 +89,7 @@ def _default_factors() -> dict[str, dict[str, list[str]]]:
     }
 
 
-class GatingConfig(BaseModel):
+class GatingConfig(StrictFrozen):
     """The ``gating`` section of a pipeline config.
 
     ``factors``: per factor type, the components each degree of freedom
@@ -121,7 +121,6 @@ class GatingConfig(BaseModel):
     right over metres still contributes.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     single: SinglePolicy = SinglePolicy.EXCLUDE
     ambiguous: AmbiguousPolicy = AmbiguousPolicy.MOST_PROBABLE

@@ -13,7 +13,7 @@ from typing import Any, TypeVar
 
 import pydantic
 import yaml
-from pydantic import BaseModel
+from pydantic import BaseModel, ConfigDict
 
 from validation.errors import ValidationError
 
@@ -43,6 +43,22 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ValidationError(f"{path}: expected a mapping at the top level")
     return data
+
+
+class Strict(BaseModel):
+    """The base of every config model of the project: an unknown key is an
+    error (a typo in an ablation must not silently run the default), NaN
+    and infinity are refused, and an assignment is validated as a loaded
+    value is."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
+
+
+class StrictFrozen(Strict):
+    """A :class:`Strict` model that does not change once loaded (and so can
+    be hashed): the validation sections, specs and faults."""
+
+    model_config = ConfigDict(frozen=True)
 
 
 _M = TypeVar("_M", bound=BaseModel)

@@ -16,19 +16,16 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, model_validator
 
 from slam.config import describe_validation_error, load_yaml
 from slam.errors import GslamError
+from validation.yamlio import StrictFrozen
 
 SCENARIO_PREFIX = "scenario."
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class Distribution(_Strict):
+class Distribution(StrictFrozen):
     """One randomly sampled parameter: exactly one of ``uniform: [lo, hi]``,
     ``log_uniform: [lo, hi]``, ``integer: [lo, hi]`` (inclusive) or
     ``choice: [values]``."""
@@ -51,7 +48,7 @@ class Distribution(_Strict):
         return self
 
 
-class RandomSweep(_Strict):
+class RandomSweep(StrictFrozen):
     """``samples`` points drawn with ``seed`` (the same spec draws the same
     points), each parameter independently."""
 
@@ -60,7 +57,7 @@ class RandomSweep(_Strict):
     params: dict[str, Distribution] = Field(min_length=1)
 
 
-class SweepSpec(_Strict):
+class SweepSpec(StrictFrozen):
     """``grid``: a mapping key -> values (their full product), or a list of
     such mappings (the union of their products: one-at-a-time sweeps).
     ``random``: seeded random samples. With both, every grid point is
@@ -81,7 +78,7 @@ class SweepSpec(_Strict):
         return keys
 
 
-class SeedRange(_Strict):
+class SeedRange(StrictFrozen):
     """``count`` consecutive seeds from ``first``."""
 
     first: int = Field(1, ge=0)
@@ -91,7 +88,7 @@ class SeedRange(_Strict):
         return list(range(self.first, self.first + self.count))
 
 
-class ScenarioInput(_Strict):
+class ScenarioInput(StrictFrozen):
     """A scenario YAML simulated once per seed (``seeds``: a list or a
     range). ``sweep``, if given, replaces the spec's sweep for this input
     (e.g. a scenario parameter only this scenario has)."""
@@ -104,7 +101,7 @@ class ScenarioInput(_Strict):
         return list(self.seeds) if isinstance(self.seeds, list) else self.seeds.seeds()
 
 
-class RecordedInput(_Strict):
+class RecordedInput(StrictFrozen):
     """A recorded run (bag, log or run folder) used as it is; ``name`` labels
     it in job ids and tables (default: the file name). A path starting with
     ``{data}`` is under the data root (``$GSLAM_DATA``, else
@@ -119,7 +116,7 @@ class RecordedInput(_Strict):
         return self.name or self.path.name.split(".")[0]
 
 
-class InputsSpec(_Strict):
+class InputsSpec(StrictFrozen):
     scenarios: list[ScenarioInput] = Field(default_factory=list)
     recorded: list[RecordedInput] = Field(default_factory=list)
 
@@ -130,7 +127,7 @@ class InputsSpec(_Strict):
         return self
 
 
-class AblationSpec(_Strict):
+class AblationSpec(StrictFrozen):
     """Root of an ablation spec (e.g. ``configs/ablations/gating_policy.yaml``).
 
     ``variants``: name -> dotted overrides (as ``configs/variants.yaml``);

@@ -24,16 +24,15 @@ from __future__ import annotations
 from typing import Literal
 
 import pydantic
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from slam.errors import GslamError
+from validation.yamlio import StrictFrozen
 
 
-class Fault(BaseModel):
+class Fault(StrictFrozen):
     """Common to every fault: the interval it is present in (s from the
     recording's start)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     kind: str
     start_s: float = Field(ge=0.0)

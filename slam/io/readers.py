@@ -124,23 +124,23 @@ def guess_format(path: str | Path) -> str:
 # --- sidecar -------------------------------------------------------------
 
 
-class _Strict(BaseModel):
+class _Sidecar(BaseModel):
     # Keys added by newer simulators are ignored: this is data, not a config.
     model_config = ConfigDict(extra="ignore", allow_inf_nan=False)
 
 
-class _MagneticReference(_Strict):
+class _MagneticReference(_Sidecar):
     strength_T: float
     dip_rad: float
     declination_rad: float = 0.0
 
 
-class _Datum(_Strict):
+class _Datum(_Sidecar):
     lat_deg: float
     lon_deg: float
 
 
-class Sidecar(_Strict):
+class Sidecar(_Sidecar):
     """Contents of ``truth.json``; times in seconds, ``t0`` absolute."""
 
     scenario: str = ""

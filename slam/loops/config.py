@@ -8,16 +8,13 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from validation.loops.constraint import ObserverConfig
+from validation.yamlio import Strict
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
-
-
-class DescriptorConfig(_Strict):
+class DescriptorConfig(Strict):
     """Scan Context of a local map (slam.loops.descriptor).
 
     ``rings`` x ``sectors`` polar cells up to ``max_radius_m``. A keyframe
@@ -37,7 +34,7 @@ class DescriptorConfig(_Strict):
     linear_window_m: float = Field(1.5, ge=0.0)
 
 
-class RegistrationConfig(_Strict):
+class RegistrationConfig(Strict):
     """Point-to-line ICP (slam.loops.registration).
 
     ``max_distance_m``: correspondences farther than this are dropped at
@@ -59,7 +56,7 @@ class RegistrationConfig(_Strict):
     min_linearity: float = Field(0.8, ge=0.0, le=1.0)
 
 
-class CorrelativeConfig(_Strict):
+class CorrelativeConfig(Strict):
     """Coarse search before ICP (slam.loops.correlative), on a score grid of
     ``resolution_m`` cells, in ``angular_step_deg`` steps (both coarsened so
     a window has at most 11 x 11 translations and 15 yaws), with at most
@@ -74,7 +71,7 @@ class CorrelativeConfig(_Strict):
     skip_below_deg: float = Field(5.0, ge=0.0)
 
 
-class AcceptanceConfig(_Strict):
+class AcceptanceConfig(Strict):
     """When a registration verifies a candidate.
 
     ``min_overlap``: fraction of query points with a correspondence at the
@@ -94,7 +91,7 @@ class AcceptanceConfig(_Strict):
     max_correction_m: float = Field(3.0, gt=0.0)
 
 
-class FileLoopsConfig(_Strict):
+class FileLoopsConfig(Strict):
     """Loops given by the recording (libRSF ``loop t t_other weight``):
     position equality of the two keyframes nearest the stamps, with
     ``sigma_m / sqrt(weight)`` per axis; lines with a weight below
@@ -104,7 +101,7 @@ class FileLoopsConfig(_Strict):
     min_weight: float = Field(0.43, ge=0.0)
 
 
-class LoopsConfig(_Strict):
+class LoopsConfig(Strict):
     """Loop closing (slam.loops) and the loop observer (validation.loops).
 
     ``source``: ``scans`` detects loops by place recognition and geometric

@@ -16,19 +16,16 @@ from pathlib import Path
 from typing import Annotated
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from slam.config import describe_validation_error
 from slam.io.yamlfile import check_finite, load_yaml
 from slam.errors import GslamError
+from validation.yamlio import Strict
 
 Point = tuple[float, float]
 Polyline = Annotated[list[Point], Field(min_length=2)]
 Polygon = Annotated[list[Point], Field(min_length=3)]
-
-
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 # --- world ---------------------------------------------------------------

@@ -42,9 +42,9 @@ from __future__ import annotations
 from enum import Enum
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from validation.yamlio import load_yaml, validate_mapping
+from validation.yamlio import StrictFrozen, load_yaml, validate_mapping
 
 DEFAULT_PRIOR = 0.01
 """Fault probability of a component the model gives no prior for."""
@@ -64,11 +64,7 @@ class Plausibility(Enum):
     IMPLAUSIBLE = "implausible"
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class MaskingRule(_Strict):
+class MaskingRule(StrictFrozen):
     """No failure masking on ``relation``: its match implies both components ok.
 
     ``corr``: the implication holds under the retractable assumption
@@ -81,7 +77,7 @@ class MaskingRule(_Strict):
     masking_prob: float = Field(DEFAULT_PRIOR, gt=0.0, lt=1.0)
 
 
-class SystemModel(_Strict):
+class SystemModel(StrictFrozen):
     """The system description SD; see the module docstring for its logic."""
 
     components: tuple[str, ...] = Field(min_length=1)

@@ -17,15 +17,6 @@ from __future__ import annotations
 import numpy as np
 
 
-def _bits(mask: int) -> list[int]:
-    out = []
-    while mask:
-        low = mask & -mask
-        out.append(low.bit_length() - 1)
-        mask ^= low
-    return out
-
-
 def _colour(candidates: int, neighbours: list[int]) -> list[tuple[int, int]]:
     """Greedy colouring of ``candidates``: (vertex, colour) with colours
     non-decreasing, for the MCQ bound."""

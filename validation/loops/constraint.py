@@ -6,11 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+from pydantic import Field
+from validation.yamlio import StrictFrozen
 
 
 @dataclass
@@ -36,7 +33,7 @@ class LoopConstraint:
     quality: dict[str, float] = field(default_factory=dict)
 
 
-class ObserverConfig(_Strict):
+class ObserverConfig(StrictFrozen):
     """The loop observer (validation.loops).
 
     ``chain_probability``: a loop is consistent with the dead-reckoning chain

@@ -18,12 +18,12 @@ from typing import Literal
 
 import numpy as np
 import pydantic
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from validation.errors import ValidationError
 from validation.streams import STREAM_COMPONENT, STREAM_NAMES, StreamName
 from validation.trends import Rule, Window
-from validation.yamlio import load_yaml, validate_mapping
+from validation.yamlio import StrictFrozen, load_yaml, validate_mapping
 
 Component = str
 """A component of the system model (checked against the model's list)."""
@@ -32,11 +32,7 @@ Component = str
 # --- configuration ------------------------------------------------------------
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class RelationConfig(_Strict):
+class RelationConfig(StrictFrozen):
     """One relation observer: two streams that should move together.
 
     ``kind: trend`` (the paper's) compares their qualitative trends:
@@ -180,7 +176,7 @@ DEFAULT_RELATIONS: tuple[RelationConfig, ...] = (
 )
 
 
-class MagnetometerCheckConfig(_Strict):
+class MagnetometerCheckConfig(StrictFrozen):
     """Field strength and dip against the local Earth field; the reference
     comes from the recording unless ``strength_T``/``dip_deg`` are given."""
 
@@ -194,7 +190,7 @@ class MagnetometerCheckConfig(_Strict):
     hold_s: float = Field(1.0, ge=0.0)
 
 
-class FieldGyroCheckConfig(_Strict):
+class FieldGyroCheckConfig(StrictFrozen):
     """The field's change over ``window_s`` that the gyro's turn does not
     explain, each end averaged over ``smooth_s``, against ``tolerance_T``
     (:mod:`validation.streams.field_gyro`). Off unless enabled: it needs the
@@ -209,7 +205,7 @@ class FieldGyroCheckConfig(_Strict):
     hold_s: float = Field(0.0, ge=0.0)
 
 
-class GpsCheckConfig(_Strict):
+class GpsCheckConfig(StrictFrozen):
     """The receiver's reported horizontal sigma against a maximum."""
 
     enabled: bool = True
@@ -223,7 +219,7 @@ SCAN_AXES = ("dist", "lat", "yaw")
 """The scan check's axes, in the order of the scan's (forward, left, turn)."""
 
 
-class ScanCheckConfig(_Strict):
+class ScanCheckConfig(StrictFrozen):
     """Scan degeneracy: one check per scan-matching modality, named
     ``{name}_dist``, ``{name}_lat`` and ``{name}_yaw`` (components
     ``components``). A scan is implausible for all three with fewer than
@@ -247,7 +243,7 @@ class ScanCheckConfig(_Strict):
         return tuple(f"{self.name}_{axis}" for axis in SCAN_AXES)
 
 
-class ObserversConfig(_Strict):
+class ObserversConfig(StrictFrozen):
     """All observers. ``max_gap_s`` is the largest gap (s) between samples a
     step may be interpolated across; a sparse stream may bridge up to
     ``gap_periods`` of its own median sample period instead (null: never),
