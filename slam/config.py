@@ -162,6 +162,11 @@ class FrontendConfig(Strict):
     which sparse, fast-turning logs (CARMEN) need. With odometry as the
     guess, a scan matcher that sees nothing returns the odometry step, so
     its failure no longer shows as a disagreement with odometry.
+
+    ``threads``: the threads of KISS-ICP's registration. 1 (the default)
+    gives the same poses to the last bit on every run and every machine;
+    0 is all cores (KISS-ICP's own default), faster, with sums whose order,
+    and so whose last bits, depend on the scheduling.
     """
 
     enabled: bool = True
@@ -173,6 +178,7 @@ class FrontendConfig(Strict):
     initial_threshold_m: float = Field(0.5, gt=0.0)
     min_motion_m: float = Field(0.05, ge=0.0)
     max_iterations: int = Field(500, ge=1)
+    threads: int = Field(1, ge=0)
 
 
 # --- keyframes and back-end ----------------------------------------------

@@ -117,7 +117,7 @@ def kiss_config(config: FrontendConfig, range_max: float):
     kiss.adaptive_threshold.initial_threshold = config.initial_threshold_m
     kiss.adaptive_threshold.min_motion_th = config.min_motion_m
     kiss.registration.max_num_iterations = config.max_iterations
-    kiss.registration.max_num_threads = 1
+    kiss.registration.max_num_threads = config.threads
     return kiss
 
 

@@ -50,6 +50,18 @@ def test_registration_follows_a_known_motion():
     np.testing.assert_allclose(pose, [0.05 * 29, 0.02 * 29, 0.29], atol=0.02)
 
 
+def test_threads_reach_kiss_icp_and_all_cores_register_alike():
+    from slam.frontend import kiss_config
+
+    assert kiss_config(FrontendConfig(), 30.0).registration.max_num_threads == 1  # the bit-identical default
+    assert kiss_config(FrontendConfig(threads=0), 30.0).registration.max_num_threads == 0
+    poses = {}
+    for threads in (1, 0):
+        matcher = ScanMatcher(FrontendConfig(threads=threads), range_max=30.0)
+        poses[threads] = [matcher.register(_room_scan(2.0 + 0.05 * k, 2.0, 0.01 * k)) for k in range(20)]
+    np.testing.assert_allclose(poses[0], poses[1], atol=1e-6)  # the same registration, summed in another order
+
+
 def test_the_blind_outdoor_stretch_of_seed_6_does_not_abort(tmp_path):
     # telemax_lab, seed 6: about 100 scans without a point outdoors. KISS-ICP
     # then only predicts, compounding 4x4 products; unprojected, its rotation
