@@ -44,10 +44,11 @@ run folder (a simulated run folder or a gslam inject result: truth.json + bag/),
 
 OUTPUT_RULE = """\
 --out must be new, or an earlier result of the same command (it holds
-.gslam-result.json), which is replaced; anything else is refused before any
-work. --force writes into another folder: the command's files replace files
-of the same name, nothing else there is touched. --out is never the input,
-a folder holding it, or a folder inside it."""
+.gslam-result.json, which lists the files the command wrote): those are
+replaced, any file of yours there is kept. Anything else is refused before
+any work. --force adds the command's files to another folder, replacing
+nothing of yours. --out is never empty, an input, a folder holding one or
+a place inside one, a link, a device or a pipe."""
 
 
 def _config_path(path: str | None) -> Path | None:
@@ -72,10 +73,12 @@ def _cmd_inject(args: argparse.Namespace) -> int:
     from slam.config import load_config
     from slam.inject import inject
 
+    from slam.config import config_files
+
     config_path = _config_path(args.config)
     config = load_config(config_path)
-    res = inject(args.input, args.fault or [], args.out, config.input,
-                 inputs=[config_path] if config_path is not None else [], force=args.force)
+    res = inject(args.input, args.fault or [], args.out, config.input, inputs=config_files(config_path),
+                 force=args.force)
     print(f"wrote {res.run_dir} ({res.duration_s:.1f} s, the input with the faults added; truth.json beside it)")
     for comp, intervals in sorted(res.injected.items()):
         spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals) or "none beyond the nominal noise"
@@ -121,7 +124,7 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     from slam.io.outdir import check_new_file
 
     if args.config_out is not None:
-        check_new_file(args.config_out, [args.input], args.force)
+        check_new_file(args.config_out, [args.input], args.force, command="inspect", flag="--config-out")
     found = inspect_recording(args.input)
     print(found.report())
     if args.config_out is None:
@@ -135,7 +138,7 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 
 
 def _cmd_map(args: argparse.Namespace) -> int:
-    from slam.config import load_config
+    from slam.config import config_files, load_config
     from slam.pipeline import run_map
 
     overrides = list(args.set or [])
@@ -143,7 +146,8 @@ def _cmd_map(args: argparse.Namespace) -> int:
         overrides.append(f"validation.mode={args.gating}")
     config_path = _config_path(args.config)
     config = load_config(config_path, overrides)
-    res = run_map(args.input, config, args.out, progress=not args.quiet, inputs=[config_path], force=args.force)
+    res = run_map(args.input, config, args.out, progress=not args.quiet, inputs=config_files(config_path),
+                  force=args.force)
     _print_metrics(res.out_dir, res.metrics)
     return 0
 
@@ -220,16 +224,22 @@ def _seed(text: str) -> int:
     return value
 
 
+def _out_path(text: str) -> str:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("is empty; give a path (an unset shell variable?)")
+    return text
+
+
 def _sub(sub, name: str, help: str, examples: str, common: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return sub.add_parser(name, help=help, description=help, epilog=examples, parents=[common],
                           formatter_class=argparse.RawDescriptionHelpFormatter)
 
 
 def _add_out(parser: argparse.ArgumentParser, what: str, **kwargs) -> None:
-    parser.add_argument("--out", help=f"{what}; see the --out rule below", **kwargs)
+    parser.add_argument("--out", type=_out_path, help=f"{what}; see the --out rule below", **kwargs)
     parser.add_argument("--force", action="store_true",
-                        help="write into an existing folder that is not a result of this command "
-                             "(only its own files are replaced; the input never)")
+                        help="add the command's files to an existing folder that is not its result "
+                             "(nothing of yours there is replaced; the input never)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -291,7 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
              "  gslam calibrate robot.bag --config my_robot.yaml --clean 0:120 --out my_robot_calibrated.yaml\n"
              "  gslam map other.bag --config my_robot_calibrated.yaml --out runs/other --gating on\n\n"
              "--out must be a new file, or an earlier calibrate result (its first line says so), which is\n"
-             "replaced; --force replaces any other file. Never a run or the config.", common)
+             "replaced; --force replaces a file another gslam command wrote, never one of yours. Never a\n"
+             "run, a file inside a run folder, or the config.", common)
     k.add_argument("runs", nargs="+", metavar="RUN", help="recorded runs to learn from (any input gslam map reads)")
     k.add_argument("--config", required=True, help="pipeline config whose observers are calibrated (its input "
                    "section reads the runs, its validation section names the relations and the pass)")
@@ -303,8 +314,9 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--lag-reference", default="gyro", choices=["gyro", "odometry", "compass", "scan", "none"],
                    help="the stream the yaw streams' time offsets are measured against (default gyro; none: "
                         "measure none, keep input.time_offsets_s as configured)")
-    k.add_argument("--out", required=True, metavar="MODEL.yaml", help="the calibrated config to write")
-    k.add_argument("--force", action="store_true", help="replace --out even if it is not an earlier calibrate result")
+    k.add_argument("--out", required=True, type=_out_path, metavar="MODEL.yaml", help="the calibrated config to write")
+    k.add_argument("--force", action="store_true",
+                   help="replace --out if another gslam command wrote it (never a file of yours)")
     k.set_defaults(func=_cmd_calibrate)
 
     i = _sub(sub, "inspect", "list what a recording holds (topics, types, counts, rates, time span); "
@@ -312,9 +324,10 @@ def build_parser() -> argparse.ArgumentParser:
              "examples:\n  gslam inspect recording.bag\n  gslam inspect recording.bag --config-out my_robot.yaml\n"
              "  gslam map recording.bag --config my_robot.yaml --out runs/first_map", common)
     i.add_argument("input", help=INPUTS)
-    i.add_argument("--config-out", default=None, metavar="FILE",
-                   help="write a commented starter config for gslam map with the topics filled in (a new file)")
-    i.add_argument("--force", action="store_true", help="replace FILE of --config-out if it exists")
+    i.add_argument("--config-out", default=None, type=_out_path, metavar="FILE",
+                   help="write a commented starter config for gslam map with the topics filled in (a new file, "
+                        "or an earlier one gslam inspect wrote)")
+    i.add_argument("--force", action="store_true", help="replace FILE of --config-out if another gslam command wrote it")
     i.set_defaults(func=_cmd_inspect)
 
     m = _sub(sub, "map", "map a recorded or simulated run and evaluate it",

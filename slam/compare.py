@@ -16,19 +16,25 @@ from __future__ import annotations
 import csv
 import io
 import logging
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from slam.config import PipelineConfig, load_config, load_yaml
+from slam.config import PipelineConfig, config_files, load_config, load_yaml
 from slam.errors import GslamError
 from slam.io.outdir import result_folder
-from slam.pipeline import MapResult, MappingPipeline
+from slam.pipeline import RESULT_FILES, MapResult, MappingPipeline
 from slam.resources import shipped_config
 
 log = logging.getLogger(__name__)
+
+COMPARE_FILES = ("comparison.csv", "comparison.md", "trajectories.png", "trajectories_full.png",
+                 "compass_trends.png", "observer_alarms.png")
+"""The files of a comparison beside its variants' folders."""
+_VARIANT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
 
 COLUMNS: tuple[tuple[str, str, str], ...] = (
     # (metric key, column header, format)
@@ -65,10 +71,14 @@ def load_variants(path: str | Path, only: list[str] | None = None) -> dict[str, 
     """Variants from YAML: name -> mapping of dotted overrides."""
     data = load_yaml(path)
     variants: dict[str, list[str]] = {}
-    for name, overrides in data.items():
+    for key, overrides in data.items():
+        name = str(key)
+        if not _VARIANT_NAME.fullmatch(name) or name in COMPARE_FILES:
+            raise GslamError(f"{path}: variant {name!r}: a variant's name names its result folder: letters, digits "
+                             f"and _.+- (not starting with . or -), other than {', '.join(COMPARE_FILES)}")
         if not isinstance(overrides, dict):
             raise GslamError(f"{path}: variant '{name}': expected a mapping of dotted.key: value")
-        variants[str(name)] = [f"{k}={_yaml_scalar(v)}" for k, v in overrides.items()]
+        variants[name] = [f"{k}={_yaml_scalar(v)}" for k, v in overrides.items()]
     if only:
         unknown = [n for n in only if n not in variants]
         if unknown:
@@ -124,7 +134,9 @@ def run_compare(
     variants = load_variants(variants_path, only)
     load_config(config_path, overrides or [])  # errors of the config and --set first
     configs = {name: _variant_config(config_path, overrides or [], variants_path, name, ov) for name, ov in variants.items()}
-    with result_folder(out_dir, "compare", [input_path, config_path, variants_path], force) as tmp:
+    names = [*COMPARE_FILES, *(f"{v}/{f}" for v in variants for f in RESULT_FILES)]
+    inputs = [input_path, *config_files(config_path), variants_path]
+    with result_folder(out_dir, "compare", inputs, force, names) as tmp:
         results, recording = _run_variants(input_path, configs, tmp, progress)
         result = CompareResult(tmp, results)
         rows = result.table()

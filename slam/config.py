@@ -29,7 +29,7 @@ from slam.io.yamlfile import SAFE_LOADER, check_finite, load_yaml, non_finite, r
 from validation.yamlio import Strict
 
 __all__ = [  # the YAML helpers are used through this module too
-    "PipelineConfig", "check_finite", "describe_validation_error", "dump_config", "load_config", "load_yaml",
+    "PipelineConfig", "check_finite", "config_files", "describe_validation_error", "dump_config", "load_config", "load_yaml",
     "non_finite", "parse_override", "read_text_file", "validation_sections", "yaml_number",
 ]
 
@@ -413,6 +413,24 @@ def _blame(source: str, overrides: list[tuple[str, str]], key: str) -> str:
         if key == okey or key.startswith(okey + ".") or okey.startswith(key + "."):
             return f"--set {text}"
     return source
+
+
+def config_files(path: str | Path | None) -> list[Path]:
+    """The files a config reads: itself and the system model it names by
+    path (``validation.model``), for the output rule (nothing is written
+    over them); a file that cannot be read is left for :func:`load_config`
+    to report."""
+    if path is None:
+        return []
+    files = [Path(path)]
+    try:
+        tree = load_yaml(path)
+    except GslamError:
+        return files
+    model = tree.get("validation", {}).get("model") if isinstance(tree.get("validation"), dict) else None
+    if isinstance(model, str):
+        files.append(Path(model) if Path(model).is_absolute() else Path(path).parent / model)
+    return files
 
 
 def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] = ()) -> PipelineConfig:

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from slam.compare import CompareResult, run_compare
-from slam.io.outdir import open_container, result_command
+from slam.config import config_files
+from slam.io.outdir import classify, open_container, result_command
 from slam.resources import shipped_config
 from slam.sim import simulate
 from slam.sim.scenario import dump_scenario, load_scenario
@@ -52,9 +53,15 @@ def run_demo(
     wanted = load_scenario(scenario)
     if seed is not None:
         wanted = wanted.model_copy(update={"seed": seed})
-    out = open_container(out_dir, "demo", [scenario, config, variants], force)
-    run_dir = out / scenario.stem
+    inputs = [scenario, *config_files(config), variants]
+    run_dir = Path(out_dir) / scenario.stem
     reuse = result_command(run_dir) == "simulate" and _text(run_dir / "scenario.yaml") == dump_scenario(wanted)
+    # Both parts' places are checked before either is written.
+    classify(Path(out_dir), "demo", inputs, force)
+    if not reuse:
+        classify(run_dir, "simulate", [scenario], force)
+    classify(Path(out_dir) / "compare", "compare", inputs, force)
+    out = open_container(out_dir, "demo", inputs, force, (f"{scenario.stem}/", "compare/"))
     duration = 0.0
     if not reuse:
         duration = simulate(scenario, run_dir, seed=seed, progress=progress, force=force).duration_s

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from slam.config import InputConfig
 from slam.errors import GslamError
+from slam.io.outdir import result_file_mark
 from slam.io.readers import SIDECAR, guess_format, is_run_folder, load_sidecar, read_recording, run_recording
 from slam.io.rosbag import open_bag
 from slam.io.rosbag_streams import IMU, LASER_SCAN, MAGNETIC_FIELD, NAV_SAT_FIX, ODOMETRY, POSE_STAMPED
@@ -127,7 +128,8 @@ def _inspect_other(path: Path, fmt: str) -> Inspection:
     shipped = shipped_config(_DATASET_CONFIGS[fmt])
     # The model paths are relative to the shipped file: make them absolute.
     text = shipped.read_text().replace("../validation/", f"{configs_dir() / 'validation'}/")
-    found.starter = (f"# Starter config for {path.name}: the shipped config for {names[fmt]} data sets\n"
+    found.starter = (f"{result_file_mark('inspect')}: a starter config for {path.name}, the shipped config for "
+                     f"{names[fmt]} data sets\n"
                      f"# ({shipped.name}); check the comments against your recording.\n" + text)
     return found
 
@@ -186,7 +188,7 @@ def starter_config(path: Path, topics: list[Topic]) -> str:
     sm = "true" if scan else "false"
     initial = "groundtruth" if gt else "origin"
     return f"""\
-# Starter config for {path.name}, written by `gslam inspect`.
+{result_file_mark('inspect')}: a starter config for {path.name}, written by `gslam inspect`.
 # Every key is optional and has a default (README, "Configuration");
 # configs/telemax.yaml is a fully commented example. Check the sigmas
 # against your sensors before trusting a result.

@@ -43,6 +43,12 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+RESULT_FILES = (
+    "config.yaml", "metrics.json", "trajectory.tum", "groundtruth.tum", "validation.csv", "loops.csv", "map.ply",
+    "trajectory.png", "map.png",
+)
+"""Every file a map result may hold (which of them depends on the run)."""
+
 
 @dataclass
 class MapResult:
@@ -122,7 +128,7 @@ class MappingPipeline:
 
     def run(self) -> MapResult:
         self._start = time.perf_counter()
-        with result_folder(self.out_dir, "map", self.inputs, self.force) as tmp:
+        with result_folder(self.out_dir, "map", self.inputs, self.force, RESULT_FILES) as tmp:
             self.start_helpers()
             try:
                 self.read()

@@ -16,7 +16,9 @@ import yaml
 from slam.cli import main
 from slam.errors import GslamError
 from slam.io.atomic import write_text
-from slam.io.outdir import RESULT_MARKER, TEMP_MARKER, host_tag, open_container, remove_stale_temps, result_folder
+from slam.io.outdir import (
+    ADDED_MARKER, RESULT_MARKER, TEMP_MARKER, ResultFolder, host_tag, open_container, remove_stale_temps, result_folder,
+)
 from tests.conftest import REPO, TELEMAX_CONFIG
 
 
@@ -27,6 +29,7 @@ def listing(folder: Path) -> set[str]:
 def build(out: Path, command: str = "map", inputs=(), force: bool = False, files=("a.txt",)) -> None:
     with result_folder(out, command, inputs, force) as tmp:
         for name in files:
+            (tmp / name).parent.mkdir(parents=True, exist_ok=True)
             (tmp / name).write_text(f"{name} by {command}\n")
 
 
@@ -46,7 +49,49 @@ def test_an_earlier_result_of_the_same_command_is_replaced_whole(tmp_path):
     build(out, files=("a.txt", "old.txt"))
     build(out, files=("a.txt",))
     assert listing(out) == {"a.txt", RESULT_MARKER}
+    assert json.loads((out / RESULT_MARKER).read_text())["files"] == ["a.txt"]
     assert listing(tmp_path) == {"out"}
+
+
+def test_an_earlier_result_keeps_every_file_the_command_did_not_write(tmp_path):
+    out = tmp_path / "out"
+    build(out, files=("a.txt", "old.txt", "sub/b.txt", "gone/c.txt"))
+    (out / "notes.txt").write_text("mine\n")
+    (out / "sub" / "figure.png").write_bytes(b"my own figure")
+    (out / "mine").mkdir()
+    build(out, files=("a.txt", "sub/b.txt", "new.txt"))
+    assert listing(out) == {"a.txt", "sub", "new.txt", "notes.txt", "mine", RESULT_MARKER}  # old.txt, gone/ removed
+    assert listing(out / "sub") == {"b.txt", "figure.png"}
+    assert (out / "notes.txt").read_text() == "mine\n" and (out / "sub" / "figure.png").read_bytes() == b"my own figure"
+    assert (out / "a.txt").read_text() == "a.txt by map\n"
+    assert json.loads((out / RESULT_MARKER).read_text())["files"] == ["a.txt", "new.txt", "sub/b.txt"]
+    assert listing(tmp_path) == {"out"}
+
+
+def test_a_file_of_the_users_where_the_result_goes_is_refused_before_anything_moves(tmp_path):
+    out = tmp_path / "out"
+    build(out, files=("a.txt",))
+    (out / "b.txt").write_text("mine\n")  # b.txt: not written by the earlier run
+    with pytest.raises(GslamError, match=r"out: --out holds b.txt, which gslam map would replace and did not write"):
+        build(out, files=("a.txt", "b.txt"))
+    assert (out / "b.txt").read_text() == "mine\n" and (out / "a.txt").read_text() == "a.txt by map\n"
+    (out / "b.txt").unlink()
+    (tmp_path / "elsewhere").write_text("precious\n")
+    (out / "b.txt").symlink_to(tmp_path / "elsewhere")  # a link where a file goes: not gslam's either
+    with pytest.raises(GslamError, match="holds b.txt"):
+        build(out, files=("a.txt", "b.txt"))
+    assert (tmp_path / "elsewhere").read_text() == "precious\n"
+    assert listing(tmp_path) == {"out", "elsewhere"}
+
+
+def test_a_legacy_marker_without_a_file_list_replaces_names_and_removes_nothing(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / RESULT_MARKER).write_text(json.dumps({"command": "map"}))
+    (out / "a.txt").write_text("old a\n")
+    (out / "notes.txt").write_text("mine\n")
+    build(out, files=("a.txt",))
+    assert (out / "a.txt").read_text() == "a.txt by map\n" and (out / "notes.txt").read_text() == "mine\n"
 
 
 def test_an_empty_folder_is_new(tmp_path):
@@ -63,19 +108,32 @@ def test_a_file_is_refused_even_with_force(tmp_path, force):
     assert (tmp_path / "out").read_text() == "precious\n" and listing(tmp_path) == {"out"}
 
 
-def test_a_foreign_folder_is_refused_and_force_writes_only_the_commands_files(tmp_path):
+def test_a_foreign_folder_is_refused_and_force_adds_the_commands_files(tmp_path):
     out = tmp_path / "mine"
     out.mkdir()
     (out / "notes.txt").write_text("mine\n")
-    (out / "a.txt").write_text("an older a\n")
     with pytest.raises(GslamError, match=r"mine: --out is a folder that is not a gslam map result .*--force"):
         build(out)
-    assert (out / "a.txt").read_text() == "an older a\n"
     build(out, force=True, files=("a.txt", "b.txt"))
-    assert listing(out) == {"notes.txt", "a.txt", "b.txt"}  # no marker: still not a map result
-    assert (out / "notes.txt").read_text() == "mine\n" and (out / "a.txt").read_text() == "a.txt by map\n"
+    assert listing(out) == {"notes.txt", "a.txt", "b.txt", ADDED_MARKER}  # no result marker: still not a map result
+    assert json.loads((out / ADDED_MARKER).read_text())["map"]["files"] == ["a.txt", "b.txt"]
     with pytest.raises(GslamError, match="not a gslam map result"):
         build(out)
+    build(out, force=True, files=("a.txt",))  # its own files, as recorded: replaced, b.txt removed
+    assert listing(out) == {"notes.txt", "a.txt", ADDED_MARKER}
+    assert (out / "notes.txt").read_text() == "mine\n"
+
+
+def test_force_replaces_nothing_of_the_users(tmp_path):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "a.txt").write_text("my a\n")
+    with pytest.raises(GslamError, match=r"mine: --out holds a.txt, which gslam map may write and did not write"):
+        ResultFolder.prepare(out, "map", force=True, names=["a.txt", "b.txt"])  # refused before any work
+    with pytest.raises(GslamError, match=r"holds a.txt, which gslam map would replace"):
+        build(out, force=True, files=("a.txt", "b.txt"))  # and when it was not foreseen: before anything moves
+    assert listing(out) == {"a.txt"} and (out / "a.txt").read_text() == "my a\n"
+    assert listing(tmp_path) == {"mine"}
 
 
 def test_a_result_of_another_command_is_refused(tmp_path):
@@ -139,10 +197,20 @@ def test_only_recognisable_leftovers_of_dead_processes_are_removed(tmp_path):
     elsewhere = temp_left_by(target, "0badc0de" if host_tag() != "0badc0de" else "00000000", dead_pid())
     unmarked = tmp_path / ".out.gslam-tmp-unmarked"
     unmarked.mkdir()
-    other_name = temp_left_by(tmp_path / "other", host_tag(), dead_pid())
-    assert remove_stale_temps(target) == [dead]
-    assert {p.name for p in (alive, elsewhere, unmarked, other_name) if p.exists()} == {
-        alive.name, elsewhere.name, unmarked.name, other_name.name}
+    other_name = temp_left_by(tmp_path / "other", host_tag(), dead_pid())  # another result's, same parent
+    dead_file = tmp_path / f".cal.yaml.gslam-tmp-{dead_pid()}-{host_tag()}-0123abcd.yaml"  # an atomic write's
+    dead_file.write_text("half")
+    users = tmp_path / "notes.gslam-tmp-1-00000000-00000000"  # not hidden: not a gslam name
+    users.write_text("mine")
+    assert sorted(remove_stale_temps(tmp_path)) == sorted([dead, other_name, dead_file])
+    assert {p.name for p in (alive, elsewhere, unmarked, users) if p.exists()} == {
+        alive.name, elsewhere.name, unmarked.name, users.name}
+
+
+def test_a_run_removes_the_leftovers_of_killed_runs_beside_it(tmp_path):
+    left = temp_left_by(tmp_path / "earlier", host_tag(), dead_pid())
+    build(tmp_path / "out")
+    assert listing(tmp_path) == {"out"} and not left.exists()
 
 
 @pytest.mark.parametrize("umask, file_mode, dir_mode", [(0o022, 0o644, 0o755), (0o077, 0o600, 0o700)])
@@ -281,21 +349,26 @@ def test_out_rule_for_every_command(command, commands, tmp_path, capsys):
 
 
 def test_inspect_config_out(short_run, tmp_path, capsys):
+    """inspect's --config-out: new, or an earlier starter (replaced); never
+    a file of the user's, even with --force."""
     target = tmp_path / "starter.yaml"
     code, err = run(capsys, "inspect", short_run.run_dir, "--config-out", target)
     assert code == 0, err
-    target.write_text("mine\n")
+    assert target.read_text().startswith("# gslam inspect result: a starter config")
     code, err = run(capsys, "inspect", short_run.run_dir, "--config-out", target)
-    assert code == 1 and "exists; give a new file name, or --force" in err
+    assert code == 0, err  # its own earlier result
+    target.write_text("mine\n")
+    for force in ([], ["--force"]):
+        code, err = run(capsys, "inspect", short_run.run_dir, "--config-out", target, *force)
+        assert code == 1 and "exists and is not a gslam inspect result" in err, err
     assert target.read_text() == "mine\n"
-    code, err = run(capsys, "inspect", short_run.run_dir, "--config-out", target, "--force")
-    assert code == 0 and target.read_text().startswith("# Starter config")
 
 
 def test_calibrate_out_rule(short_run, tmp_path, capsys):
     """calibrate's --out is one file: new, or an earlier calibrate result
-    (its first line), replaced; any other file only with --force; never a
-    folder, a symbolic link or the config."""
+    (its first line), replaced; a result of another gslam command only with
+    --force; never a file of the user's, a folder, a symbolic link or the
+    config."""
     argv = ["calibrate", short_run.run_dir, "--config", TELEMAX_CONFIG, "--clean", "0:10", "--out"]
     out = tmp_path / "cal.yaml"
     code, err = run(capsys, *argv, out)
@@ -307,10 +380,92 @@ def test_calibrate_out_rule(short_run, tmp_path, capsys):
     mine.write_text("precious\n")
     link = tmp_path / "link.yaml"
     link.symlink_to(out)
-    for target, says in ((mine, "is not a gslam calibrate result"), (link, "symbolic link"), (tmp_path, "is a folder")):
+    starter = tmp_path / "starter.yaml"
+    assert run(capsys, "inspect", short_run.run_dir, "--config-out", starter)[0] == 0
+    for target, says in ((mine, "is not a gslam calibrate result"), (link, "symbolic link"), (tmp_path, "is a folder"),
+                         (starter, "is a gslam inspect result, not a calibrate result")):
         code, err = run(capsys, *argv, target)
         assert code == 1 and err.count("\n") == 1 and says in err, err
-    assert mine.read_text() == "precious\n" and out.read_bytes() == first
     code, err = run(capsys, *argv[:-1], "--force", "--out", mine)
-    assert code == 0 and mine.read_bytes() == first, err
+    assert code == 1 and "is not a gslam calibrate result" in err, err
+    assert mine.read_text() == "precious\n" and out.read_bytes() == first
+    code, err = run(capsys, *argv[:-1], "--force", "--out", starter)
+    assert code == 0 and starter.read_bytes() == first, err
     assert not [p for p in tmp_path.rglob("*") if ".gslam-tmp-" in p.name]
+
+
+def copy_of(run_dir: Path, where: Path) -> Path:
+    import shutil
+
+    shutil.copytree(run_dir, where)
+    return where
+
+
+@pytest.mark.parametrize("force", [[], ["--force"]])
+def test_no_file_of_an_input_is_written_even_with_force(short_run, tmp_path, capsys, force):
+    run_dir = copy_of(short_run.run_dir, tmp_path / "run")
+    config = tmp_path / "c.yaml"
+    config.write_text("validation: {mode: \"off\"}\nbackend: {factors: {gps: {enabled: false}}}\n")
+    before = {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()}
+    cases = [
+        ("calibrate", run_dir, "--config", TELEMAX_CONFIG, "--clean", "0:10", "--out", run_dir / "truth.json"),
+        ("calibrate", run_dir, "--config", TELEMAX_CONFIG, "--out", run_dir / "bag" / "new.yaml"),
+        ("inspect", run_dir, "--config-out", run_dir / "bag" / "metadata.yaml"),
+        ("inspect", run_dir, "--config-out", run_dir / "scenario.yaml"),
+        ("map", run_dir, "--config", config, "--out", run_dir / "bag"),
+        ("map", run_dir / "bag", "--config", config, "--out", run_dir),
+        ("compare", run_dir, "--config", config, "--out", tmp_path),
+        ("calibrate", run_dir, "--config", config, "--out", config),
+    ]
+    for argv in cases:
+        code, err = run(capsys, *argv, *force)
+        assert code == 1 and err.count("\n") == 1 and "input" in err, (argv, err)
+    assert {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()} == before
+
+
+def test_a_hard_link_of_the_input_is_the_input(short_run, tmp_path, capsys):
+    config = tmp_path / "c.yaml"
+    config.write_text("keyframes: {period_s: 0.5}\n")
+    os.link(config, tmp_path / "alias.yaml")
+    code, err = run(capsys, "calibrate", short_run.run_dir, "--config", config, "--force", "--out", tmp_path / "alias.yaml")
+    assert code == 1 and "is the input" in err, err
+    assert config.read_text() == "keyframes: {period_s: 0.5}\n"
+
+
+@pytest.mark.parametrize("kind", ["fifo", "socket", "device"])
+def test_no_device_pipe_or_socket_is_replaced_even_with_force(short_run, commands, tmp_path, capsys, kind):
+    import socket
+
+    if kind == "fifo":
+        target = tmp_path / "pipe"
+        os.mkfifo(target)
+    elif kind == "socket":
+        target = tmp_path / "sock"
+        sock = socket.socket(socket.AF_UNIX)
+        sock.bind(str(target))
+    else:
+        target = Path("/dev/null")
+    before = os.stat(target)
+    others = (("inspect", short_run.run_dir, "--config-out"),
+              ("calibrate", short_run.run_dir, "--config", TELEMAX_CONFIG, "--out"))
+    for argv in (*commands.values(), *others):
+        code, err = run(capsys, *argv, target, "--force")
+        assert code == 1 and f"is a {'named pipe' if kind == 'fifo' else kind}, not a regular file or folder" in err, err
+    after = os.stat(target)
+    assert (after.st_ino, after.st_mode, after.st_rdev) == (before.st_ino, before.st_mode, before.st_rdev)
+
+
+@pytest.mark.parametrize("command", ["map", "simulate", "compare", "ablate", "calibrate", "inspect", "inject", "demo"])
+def test_an_empty_out_is_refused(command, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    flag = "--config-out" if command == "inspect" else "--out"
+    argv = {"map": ["map", "x", "--config", "c"], "simulate": ["simulate", "s"], "compare": ["compare", "x", "--config", "c"],
+            "ablate": ["ablate", "s"], "calibrate": ["calibrate", "x", "--config", "c"], "inspect": ["inspect", "x"],
+            "inject": ["inject", "x"], "demo": ["demo"]}[command]
+    with pytest.raises(SystemExit) as e:
+        main([*argv, flag, ""])
+    assert e.value.code == 2
+    assert f"argument {flag}: is empty" in capsys.readouterr().err
+    assert listing(tmp_path) == set()
+    with pytest.raises(GslamError, match="--out is empty"):
+        result_folder("", "map").__enter__()

@@ -270,7 +270,7 @@ def test_failed_rerun_keeps_the_old_folder_and_a_rerun_replaces_it(short_run, tm
 
     out = tmp_path / "map"
     run_map(short_run.run_dir, quick_config(), out)
-    (out / "stale.txt").write_text("from an older run\n")
+    (out / "notes.txt").write_text("the user's\n")
     before = listing(out)
 
     real = slam.io.pointcloud.write_ply
@@ -286,5 +286,6 @@ def test_failed_rerun_keeps_the_old_folder_and_a_rerun_replaces_it(short_run, tm
 
     monkeypatch.setattr(slam.io.pointcloud, "write_ply", real)
     run_map(short_run.run_dir, quick_config(), out)
-    assert listing(out) == MAP_FILES - {"trajectory.png", "map.png"}  # replaced whole, no plots
+    assert listing(out) == MAP_FILES - {"trajectory.png", "map.png"} | {"notes.txt"}  # the map's files replaced
+    assert (out / "notes.txt").read_text() == "the user's\n"
     assert listing(tmp_path) == {"map"}

@@ -45,6 +45,9 @@ from slam.errors import GslamError
 from slam.io.atomic import write_text
 from slam.io.outdir import TEMP_TAG, open_container
 
+CONTAINER_NAMES = ("spec.yaml", "summary.csv", "summary.md", ".lock", "plots/", "inputs/", "jobs/", "failed/")
+"""What a sweep writes into its folder (each job's result inside ``jobs/``)."""
+
 log = logging.getLogger(__name__)
 
 
@@ -204,7 +207,7 @@ def run_ablation(
     jobs = expand_jobs(spec, source)  # validates everything before any job runs
     inputs = [source, spec.config, *(s.path for s in spec.inputs.scenarios)]
     inputs += [j.input_path for j in jobs if j.input_path is not None]
-    out_dir = open_container(out_dir, "ablate", inputs, force).resolve()
+    out_dir = open_container(out_dir, "ablate", inputs, force, CONTAINER_NAMES).resolve()
     workers = max(1, workers or os.cpu_count() or 1)
     with FileLock(out_dir / ".lock"):
         _clean_leftovers(out_dir)

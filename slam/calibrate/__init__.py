@@ -40,7 +40,7 @@ from slam.calibrate.runs import CalibrationRun, load_run, parse_clean
 from slam.calibrate.select import (CheckChoice, Choice, FieldGyroChoice, calibrate_field_gyro, calibrate_magnetometer,
                                    calibrate_relation)
 from slam.calibrate.write import calibrated_config
-from slam.config import PipelineConfig, load_config, validation_sections
+from slam.config import PipelineConfig, config_files, load_config, validation_sections
 from slam.errors import GslamError
 from slam.io.atomic import write_text
 from slam.io.outdir import check_new_file
@@ -92,7 +92,7 @@ def calibrate(
         raise GslamError("gslam calibrate: no run given")
     if not 0.0 < false_alarm < 1.0:
         raise GslamError(f"--false-alarm {false_alarm:g}: expected a share of steps between 0 and 1, e.g. 0.005")
-    out = check_new_file(out, [*runs, config_path], force, command="calibrate")
+    out = check_new_file(out, [*runs, *config_files(config_path)], force, command="calibrate")
     stretch = parse_clean(clean)
     config = load_config(config_path, list(overrides))
     vcfg, _ = validation_sections(config)

@@ -103,7 +103,7 @@ def inject(
     # labels are moved by them, to the times the faulty samples were taken.
     offsets = config.time_offsets_s.model_dump()
     config = config.model_copy(update={"time_offsets_s": TimeOffsetsConfig()})
-    with result_folder(out, "inject", [input_path, *inputs], force) as tmp:
+    with result_folder(out, "inject", [input_path, *inputs], force, (f"{RUN_BAG}/", SIDECAR)) as tmp:
         rec = read_recording(input_path, config)
         _check_intervals(parsed, rec)
         source = run_recording(input_path) if is_run_folder(input_path) else input_path

@@ -1,29 +1,19 @@
 """Atomic file writing: a killed run leaves a complete file or none.
 
-The temporary file is ``.NAME.gslam-tmp-XXXXXXXX.SUFFIX`` beside its target
-(recognisably ours, see :mod:`slam.io.outdir`), created with the permissions
-the umask allows, as an ordinary file would be.
+The temporary file is named as :mod:`slam.io.tempfiles` says (recognisably
+gslam's, with its process id, so a later run removes it if the process was
+killed), beside its target, with the permissions the umask allows, as an
+ordinary file would be.
 """
 
 from __future__ import annotations
 
 import os
-import secrets
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-from slam.io.outdir import TEMP_TAG
-
-
-def _new_temp_file(path: Path) -> Path:
-    while True:
-        tmp = path.with_name(f".{path.stem}{TEMP_TAG}{secrets.token_hex(4)}{path.suffix}")
-        try:
-            os.close(os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
-        except FileExistsError:
-            continue
-        return tmp
+from slam.io.tempfiles import new_temp_file
 
 
 @contextmanager
@@ -33,7 +23,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     (open3d, matplotlib)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp_path = _new_temp_file(path)
+    tmp_path = new_temp_file(path)
     try:
         yield tmp_path
         os.replace(tmp_path, path)

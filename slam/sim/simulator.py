@@ -46,6 +46,9 @@ from slam.sim.world import World
 
 log = logging.getLogger(__name__)
 
+RESULT_NAMES = ("bag/", "truth.json", "scenario.yaml")
+"""What a simulated run folder holds."""
+
 
 class Stream(IntEnum):
     """Fixed spawn key of each sensor's random stream: changing one sensor's
@@ -109,7 +112,7 @@ def _run(
 ) -> SimulationResult:
     estimate = check_bounded(scenario, source or f"scenario '{scenario.name}'")
     log.info("%s: about %.0f s of mission, %.0f m", scenario.name, estimate.duration_s, estimate.path_m)
-    with result_folder(out, "simulate", [source] if source else [], force) as tmp:
+    with result_folder(out, "simulate", [source] if source else [], force, RESULT_NAMES) as tmp:
         result = _simulate_into(scenario, tmp, progress)
     result.run_dir = out
     result.wall_time_s = time.perf_counter() - started
