@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from slam.errors import GslamError
 from slam.loops.config import LoopsConfig
@@ -135,12 +135,31 @@ class TimeOffsetsConfig(Strict):
         return {name: value for name, value in self.model_dump().items() if value != 0.0}
 
 
+class ExtraOdometryConfig(Strict):
+    """A further odometry source (``input.extra_odometry.NAME``): a visual
+    odometry, a lidar odometry, a second wheel odometry. nav_msgs/Odometry
+    on ``topic`` (ROS bags), in the frame conventions ``frame``, its stamps
+    moved by ``time_offset_s`` as ``time_offsets_s`` moves the others'.
+
+    Validation compares it with the other sensors as a sensor of its own:
+    streams ``NAME_yaw``, ``NAME_forward``, ... and components
+    ``NAME_YAW``, ``NAME_DIST`` (upper case; :mod:`validation.streams.names`).
+    It is a witness: the graph fuses ``topics.odometry`` only. A fused
+    estimate (robot_localization's ``odometry/filtered``) is no witness of
+    the sensors it fuses."""
+
+    topic: str
+    frame: StreamFrameConfig = StreamFrameConfig()
+    time_offset_s: float = 0.0
+
+
 class InputConfig(Strict):
     """``format``: ``auto`` guesses the reader from the path (ROS 1 ``.bag``,
     ROS 2 bag folder, simulated run folder, CARMEN ``.log``/``.log.gz``,
     BROAD ``.mat``, libRSF ``*_Input.txt``). ``frames``: the frame
     conventions of a bag's streams (the other formats have fixed ones).
-    ``time_offsets_s``: per stream, seconds added to its stamps (any format)."""
+    ``time_offsets_s``: per stream, seconds added to its stamps (any format).
+    ``extra_odometry``: further odometry sources by name (ROS bags)."""
 
     format: Literal["auto", "rosbag", "carmen", "broad", "librsf"] = "auto"
     topics: TopicsConfig = TopicsConfig()
@@ -149,6 +168,16 @@ class InputConfig(Strict):
     gps: GpsInputConfig = GpsInputConfig()
     frames: FramesConfig = FramesConfig()
     time_offsets_s: TimeOffsetsConfig = TimeOffsetsConfig()
+    extra_odometry: dict[str, ExtraOdometryConfig] = Field(default_factory=dict)
+
+    @field_validator("extra_odometry")
+    @classmethod
+    def _source_names(cls, value: dict[str, ExtraOdometryConfig]) -> dict[str, ExtraOdometryConfig]:
+        from validation.streams.names import check_source_name
+
+        for name in value:
+            check_source_name(name)
+        return value
 
 
 # --- front-end -----------------------------------------------------------
@@ -482,11 +511,28 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
             check_model(vcfg.model)
     except SectionError as e:
         raise GslamError(f"{_blame(source, applied, _section_error_key(str(e)))}: {e}") from None
+    _check_sources(vcfg, config.input, lambda key: _blame(source, applied, key))
     # The checked sections, every default spelled out (validate_assignment
     # checks them as mappings).
     config.validation = vcfg.model_dump(mode="json", by_alias=True)
     config.gating = gcfg.model_dump(mode="json", by_alias=True)
     return config
+
+
+def _check_sources(vcfg, inputs: InputConfig, blame) -> None:
+    """Every odometry-like stream an observer compares must come from the
+    odometry, scan matching or a declared further odometry source."""
+    from validation.streams.names import BUILTIN_SOURCES, split_source_stream
+
+    for i, rel in enumerate(vcfg.observers.relations):
+        for key, stream in (("stream_a", rel.stream_a), ("stream_b", rel.stream_b)):
+            split = split_source_stream(stream)
+            if split is None or split[0] in BUILTIN_SOURCES or split[0] in inputs.extra_odometry:
+                continue
+            declared = ", ".join(sorted(inputs.extra_odometry)) or "none"
+            where = f"validation.observers.relations.{i}.{key}"
+            raise GslamError(f"{blame(where)}: {where}: stream {stream!r} is odometry source {split[0]!r}, which "
+                             f"input.extra_odometry does not declare (declared: {declared})")
 
 
 def _section_error_key(message: str) -> str:

@@ -154,7 +154,8 @@ class Recording:
     """One run: every stream is optional, since real robots differ.
 
     ``odometry`` is the pose integrated by the robot's odometry in its own
-    ``odom`` frame. ``faults`` maps a component name to the intervals (s, in
+    ``odom`` frame; ``extra_odometry`` further odometry sources by name (a
+    visual odometry, a second wheel odometry), each in its own frame. ``faults`` maps a component name to the intervals (s, in
     the recording's time) where its output is physically wrong beyond its
     nominal noise; it is known only for simulated runs. ``place_matches``:
     loop closures the recording lists, if any.
@@ -171,13 +172,15 @@ class Recording:
     faults: dict[str, list[Interval]] = field(default_factory=dict)
     magnetic_reference: MagneticReference | None = None
     place_matches: PlaceMatches | None = None
+    extra_odometry: dict[str, Trajectory] = field(default_factory=dict)
 
     @property
     def duration(self) -> float:
         """Time from the first to the last message of any stream, s."""
         ends = [
             s.t[-1]
-            for s in (self.scans, self.gyro, self.compass, self.odometry, self.gps, self.groundtruth)
+            for s in (self.scans, self.gyro, self.compass, self.odometry, self.gps, self.groundtruth,
+                      *self.extra_odometry.values())
             if s is not None and len(s.t)
         ]
         return float(max(ends)) if ends else 0.0

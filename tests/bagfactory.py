@@ -318,3 +318,115 @@ def ned_driving_bag(
             lat, lon = geodetic_from_enu(x[k] + rng.normal(0, 0.5), y[k] + rng.normal(0, 0.5), *datum)
             bag.fix("/fix", stamp, float(lat), float(lon), variance_m2=(0.25, 0.25))
     return bag, {"t": t, "x": x, "y": y, "yaw": yaw}
+
+
+SENSOR_TOPICS = {
+    "imu": "/imu/data", "mag": "/imu/mag", "odom": "/odom", "vo": "/vo/odom", "odom2": "/wheels2/odom",
+    "gps": "/fix", "filtered": "/odometry/filtered",
+}
+"""The topic each sensor of :func:`sensor_bag` is written on."""
+
+
+def sensor_bag(
+    sensors: Sequence[str],
+    duration_s: float = 150.0,
+    seed: int = 0,
+    faults: dict[str, tuple[float, float]] | None = None,
+    unrelated: Sequence[str] = (),
+    ros: int = 1,
+    t0: float = 1_700_000_000.0,
+    datum: tuple[float, float] = (48.0, 11.0),
+) -> BagBuilder:
+    """A robot driving 1 m/s with left and right turns and changes of speed,
+    recorded by the ``sensors`` of :data:`SENSOR_TOPICS`:
+
+    * ``imu``: sensor_msgs/Imu at 50 Hz, yaw rate with 0.2 deg/s noise and a
+      0.05 deg/s bias, its orientation a heading with 1 deg noise;
+      ``imu_no_orientation``: the same without an orientation (REP-145);
+    * ``mag``: sensor_msgs/MagneticField at 20 Hz, a level field of 20 uT
+      north and 40 uT down with 0.3 uT noise;
+    * ``odom``: wheel odometry at 20 Hz with 2 % errors of distance and turn;
+    * ``vo``: a visual odometry at 15 Hz, 1 % errors, in its own frame
+      (turned 0.7 rad, started 3 m off); ``odom2``: a second wheel odometry,
+      10 Hz, 3 % errors;
+    * ``gps``: NavSatFix at 2 Hz, 0.5 m noise;
+    * ``filtered``: an odometry/filtered topic (a fused estimate).
+
+    ``faults``: per sensor (``vo``, ``odom``, ``odom2``, ``imu``, ``mag``), an
+    interval (s from the start) over which it goes wrong: an odometry's
+    heading drifts 0.15 rad/s off (a visual odometry losing track), the
+    gyro gains a 2 deg/s bias, the magnetometer's field is bent by 40 deg.
+    ``unrelated``: sensors whose streams come from another robot's path
+    (the same speeds, other turns). ``t`` starts at ``t0``."""
+    from slam.geometry import geodetic_from_enu
+
+    rng = np.random.default_rng(seed)
+    faults = faults or {}
+    dt = 0.01
+    t = np.arange(0.0, duration_s, dt)
+
+    def path(turns) -> tuple[np.ndarray, ...]:
+        rate = np.zeros_like(t)
+        for start, end, r in turns:
+            rate[(t >= start) & (t < end)] = r
+        speed = 1.0 + 0.4 * np.sin(2 * np.pi * t / 37.0)
+        speed[t < 3.0] = t[t < 3.0] / 3.0
+        yaw = np.concatenate([[0.3], 0.3 + np.cumsum(rate[:-1] * dt)])
+        x = np.concatenate([[0.0], np.cumsum(speed[:-1] * np.cos(yaw[:-1]) * dt)])
+        y = np.concatenate([[0.0], np.cumsum(speed[:-1] * np.sin(yaw[:-1]) * dt)])
+        return rate, speed, yaw, x, y
+
+    turns = [(s, s + 6, r) for s, r in zip(np.arange(8.0, duration_s - 8, 14.0), (0.3, -0.4, 0.5, -0.25, 0.35, -0.5))]
+    own = path(turns)
+    other = path([(s + 5, e + 5, -r) for s, e, r in turns])
+
+    def truth(sensor: str):
+        return other if sensor in unrelated else own
+
+    def inside(sensor: str) -> np.ndarray:
+        a, b = faults.get(sensor, (np.inf, np.inf))
+        return (t >= a) & (t < b)
+
+    def odometry(sensor: str, err: float, frame_yaw: float = 0.0, start: tuple[float, float] = (0.0, 0.0)):
+        rate, speed, _, _, _ = truth(sensor)
+        drift = np.where(inside(sensor), 0.15, 0.0)
+        # A scale error of its own (a wheel's radius), and noise on every step.
+        w = (1.0 + err) * rate + drift + err * rng.standard_normal(len(t))
+        yaw = frame_yaw + np.concatenate([[0.0], np.cumsum(w[:-1] * dt)])
+        v = (1.0 - err) * speed * (1.0 + 2.0 * err * rng.standard_normal(len(t)))
+        x = start[0] + np.concatenate([[0.0], np.cumsum(v[:-1] * np.cos(yaw[:-1]) * dt)])
+        y = start[1] + np.concatenate([[0.0], np.cumsum(v[:-1] * np.sin(yaw[:-1]) * dt)])
+        return x, y, yaw
+
+    bag = BagBuilder(ros)
+    for sensor in sensors:
+        every = {"imu": 2, "imu_no_orientation": 2, "mag": 5, "odom": 5, "vo": 7, "odom2": 10, "gps": 50,
+                 "filtered": 5}[sensor]
+        idx = np.arange(0, len(t), every)
+        rate, _, yaw, x, y = truth(sensor)
+        if sensor in ("imu", "imu_no_orientation"):
+            bias = np.radians(0.05) + np.where(inside("imu"), np.radians(2.0), 0.0)
+            heading = yaw + np.radians(1.0) * rng.standard_normal(len(t))
+            for k in idx:
+                bag.imu(SENSOR_TOPICS["imu"], t0 + t[k], rate_z=rate[k] + bias[k] + np.radians(0.2) * rng.standard_normal(),
+                        yaw=heading[k], has_orientation=sensor == "imu")
+        elif sensor == "mag":
+            bent = yaw + np.where(inside("mag"), np.radians(40.0), 0.0)
+            for k in idx:
+                north = np.pi / 2 - bent[k]
+                noise = 0.3e-6 * rng.standard_normal(3)
+                bag.mag(SENSOR_TOPICS["mag"], t0 + t[k], (20e-6 * np.cos(north) + noise[0],
+                                                        20e-6 * np.sin(north) + noise[1], -40e-6 + noise[2]))
+        elif sensor in ("odom", "vo", "odom2", "filtered"):
+            err = {"odom": 0.02, "vo": 0.01, "odom2": 0.03, "filtered": 0.005}[sensor]
+            frame = (0.7, (3.0, -1.0)) if sensor == "vo" else (0.3, (0.0, 0.0))
+            ox, oy, oyaw = odometry(sensor, err, *frame)
+            for k in idx:
+                bag.odom(SENSOR_TOPICS[sensor], t0 + t[k], ox[k], oy[k], oyaw[k])
+        elif sensor == "gps":
+            for k in idx:
+                lat, lon = geodetic_from_enu(x[k] + rng.normal(0, 0.5), y[k] + rng.normal(0, 0.5), *datum)
+                bag.fix(SENSOR_TOPICS["gps"], t0 + t[k], float(lat), float(lon), variance_m2=(0.25, 0.25))
+        else:
+            raise ValueError(f"unknown sensor {sensor!r}")
+    return bag

@@ -77,7 +77,7 @@ def _run(name, disturbance=None):
     t, field, psi = turning_sensor(disturbance, duration_s=60.0)
     rate = np.gradient(psi, t)
     sensors = SimpleNamespace(compass=SimpleNamespace(t=t, yaw=psi, field=field), gyro=SimpleNamespace(t=t, rate=rate),
-                              odometry=None, gps=None)
+                              odometry=None, gps=None, extra_odometry={})
     streams = validation_streams(sensors, field_gyro=(1.0, 0.1))
     steps = resample_streams(streams, fixed_rate_steps(0.0, 59.9, 10.0))
     return CalibrationRun(name, streams, steps, [], np.ones(len(steps.t), bool), False)

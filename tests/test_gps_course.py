@@ -41,7 +41,7 @@ def drive(seed: int = 0) -> SimpleNamespace:
     n = len(t[fix])
     gps = SimpleNamespace(t=t[fix], x=x[fix] + rng.normal(0, FIX_SIGMA_M, n), y=y[fix] + rng.normal(0, FIX_SIGMA_M, n),
                           sigma=np.full(n, FIX_SIGMA_M), status=np.zeros(n, int))
-    return SimpleNamespace(t=t, yaw=yaw, odometry=_Poses(t, x, y, yaw), gps=gps, compass=None, gyro=None)
+    return SimpleNamespace(t=t, yaw=yaw, odometry=_Poses(t, x, y, yaw), gps=gps, compass=None, gyro=None, extra_odometry={})
 
 
 class _Poses(SimpleNamespace):

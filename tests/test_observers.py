@@ -123,8 +123,10 @@ def test_validation_streams_from_recording():
     s = validation_streams(rec, sm)
     assert set(s) == {
         "gyro_yaw", "odo_yaw", "odo_distance", "odo_forward", "odo_lateral", "odo_speed",
-        "sm_yaw", "sm_distance", "sm_forward", "sm_lateral", "gps_speed", "gps_sigma", "odo_fix_speed", "gps_course",
+        "sm_yaw", "sm_distance", "sm_forward", "sm_lateral", "sm_speed", "sm_fix_speed", "gps_speed", "gps_sigma",
+        "odo_fix_speed", "gps_course",
     }
+    np.testing.assert_allclose(s["sm_speed"].values, 1.0, atol=1e-9)
     np.testing.assert_allclose(s["gyro_yaw"].values, 0.1 * rec.gyro.t, atol=1e-12)
     np.testing.assert_allclose(s["odo_distance"].values, 0.5 * rec.odometry.t, atol=1e-12)
     np.testing.assert_allclose(s["odo_speed"].values, 0.5, atol=1e-9)

@@ -34,7 +34,7 @@ from validation.observers.checks import MagneticReference, ScanGeometrySeries, s
 from validation.observers.config import RelationConfig, field_gyro_stream, gps_course_limits
 from validation.observers.coverage import observer_coverage, require_observations, warn_low_coverage
 from validation.streams import (
-    INTEGRATED_STREAMS, PoseSeries, SensorSet, fixed_rate_steps, resample_streams, validation_streams,
+    PoseSeries, SensorSet, fixed_rate_steps, is_integrated, resample_streams, validation_streams,
 )
 
 log = logging.getLogger(__name__)
@@ -197,7 +197,7 @@ def integrated_fault_spans(
             blame_of[id(r)] = frozenset(c for s in top for c in (s, *model.modalities(s)))
     blamed_sets = [blame_of[id(r)] for r in results]
     for rel in offsets:
-        comps = {c for s, c in zip(rel.streams, rel.components) if s in INTEGRATED_STREAMS}
+        comps = {c for s, c in zip(rel.streams, rel.components) if is_integrated(s)}
         blamed = np.array([bool(comps & b) for b in blamed_sets])
         if not blamed.any():
             continue

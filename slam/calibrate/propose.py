@@ -23,7 +23,7 @@ from slam.calibrate.select import Choice, calibrate_relation, candidate_windows
 from validation.config import ValidationConfig
 from validation.diagnosis.model import SystemModel
 from validation.observers.config import RelationConfig
-from validation.streams import STREAM_COMPONENT
+from validation.streams import stream_component
 
 MIN_CORRELATION = 0.9
 MIN_MOTION = 3.0
@@ -52,7 +52,7 @@ def propose(runs: Sequence[CalibrationRun], relations: Sequence[RelationConfig],
     out: list[Proposal] = []
     for quantity, streams in QUANTITIES.items():
         for a, b in itertools.combinations([s for s in streams if s in present], 2):
-            ca, cb = STREAM_COMPONENT[a], STREAM_COMPONENT[b]
+            ca, cb = stream_component(a), stream_component(b)
             if frozenset((a, b)) in taken or ca not in model.components or cb not in model.components:
                 continue
             name = f"{quantity}_{a.split('_')[0]}_{b.split('_')[0]}_res"

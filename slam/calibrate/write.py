@@ -23,18 +23,11 @@ from validation.observers.config import RelationConfig
 
 _PLACEHOLDER = "__relations__"
 _INDENT = "    "
-_KEEP = ("name", "kind", "stream_a", "stream_b")
 
 
 def _flow(rel: RelationConfig) -> str:
-    """One relation as a YAML flow mapping: its name, kind and streams, then
-    every value that differs from the default."""
-    data = rel.model_dump(mode="json")
-    default = {k: f.default for k, f in RelationConfig.model_fields.items()}
-    # None is shown where the default is not (an offset relation's level of 0).
-    shown = {k: v for k, v in data.items()
-             if k in _KEEP or (v != default.get(k) and (v is not None or default.get(k) is not None))}
-    return yaml.safe_dump([shown], default_flow_style=None, width=10_000, sort_keys=False).strip()
+    """One relation as a YAML flow mapping (:meth:`RelationConfig.compact`)."""
+    return yaml.safe_dump([rel.compact()], default_flow_style=None, width=10_000, sort_keys=False).strip()
 
 
 def _pct(x: float) -> str:

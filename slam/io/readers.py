@@ -29,7 +29,7 @@ from typing import Callable, Mapping, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from slam.config import GpsInputConfig, InputConfig, TimeOffsetsConfig
+from slam.config import GpsInputConfig, InputConfig
 from slam.io.yamlfile import read_text_file
 from slam.errors import GslamError
 from slam.io import broad, carmen, librsf
@@ -221,8 +221,11 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
         raise GslamError(f"unknown input format '{fmt}'; known: {', '.join(READERS)}")
     if fmt != "rosbag" and not config.frames.is_default():
         raise GslamError(f"input.frames: a {fmt} recording has fixed frame conventions; frames apply to ROS bags")
+    if fmt != "rosbag" and config.extra_odometry:
+        raise GslamError(f"input.extra_odometry: a {fmt} recording has no topics; further odometry sources are "
+                         "read from ROS bags")
     if not is_run_folder(path):
-        return shift_streams(_read(fmt, path, config, on_scans), config.time_offsets_s)
+        return shift_streams(_read(fmt, path, config, on_scans), config)
 
     sidecar = load_sidecar(path / SIDECAR)
     unset = config.gps.datum_lat_deg is None and config.gps.datum_lon_deg is None
@@ -230,7 +233,7 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
         lat, lon = sidecar.gps_datum.lat_deg, sidecar.gps_datum.lon_deg
         datum = GpsInputConfig(datum_lat_deg=lat, datum_lon_deg=lon)
         config = config.model_copy(update={"gps": datum})
-    rec = shift_streams(_read(fmt, run_recording(path), config, on_scans), config.time_offsets_s)
+    rec = shift_streams(_read(fmt, run_recording(path), config, on_scans), config)
     rec.name = path.name
     attach_sidecar(rec, sidecar)
     log.info("%s: run '%s' with faults in %s", path, sidecar.scenario, ", ".join(rec.faults) or "none")
@@ -247,14 +250,21 @@ def _read(fmt: str, path: Path, config: InputConfig, on_scans: ScansHook | None)
     return rec
 
 
-def shift_streams(rec: Recording, offsets: TimeOffsetsConfig) -> Recording:
-    """Add each stream's offset to its stamps (stamp + offset = the time the
-    sample was taken), in place; ``rec.t0`` and the fault intervals stay.
-    Scans handed to ``on_scans`` before this keep their stamps; the
+def shift_streams(rec: Recording, config: InputConfig) -> Recording:
+    """Add each stream's offset (``config.time_offsets_s``, and each further
+    odometry source's ``time_offset_s``) to its stamps (stamp + offset = the
+    time the sample was taken), in place; ``rec.t0`` and the fault intervals
+    stay. Scans handed to ``on_scans`` before this keep their stamps; the
     front-end's result takes the recording's."""
-    for name, offset in offsets.shifted().items():
+    for name, offset in config.time_offsets_s.shifted().items():
         stream = getattr(rec, "scans" if name == "scan" else name)
         if stream is not None:
             stream.t = stream.t + offset
             log.info("%s: %s stamps moved by %+.3f s (input.time_offsets_s)", rec.name, name, offset)
+    for name, extra in config.extra_odometry.items():
+        stream = rec.extra_odometry.get(name)
+        if stream is not None and extra.time_offset_s != 0.0:
+            stream.t = stream.t + extra.time_offset_s
+            log.info("%s: %s stamps moved by %+.3f s (input.extra_odometry.%s.time_offset_s)", rec.name, name,
+                     extra.time_offset_s, name)
     return rec

@@ -15,8 +15,9 @@ Message -> stream mapping (all times are header stamps):
 * ``compass``: sensor_msgs/MagneticField or the orientation of a
   sensor_msgs/Imu -> :class:`Compass` (sign conventions in
   :mod:`slam.io.rosbag_imu`).
-* ``odometry``, ``groundtruth``: nav_msgs/Odometry (ground truth may also be
-  geometry_msgs/PoseStamped) -> :class:`Trajectory` from the planar pose.
+* ``odometry``, ``groundtruth``, each of ``extra_odometry``:
+  nav_msgs/Odometry (ground truth may also be geometry_msgs/PoseStamped) ->
+  :class:`Trajectory` from the planar pose.
 * ``gps``: sensor_msgs/NavSatFix -> :class:`Gps` in metres about a datum.
 
 Each stream but GPS is turned from its own frame conventions into the
@@ -58,6 +59,9 @@ log = logging.getLogger(__name__)
 BAG_SUFFIXES = (".bag", ".db3", ".mcap")
 
 ScansHook = Callable[[Scans], None]
+
+EXTRA_ODOMETRY = "extra_odometry."
+"""Prefix of a further odometry source's stream name (``input.extra_odometry``)."""
 
 BULK_CHUNK = 8192
 """Messages of one topic decoded together: bounds the raw bytes held."""
@@ -113,6 +117,8 @@ def _make_streams(path: Path, config: InputConfig) -> list[_Stream]:
         streams.append(_PoseStream("odometry", topics.odometry, path, frame=frames.odometry))
     if topics.gps is not None:
         streams.append(_GpsStream("gps", topics.gps, path, config.gps))
+    for name, extra in config.extra_odometry.items():
+        streams.append(_PoseStream(f"{EXTRA_ODOMETRY}{name}", extra.topic, path, frame=extra.frame))
     if topics.groundtruth is not None:
         gt_types = (ODOMETRY, POSE_STAMPED)
         streams.append(_PoseStream("groundtruth", topics.groundtruth, path, gt_types, frames.groundtruth))
@@ -345,6 +351,7 @@ def read_rosbag(path: str | Path, config: InputConfig, on_scans: ScansHook | Non
         odometry=built.get("odometry"),
         gps=built.get("gps"),
         groundtruth=built.get("groundtruth"),
+        extra_odometry={name: built[f"{EXTRA_ODOMETRY}{name}"] for name in config.extra_odometry},
     )
     log.info(
         "%s: read %s over %.1f s",

@@ -18,10 +18,10 @@ from typing import Literal
 
 import numpy as np
 import pydantic
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from validation.errors import ValidationError
-from validation.streams import STREAM_COMPONENT, STREAM_NAMES, StreamName
+from validation.streams import is_stream_name, stream_component
 from validation.trends import Rule, Window
 from validation.yamlio import StrictFrozen, load_yaml, validate_mapping
 
@@ -88,8 +88,8 @@ class RelationConfig(StrictFrozen):
 
     name: str
     kind: Literal["trend", "residual", "cusum", "offset"] = "trend"
-    stream_a: StreamName
-    stream_b: StreamName
+    stream_a: str
+    stream_b: str
     boundary: float | None = Field(None, gt=0.0)
     window_s: float = Field(gt=0.0)
     gain: float = 1.0
@@ -108,6 +108,15 @@ class RelationConfig(StrictFrozen):
     mismatch_margin: float | None = Field(None, gt=0.0)
     component_a: Component | None = None
     component_b: Component | None = None
+
+    @field_validator("stream_a", "stream_b")
+    @classmethod
+    def _known_stream(cls, value: str) -> str:
+        if not is_stream_name(value):
+            raise ValueError(f"unknown stream {value!r} (validation.streams lists them; a further odometry "
+                             "source's are NAME_yaw, NAME_distance, NAME_forward, NAME_lateral, NAME_speed, "
+                             "NAME_fix_speed)")
+        return value
 
     @model_validator(mode="after")
     def _two_streams(self) -> "RelationConfig":
@@ -129,6 +138,16 @@ class RelationConfig(StrictFrozen):
     def streams(self) -> tuple[str, str]:
         return self.stream_a, self.stream_b
 
+    def compact(self) -> dict:
+        """Its name, kind and streams, then every value that differs from
+        the default (a None shown where the default is not: an offset
+        relation's level of 0), JSON-ready: what a config file needs."""
+        data = self.model_dump(mode="json")
+        default = {k: f.default for k, f in type(self).model_fields.items()}
+        return {k: v for k, v in data.items()
+                if k in ("name", "kind", "stream_a", "stream_b")
+                or (v != default.get(k) and (v is not None or default.get(k) is not None))}
+
     @property
     def boundaries(self) -> tuple[float, float]:
         return (self.boundary_a or self.boundary, self.boundary_b or self.boundary)
@@ -149,8 +168,8 @@ class RelationConfig(StrictFrozen):
     @property
     def components(self) -> tuple[str, str]:
         return (
-            self.component_a or STREAM_COMPONENT[self.stream_a],
-            self.component_b or STREAM_COMPONENT[self.stream_b],
+            self.component_a or stream_component(self.stream_a),
+            self.component_b or stream_component(self.stream_b),
         )
 
 
@@ -291,7 +310,7 @@ class ObserversConfig(StrictFrozen):
         if dupes:
             raise ValueError(f"observer name {dupes[0]!r} used twice")
         for key in self.stream_max_gap_s:
-            if key not in STREAM_NAMES:
+            if not is_stream_name(key):
                 raise ValueError(f"stream_max_gap_s: unknown stream {key!r}")
         return self
 

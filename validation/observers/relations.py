@@ -64,7 +64,7 @@ from validation.observers.quantitative import (
     wrap_angle,
 )
 from validation.observers.sequential import Cusum, cusum
-from validation.streams import ANGULAR_STREAMS, STREAM_NAMES, StepStreams, Stream, resample_streams
+from validation.streams import StepStreams, Stream, is_angular, resample_streams
 from validation.trends import Rule, Trend, TrendEstimator, TrendSample, Window, abstract_stream
 
 __all__ = ["MismatchCounter", "ObserverBank", "StepObservations", "evidence", "excise_spans", "mask_runs",
@@ -357,7 +357,8 @@ class ObserverBank:
         """``angular`` says which streams are angles (default: the yaw streams)."""
         self.rule = rule
         self.relations = tuple(relations)
-        self.angular = dict(angular) if angular is not None else {n: n in ANGULAR_STREAMS for n in STREAM_NAMES}
+        names = {s for r in self.relations for s in r.streams}
+        self.angular = dict(angular) if angular is not None else {n: is_angular(n) for n in names}
         self.unary = tuple(unary)
         self._estimators: dict[tuple[str, float, float], TrendEstimator] = {}
         self._counters = {r.name: MismatchCounter(r.threshold, r.max_counter) for r in self.relations}

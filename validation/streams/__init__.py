@@ -21,10 +21,17 @@ gps_speed      GPS       speed from the slope of the fixes' x and y over a
                          window, m/s
 odo_fix_speed  ODO_DIST  the odometry's speed derived as gps_speed is: the
                          slope of its x and y over the same window, m/s
+sm_speed       SM_DIST   derivative of sm_distance, m/s
+sm_fix_speed   SM_DIST   scan matching's speed derived as gps_speed is, m/s
 gps_course     GPS       direction of travel from the same slopes, rad
                          (angular), only where it is the heading
                          (:mod:`validation.streams.course`)
 ============== ========= ===================================================
+
+A further odometry source named ``vo`` (``input.extra_odometry``: a visual
+odometry, a second wheel odometry) gives the odometry's six streams as
+``vo_yaw`` ... ``vo_fix_speed``, with components ``VO_YAW`` and ``VO_DIST``
+(:mod:`validation.streams.names`).
 
 The sensors come in as any object with the attributes of
 :class:`SensorSet` (``slam.recording.Recording`` is one); this package does
@@ -49,58 +56,20 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Literal, Protocol, get_args
+from typing import Protocol
 
 import numpy as np
 
 from validation.errors import ValidationError
 from validation.streams.course import gps_course
 from validation.streams.field_gyro import field_change
+from validation.streams.names import (ANGULAR_STREAMS, INTEGRATED_STREAMS, STREAM_COMPONENT, STREAM_NAMES,  # noqa: F401
+                                     QualityStreamName, StreamName, is_angular, is_integrated, is_stream_name,
+                                     source_stream, stream_component)
 from validation.trends import Window, derive_stream
 
 logger = logging.getLogger(__name__)
 
-StreamName = Literal[
-    "compass_yaw", "gyro_yaw", "sm_yaw", "odo_yaw", "odo_distance", "sm_distance",
-    "odo_forward", "sm_forward", "odo_lateral", "sm_lateral", "odo_speed", "gps_speed", "odo_fix_speed",
-    "gps_course",
-]
-QualityStreamName = Literal[
-    "mag_strength", "mag_dip", "mag_field_change", "gps_sigma",
-    "scan_degenerate_dist", "scan_degenerate_lat", "scan_degenerate_yaw",
-]
-
-STREAM_COMPONENT: dict[str, str] = {
-    "compass_yaw": "IMU_YAW",
-    "gyro_yaw": "IMU_GYRO",
-    "sm_yaw": "SM_YAW",
-    "odo_yaw": "ODO_YAW",
-    "odo_distance": "ODO_DIST",
-    "sm_distance": "SM_DIST",
-    "odo_forward": "ODO_DIST",
-    "sm_forward": "SM_DIST",
-    "odo_lateral": "ODO_DIST",
-    "sm_lateral": "SM_LAT",
-    "odo_speed": "ODO_DIST",
-    "gps_speed": "GPS",
-    "odo_fix_speed": "ODO_DIST",
-    "gps_course": "GPS",
-    "mag_strength": "IMU_YAW",
-    "mag_dip": "IMU_YAW",
-    "mag_field_change": "IMU_YAW",
-    "gps_sigma": "GPS",
-    "scan_degenerate_dist": "SM_DIST",
-    "scan_degenerate_lat": "SM_LAT",
-    "scan_degenerate_yaw": "SM_YAW",
-}
-STREAM_NAMES: tuple[str, ...] = get_args(StreamName) + get_args(QualityStreamName)
-ANGULAR_STREAMS: frozenset[str] = frozenset({"compass_yaw", "sm_yaw", "odo_yaw", "gps_course"})
-INTEGRATED_STREAMS: frozenset[str] = frozenset({
-    "gyro_yaw", "sm_yaw", "odo_yaw", "odo_distance", "sm_distance", "odo_forward", "sm_forward", "odo_lateral",
-    "sm_lateral",
-})
-"""Streams that sum their sensor's increments: a fault of the sensor stays in
-them for good (an offset relation forgets it once the fault is over)."""
 
 
 class PoseSeries(Protocol):
@@ -140,12 +109,14 @@ class FixSeries(Protocol):
 
 
 class SensorSet(Protocol):
-    """The sensors of one run; any may be None."""
+    """The sensors of one run; any may be None. ``extra_odometry``: further
+    odometry sources by name (possibly none)."""
 
     compass: HeadingSeries | None
     gyro: RateSeries | None
     odometry: PoseSeries | None
     gps: FixSeries | None
+    extra_odometry: Mapping[str, PoseSeries]
 
 
 @dataclass(frozen=True)
@@ -202,11 +173,18 @@ def forward_travel(x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     return np.concatenate(([0.0], np.cumsum(step)))
 
 
-def _trajectory_streams(prefix: str, traj: PoseSeries, streams: dict[str, Stream]) -> None:
-    streams[f"{prefix}_yaw"] = _clean(f"{prefix}_yaw", traj.t, traj.yaw, angular=True)
-    streams[f"{prefix}_distance"] = _clean(f"{prefix}_distance", traj.t, path_length(traj.x, traj.y))
-    streams[f"{prefix}_forward"] = _clean(f"{prefix}_forward", traj.t, forward_travel(traj.x, traj.y, traj.yaw))
-    streams[f"{prefix}_lateral"] = _clean(f"{prefix}_lateral", traj.t, lateral_travel(traj.x, traj.y, traj.yaw))
+def _trajectory_streams(source: str, traj: PoseSeries, streams: dict[str, Stream], speed_window_s: float,
+                        window: Window) -> None:
+    """The streams of an odometry-like source (:mod:`validation.streams.names`)."""
+    name = lambda quantity: source_stream(source, quantity)  # noqa: E731
+    streams[name("yaw")] = _clean(name("yaw"), traj.t, traj.yaw, angular=True)
+    streams[name("distance")] = d = _clean(name("distance"), traj.t, path_length(traj.x, traj.y))
+    streams[name("forward")] = _clean(name("forward"), traj.t, forward_travel(traj.x, traj.y, traj.yaw))
+    streams[name("lateral")] = _clean(name("lateral"), traj.t, lateral_travel(traj.x, traj.y, traj.yaw))
+    streams[name("speed")] = Stream(d.t, _gradient(d.t, d.values))
+    x, y = _clean(f"{source}_x", traj.t, traj.x), _clean(f"{source}_y", traj.t, traj.y)
+    if len(x.t) == len(y.t) and len(x.t) >= 2:
+        streams[name("fix_speed")] = Stream(x.t, np.hypot(*_window_velocity(x, y, speed_window_s, window)))
 
 
 def _window_velocity(x: Stream, y: Stream, window_s: float, window: Window) -> tuple[np.ndarray, np.ndarray]:
@@ -260,15 +238,12 @@ def validation_streams(
             change = field_change(c.t, c.field, g.t, yaw, *field_gyro)
             streams["mag_field_change"] = _clean("mag_field_change", c.t, change)
     if sm is not None and len(sm):
-        _trajectory_streams("sm", sm, streams)
+        _trajectory_streams("sm", sm, streams, gps_speed_window_s, window)
     if recording.odometry is not None and len(recording.odometry):
-        _trajectory_streams("odo", recording.odometry, streams)
-        d = streams["odo_distance"]
-        streams["odo_speed"] = Stream(d.t, _gradient(d.t, d.values))
-        o = recording.odometry
-        x, y = _clean("odo_x", o.t, o.x), _clean("odo_y", o.t, o.y)
-        if len(x.t) == len(y.t) and len(x.t) >= 2:
-            streams["odo_fix_speed"] = Stream(x.t, np.hypot(*_window_velocity(x, y, gps_speed_window_s, window)))
+        _trajectory_streams("odo", recording.odometry, streams, gps_speed_window_s, window)
+    for source, traj in recording.extra_odometry.items():
+        if len(traj.t):
+            _trajectory_streams(source, traj, streams, gps_speed_window_s, window)
     if recording.gps is not None:
         gps = recording.gps
         fix = np.asarray(gps.status) >= 0
