@@ -323,7 +323,7 @@ def test_a_reader_that_leaves_early_gets_no_error(short_run):
 @pytest.mark.parametrize("argv", [
     ["husky_faults", "--faults", "bogus@1:2"],   # checked before any work
     ["husky_faults", "--data", "{tmp}"],          # no bag there
-    ["speed", "--repeats", "0"],
+    ["perf", "--sections", "speed", "--repeats", "0"],
 ])
 def test_benchmarks_fail_on_bad_input_with_one_line(argv, tmp_path):
     name, *args = argv

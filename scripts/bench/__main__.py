@@ -1,18 +1,21 @@
-"""``python -m scripts.bench NAME [ARGS ...]``: run one benchmark."""
+"""``python -m scripts.bench NAME [ARGS ...]``: run one benchmark;
+``python -m scripts.bench all [--quick]``: run every one that writes a
+results page, each in its own process, and regenerate ``docs/results/``."""
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import subprocess
 import sys
+import time
 
+from scripts.bench.common import REPO, table
 from slam.errors import run_script
 
-BENCHES = {
+RESULTS = {  # name: what it measures (each writes docs/results/NAME.md)
     "gating": "gating against the robust kernels and the oracles over many seeds of every scenario",
-    "perf": "performance of the gated pipeline: stage split, growth with run length, iSAM2, diagnosis",
-    "speed": "gslam map as a process against KISS-ICP alone",
-    "throughput": "gslam map against real time on the simulated mission",
+    "perf": "gslam map as a process against KISS-ICP alone; stages, growth, iSAM2, diagnosis",
     "loops": "loop closing on telemax_lab, false loops, the libRSF corridor, runtime",
     "carmen": "relative errors on the CARMEN logs against their corrected reference",
     "carmen_cuts": "CARMEN with the laser cut over stretches: gated against ungated and the kernels",
@@ -21,24 +24,66 @@ BENCHES = {
     "husky": "the Husky bag ungated and gated, against GPS",
     "husky_dipole": "the Husky bag with injected compass dipoles: found, and quiet elsewhere?",
     "husky_faults": "the Husky bag with one injected fault of each kind: found and blamed right?",
+}
+TUNING = {
     "tune_baselines": "tune the robust-kernel baselines on the scenarios' tuning seeds",
     "tune_loops": "loop closing on the CARMEN logs kept for tuning",
 }
+QUICK = {  # the arguments of each bench under `all --quick`: every page in under 30 minutes on 2 cores
+    "gating": ["--seeds", "11-12", "--variants-file", "configs/bench_variants.yaml"],
+    "perf": ["--quick"],
+    "loops": ["--seeds", "1", "2", "--repeats", "1"],
+    "carmen": [],
+    "carmen_cuts": ["--logs", "aces"],
+    "broad": [],
+    "broad_loto": ["--only", "trend"],
+    "husky": [],
+    "husky_dipole": ["--sets", "trend", "shipped", "--passes", "offline", "--no-folds"],
+    "husky_faults": [],
+}
+
+
+def run_all(quick: bool, only: list[str]) -> int:
+    """Every results bench in its own process, one after the other; a table
+    of how long each took and whether it finished."""
+    rows, failed = [], 0
+    for name in only:
+        cmd = [sys.executable, "-m", "scripts.bench", name, *(QUICK[name] if quick else [])]
+        print(f"== {' '.join(cmd[1:])}", flush=True)
+        start = time.perf_counter()
+        code = subprocess.run(cmd, cwd=REPO).returncode
+        seconds = time.perf_counter() - start
+        failed += code != 0
+        rows.append([name, "ok" if code == 0 else f"exit {code}", f"{seconds:.0f}"])
+        print(f"== {name}: {rows[-1][1]} in {seconds:.0f} s", flush=True)
+    print(table(["bench", "result", "wall [s]"], rows))
+    return 1 if failed else 0
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    names = {**RESULTS, **TUNING}
     parser = argparse.ArgumentParser(
-        prog="python -m scripts.bench", description="Run one benchmark of gated-slam (from the repository root).",
-        epilog="benchmarks:\n" + "\n".join(f"  {name:<15} {what}" for name, what in BENCHES.items())
+        prog="python -m scripts.bench", description="Run a benchmark of gated-slam (from the repository root).",
+        epilog="benchmarks (each writes docs/results/NAME.md):\n"
+        + "\n".join(f"  {name:<15} {what}" for name, what in RESULTS.items())
+        + "\n\ntuning runs (parameters chosen on tuning data, printed):\n"
+        + "\n".join(f"  {name:<15} {what}" for name, what in TUNING.items())
+        + "\n\n  all [--quick] [--only NAME ...]  every benchmark above, each in its own process"
         + "\n\npython -m scripts.bench NAME --help shows a benchmark's options.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("name", choices=list(BENCHES), metavar="NAME", help="the benchmark to run")
-    args, rest = parser.parse_known_args(argv[:1])
+    parser.add_argument("name", choices=[*names, "all"], metavar="NAME", help="the benchmark to run, or all")
+    args, _ = parser.parse_known_args(argv[:1])
+    if args.name == "all":
+        sub = argparse.ArgumentParser(prog="python -m scripts.bench all")
+        sub.add_argument("--quick", action="store_true", help="the short settings of each bench (QUICK)")
+        sub.add_argument("--only", nargs="+", choices=list(RESULTS), default=list(RESULTS))
+        opts = sub.parse_args(argv[1:])
+        return run_all(opts.quick, opts.only)
     module = importlib.import_module(f"scripts.bench.{args.name}")
     run_script(f"bench {args.name}", lambda: module.main(argv[1:]))
     return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

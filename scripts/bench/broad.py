@@ -53,6 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scripts.bench.common import publish
 from slam.config import PipelineConfig, load_config
 from slam.io.atomic import write_text
 from slam.io.datasets import data_root
@@ -308,6 +309,7 @@ def main(argv: list[str] | None = None) -> int:
     write_text(args.out / "broad_trials.csv", _csv([asdict(r) for r in rows]))
     text = markdown(rows, shipped, choices)
     write_text(args.out / "broad.md", text)
+    publish("broad", "BROAD: the compass observers, thresholds chosen leave-one-trial-out", text, argv)
     print(text)
     return 0
 

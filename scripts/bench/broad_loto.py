@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 
 
-from scripts.bench.common import base_config
+from scripts.bench.common import base_config, publish
 from slam.calibrate import learn, load_run
 from slam.config import load_config, validation_sections
 from slam.io.atomic import write_text
@@ -171,6 +171,7 @@ def main(argv: list[str] | None = None) -> int:
             rows += run_set(name, *SETS[name], trials, args.config, args.false_alarm, Path(tmp))
     text = tables(rows)
     write_text(args.out / "broad_loto.md", text)
+    publish("broad_loto", "BROAD: every trial mapped with observers calibrated on the other twelve", text, argv)
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     w.writeheader()

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scripts.bench.common import publish
 from slam.config import PipelineConfig, load_config
 from slam.evaluation import ate, rpe
 from slam.frontend import ScanMatcher, run_frontend, scan_points
@@ -196,6 +197,7 @@ def main(argv: list[str] | None = None) -> int:
     text = markdown(rows)
     if args.out is not None:
         write_text(args.out, text)
+    publish("carmen", "Relative errors on the CARMEN logs against their corrected reference", text, argv)
     print(text)
     return 0
 

@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import KERNELS
+from scripts.bench.common import KERNELS, publish
 from slam.calibrate import calibrate
 from slam.compare import load_variants
 from slam.config import load_config, validation_sections
@@ -214,6 +214,7 @@ def main(argv: list[str] | None = None) -> int:
                 log.info("%s", rows[-1])
     text = table(rows, rates)
     write_text(args.out / "carmen_cuts.md", text)
+    publish("carmen_cuts", "CARMEN with the laser cut to 4 m: gated against ungated, the kernels and the oracles", text, argv)
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=sorted({k for r in rows for k in r}), lineterminator="\n")
     w.writeheader()

@@ -1,16 +1,103 @@
-"""What the benches share: the repository's paths, the robust-kernel
-variants they compare against, and config building."""
+"""What the benches share: paths, the robust-kernel variants they compare
+against, simulated inputs, config building, Markdown tables, and the
+results page each bench writes into ``docs/results/``."""
 
 from __future__ import annotations
 
 import copy
+import datetime
+import os
+import platform
+import shlex
+import subprocess
+from collections.abc import Sequence
+from importlib import metadata
 from pathlib import Path
 
 import yaml
 
+from slam.io.atomic import write_text
+
 REPO = Path(__file__).resolve().parents[2]
+RESULTS = REPO / "docs" / "results"
+CONFIGS = REPO / "configs"
 KERNELS = ("huber", "cauchy", "dcs", "gnc_tls", "gnc_gm")
 """The robust-kernel variants of ``configs/variants.yaml`` (all ungated)."""
+PACKAGES = ("numpy", "gtsam", "kiss-icp", "rosbags", "python-sat")
+
+
+def table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    """A Markdown table; cells are written as given (format them first)."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join("–" if c is None else str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def machine() -> str:
+    """One line: CPU, cores, memory, Python and the main packages' versions."""
+    cpu = platform.processor() or platform.machine()
+    mem_kib = 0
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+        mem_kib = int(Path("/proc/meminfo").read_text().split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    versions = []
+    for p in PACKAGES:
+        try:
+            versions.append(f"{p} {metadata.version(p)}")
+        except metadata.PackageNotFoundError:
+            pass
+    return (f"{cpu}, {os.cpu_count()} cores, {mem_kib / 2**20:.0f} GiB, Python {platform.python_version()}, "
+            + ", ".join(versions))
+
+
+def commit() -> str:
+    """The checked-out commit, marked when the tree has uncommitted changes."""
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short=10", "HEAD"], cwd=REPO, capture_output=True, text=True,
+                             check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", "slam", "validation",
+                                "configs", "scripts"], cwd=REPO, capture_output=True, text=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown (not a git checkout)"
+    return f"{rev} (with uncommitted changes)" if dirty else rev
+
+
+def publish(name: str, title: str, body: str, argv: Sequence[str] | None) -> Path:
+    """Write ``docs/results/NAME.md``: ``title``, a header naming the
+    command, commit, machine and date, then ``body`` (Markdown)."""
+    command = " ".join(["python -m scripts.bench", name, *map(shlex.quote, argv or [])])
+    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    header = (f"# {title}\n\n"
+              f"Written by `{command}` at commit {commit()}, {date}, on {machine()}. "
+              "Generated: run the command again rather than editing this page.\n\n")
+    path = RESULTS / f"{name}.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text(path, header + body.rstrip("\n") + "\n")
+    print(f"wrote {path.relative_to(REPO)}")
+    return path
+
+
+def simulated(cache: Path, scenario: str, seed: int, laps: int | None = None) -> Path:
+    """The run folder of ``configs/scenarios/SCENARIO.yaml`` with ``seed``
+    (and, for a looping scenario, ``laps`` laps), simulated into ``cache``
+    once and reused after."""
+    from slam.sim import load_scenario, simulate_scenario
+
+    out = cache / (f"{scenario}_s{seed}" + (f"_{laps}laps" if laps is not None else ""))
+    if (out / "truth.json").exists():
+        return out
+    loaded = load_scenario(CONFIGS / "scenarios" / f"{scenario}.yaml")
+    tree = loaded.model_dump()
+    tree["seed"] = seed
+    if laps is not None:
+        tree["robot"]["laps"] = laps
+    simulate_scenario(type(loaded).model_validate(tree), out)
+    return out
 
 
 def base_config(config_path: Path, added: list[dict], folder: Path, off: tuple[str, ...] = ()) -> Path:

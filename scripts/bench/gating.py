@@ -2,41 +2,38 @@
 scenario and its fault-free twin.
 
     python -m scripts.bench gating [--scenarios NAME ...] [--seeds 1-10]
-                                   [--variants NAME ...] [--config configs/telemax.yaml]
-                                   [--workers 2] [--out runs/bench_gating] [--set KEY=VALUE ...]
+                                   [--variants NAME ...] [--variants-file configs/variants.yaml]
+                                   [--config configs/telemax.yaml] [--workers 2] [--out DIR] [--set KEY=VALUE ...]
 
-Each (scenario, seed) is simulated once into ``OUT/inputs/`` and mapped with
-every variant of ``configs/variants.yaml`` (the recording read and
-scan-matched once, as ``gslam compare`` does). One row per run and variant
-goes to ``OUT/results.csv``; finished (scenario, seed) pairs are skipped when
-the command runs again with the same config, variants, overrides and code.
-Each variant's result folder is ``OUT/maps-KEY/<scenario>-seed<N>/<variant>/``,
-KEY naming the config, variants and overrides. ``OUT/summary.md`` has, per faulty scenario, the median and worst ATE of
-each variant, the ratio of gated to the best robust kernel (the kernel with
-the lowest median ATE on that scenario; per seed against that kernel's run
-on the same seed) and to the tight oracle; per twin, gated against ungated
-and the alarm fraction; and the detection delay and blame-end lag.
+The sweep runs through ``gslam ablate``'s library (:mod:`slam.ablate`):
+each (scenario, seed) is simulated once and mapped with every variant of
+``--variants-file``, the jobs of one input sharing its reading and scan
+matching; ``--out`` keeps the sweep folder (a later run into it skips the
+finished jobs), by default it is temporary. The page has, per faulty
+scenario, the median and worst ATE of each variant, the ratio of gated to
+the best robust kernel (the kernel with the lowest median ATE on that
+scenario; per seed against that kernel's run on the same seed) and to the
+tight oracle; per twin, gated against ungated and the alarm fraction; and
+the detection delay and blame-end lag.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import hashlib
 import json
 import logging
 import math
-import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import tempfile
 from pathlib import Path
 
 import numpy as np
+import yaml
 
-from scripts.bench.common import KERNELS
+from scripts.bench.common import KERNELS, publish
+from slam.ablate import AblationSpec, run_ablation
 from slam.compare import load_variants
-from slam.config import load_config
-from slam.io.atomic import write_text
-from slam.pipeline import MappingPipeline
+from slam.errors import GslamError
+from slam.config import load_yaml
 
 REPO = Path(__file__).resolve().parents[2]
 SCENARIOS = REPO / "configs" / "scenarios"
@@ -80,47 +77,6 @@ def _flat(metrics: dict) -> dict:
     return row
 
 
-def run_one(
-    scenario: str, seed: int, config: str, variants: dict[str, list[str]], overrides: list[str], out: str, key: str
-) -> list[dict]:
-    """Simulate (if needed) and map one seed of one scenario with every variant."""
-    from slam.sim import simulate
-
-    out_dir = Path(out)
-    run_dir = out_dir / "inputs" / f"{scenario}-seed{seed}"
-    if not (run_dir / "truth.json").exists():
-        simulate(SCENARIOS / f"{scenario}.yaml", run_dir, seed=seed)
-    rows = []
-    recording = frontend = frontend_cfg = None
-    for name, ov in variants.items():
-        cfg = load_config(config, [*overrides, *ov, "output.plots=false"])
-        if frontend_cfg is not None and cfg.frontend != frontend_cfg:
-            frontend = None
-        pipe = MappingPipeline(run_dir, cfg, out_dir / f"maps-{key}" / f"{scenario}-seed{seed}" / name,
-                               recording=recording, frontend=frontend)
-        res = pipe.run()
-        recording, frontend, frontend_cfg = pipe.recording, pipe.frontend, cfg.frontend
-        rows.append({"scenario": scenario, "seed": seed, "variant": name, **_flat(res.metrics)})
-    return rows
-
-
-def _key(config: str, variants: dict, overrides: list[str]) -> str:
-    """Names the results: the config, the variants, the overrides and the
-    code (every module and config of the package), so a change of any
-    gives new runs."""
-    text = Path(config).read_text() + json.dumps(variants, sort_keys=True) + json.dumps(overrides)
-    for path in sorted([*REPO.glob("slam/**/*.py"), *REPO.glob("validation/*.py"), *REPO.glob("configs/**/*.yaml")]):
-        text += path.read_text()
-    return hashlib.sha1(text.encode()).hexdigest()[:10]
-
-
-def _read_rows(path: Path) -> list[dict]:
-    if not path.exists():
-        return []
-    with path.open() as f:
-        return list(csv.DictReader(f))
-
-
 def _num(v) -> float:
     try:
         return float(v)
@@ -137,7 +93,7 @@ def summarise(rows: list[dict], variants: list[str]) -> str:
         ate.setdefault(key, {})[int(r["seed"])] = _num(r["ate_rmse_m"])
         other.setdefault(key, {})[int(r["seed"])] = r
     scenarios = sorted({r["scenario"] for r in rows}, key=lambda s: (s not in TWINS, s))
-    lines = ["# Gating against robust kernels and oracles", ""]
+    lines: list[str] = []
 
     def med(values) -> float:
         v = [x for x in values if np.isfinite(x)]
@@ -203,50 +159,52 @@ def summarise(rows: list[dict], variants: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def sweep_spec(scenarios: list[str], seeds: list[int], variants_file: str, only: list[str] | None, config: str,
+               overrides: list[str]) -> AblationSpec:
+    """The bench as an ablation: every scenario and seed, every variant."""
+    load_variants(variants_file, only)  # unknown names: one line naming the file
+    variants = load_yaml(variants_file)
+    fixed = {}
+    for item in overrides:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise GslamError(f"--set {item}: expected KEY=VALUE")
+        fixed[key] = yaml.safe_load(value)
+    return AblationSpec.model_validate({
+        "name": "bench_gating",
+        "config": str(Path(config).resolve()),
+        "inputs": {"scenarios": [{"path": str(SCENARIOS / f"{s}.yaml"), "seeds": seeds} for s in scenarios]},
+        "variants": {name: variants[name] for name in (only or variants)},
+        "set": fixed,
+    })
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenarios", nargs="+", default=sorted(set(TWINS) | set(TWINS.values())))
     p.add_argument("--seeds", default="1-10")
-    p.add_argument("--variants", nargs="+", default=None, help="default: every variant of configs/variants.yaml")
+    p.add_argument("--variants", nargs="+", default=None, help="default: every variant of --variants-file")
     p.add_argument("--variants-file", default=str(REPO / "configs" / "variants.yaml"))
     p.add_argument("--config", default=str(REPO / "configs" / "telemax.yaml"))
     p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--out", default="runs/bench_gating")
+    p.add_argument("--out", type=Path, default=None, help="sweep folder to keep (default: a temporary one)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for every variant")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-
-    variants = load_variants(args.variants_file, args.variants)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    key = _key(args.config, variants, args.set)
-    results = out / f"results-{key}.csv"
-    rows = _read_rows(results)
-    done = {(r["scenario"], int(r["seed"])) for r in rows}
-    todo = [(s, i) for s in args.scenarios for i in parse_seeds(args.seeds) if (s, i) not in done]
-    print(f"{len(todo)} runs to do, {len(done)} done ({results})", flush=True)
-    start = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        futures = {pool.submit(run_one, s, i, args.config, variants, args.set, str(out), key): (s, i) for s, i in todo}
-        for fut in as_completed(futures):
-            s, i = futures[fut]
-            try:
-                new = fut.result()
-            except Exception as e:  # a failed run is reported, the others go on
-                print(f"  {s} seed {i}: failed: {e}", flush=True)
-                continue
-            rows += new
-            fieldnames = ["scenario", "seed", "variant", *METRICS]
-            text = ",".join(fieldnames) + "\n" + "".join(
-                ",".join("" if r.get(k) is None else str(r.get(k)) for k in fieldnames) + "\n" for r in rows
-            )
-            write_text(results, text)
-            gated = next((r for r in new if r["variant"] == "gated"), None)
-            note = f"gated {gated['ate_rmse_m']:.3f} m" if gated else ""
-            print(f"  {s} seed {i} done ({time.perf_counter() - start:.0f} s) {note}", flush=True)
-    chosen = [r for r in rows if r["scenario"] in args.scenarios and int(r["seed"]) in parse_seeds(args.seeds)]
-    summary = summarise(chosen, list(variants))
-    write_text(out / f"summary-{key}.md", summary)
+    spec = sweep_spec(args.scenarios, parse_seeds(args.seeds), args.variants_file, args.variants, args.config, args.set)
+    with tempfile.TemporaryDirectory(prefix="bench_gating_") as tmp:
+        out = args.out or Path(tmp) / "sweep"
+        result = run_ablation(spec, out, workers=args.workers, progress=False, source="bench gating")
+        if result.failed:
+            for job_id, error in result.failed.items():
+                print(f"  failed {job_id}: {error}", flush=True)
+        rows = []
+        for job in result.jobs:
+            metrics = out / "jobs" / job.id / "metrics.json"
+            if metrics.exists():
+                rows.append({"scenario": job.input_label, "seed": job.seed, "variant": job.variant,
+                             **_flat(json.loads(metrics.read_text()))})
+    summary = summarise(rows, list(spec.variants))
+    publish("gating", "Gating against the robust kernels and the oracles, every scenario", summary, argv)
     print(summary)
-    return 0
-
+    return 1 if result.failed else 0

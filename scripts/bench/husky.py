@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import KERNELS
+from scripts.bench.common import KERNELS, publish
 from scripts.bench.judges import COURSE_LAG, MIN_SPEED_M_S, WRONG_DEG, Course, ate_vs_gps, gps_course, yaw_at
 from slam.compare import load_variants
 from slam.config import PipelineConfig, load_config
@@ -211,6 +211,7 @@ def main(argv: list[str] | None = None) -> int:
     plot(args.out, rec, course, results)
     table = markdown(rows)
     (args.out / "husky.md").write_text(table + "\n")
+    publish("husky", "The Husky bag: ungated and gated against GPS", table, argv)
     print(table)
     print(f"wrote {args.out}")
     return 0

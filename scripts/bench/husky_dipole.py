@@ -65,7 +65,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from scripts.bench.common import base_config
+from scripts.bench.common import base_config, publish
 from scripts.bench.judges import (
     AFTER_LABEL_S,
     REAL_DRIFT,
@@ -249,6 +249,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{f(r['any_alarms'])} | {r['judged_steps']} | {f(r['compass_false_alarms_where_right'])} | "
                   f"{r['judged_steps_compass_right']} |\n")
     write_text(args.out / "husky_dipole.md", out.getvalue())
+    publish("husky_dipole", "The Husky bag with injected compass dipoles", out.getvalue(), argv)
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=list(rows[0]))
     writer.writeheader()

@@ -45,7 +45,7 @@ import time
 from pathlib import Path
 
 
-from scripts.bench.common import KERNELS
+from scripts.bench.common import KERNELS, publish
 from scripts.bench.judges import AFTER_LABEL_S, REAL_DRIFT, ate_vs_gps, false_alarms, gps_wanders
 from slam.compare import load_variants
 from slam.config import load_config
@@ -144,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{r['ate_ungated_m']:.2f} | {r['ate_kernel_m']:.2f} ({r['best_kernel']}) |\n")
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "husky_faults.md", out.getvalue())
+    publish("husky_faults", "The Husky bag with one injected fault of each kind", out.getvalue(), argv)
     print(out.getvalue())
     print(f"{time.perf_counter() - start:.0f} s")
     return 0

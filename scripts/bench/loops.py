@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scripts.bench.common import publish
 from slam.compare import load_variants
 from slam.config import load_config
 from slam.io.atomic import write_text
@@ -285,6 +286,7 @@ def main(argv: list[str] | None = None) -> int:
     text = "\n".join(report.lines) + "\n"
     if args.out is not None:
         write_text(args.out, text)
+    publish("loops", "Loop closing", text, argv)
     print(text)
     return 0
 

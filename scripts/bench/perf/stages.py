@@ -1,9 +1,4 @@
-"""Performance benchmark of the gated pipeline: a Markdown and a CSV report.
-
-    python -m scripts.bench perf [--out DIR] [--cache DIR] [--repeats N]
-                            [--growth-laps 1 7 29] [--growth-repeats N]
-                            [--isam2-laps N] [--isam2-repeats N]
-                            [--sections ratio growth isam2 diagnosis]
+"""The in-process sections of the ``perf`` bench.
 
 Sections (every figure is the median of ``--repeats`` runs unless stated):
 
@@ -39,36 +34,30 @@ compares variants measured side by side.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import io
 import json
 import logging
 import os
-import platform
 import statistics
 import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
+from scripts.bench.common import simulated, table
 from slam.config import load_config
-from slam.io.atomic import write_text
 
 log = logging.getLogger(__name__)
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 CONFIG = ROOT / "configs" / "telemax.yaml"
-LAB = ROOT / "configs" / "scenarios" / "telemax_lab.yaml"
-LOOP = ROOT / "configs" / "scenarios" / "telemax_loop.yaml"
 MODEL = ROOT / "configs" / "validation" / "telemax_model.yaml"
 SEED = 1
 STAGES = ("read", "frontend", "validation", "graph_build", "optimise", "write")
-PACKAGES = ("numpy", "gtsam", "kiss-icp", "open3d", "matplotlib", "rosbags", "python-sat")
 # iSAM2 settings compared: label -> (relinearizeThreshold, relinearizeSkip, enablePartialRelinearizationCheck).
 ISAM2_SETTINGS = {
     "GTSAM default (0.1, skip 10)": (0.1, 10, False),
@@ -76,6 +65,11 @@ ISAM2_SETTINGS = {
     "loose (0.5, skip 10)": (0.5, 10, False),
 }
 ISAM2_SIZES = (1_000, 10_000)
+
+
+def _rows(header: list[str], rows: list[list[str]]) -> list[str]:
+    """A Markdown table as lines (the report is a list of lines)."""
+    return table(header, rows).rstrip("\n").split("\n")
 
 
 @dataclass
@@ -94,53 +88,6 @@ class Report:
         writer.writerow(["section", "item", "metric", "value", "unit"])
         writer.writerows((s, i, m, f"{v:.6g}", u) for s, i, m, v, u in self.rows)
         return out.getvalue()
-
-
-def _table(header: list[str], rows: list[list[str]]) -> list[str]:
-    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + ["| " + " | ".join(r) + " |" for r in rows]
-
-
-def machine() -> str:
-    """One line: CPU, cores, memory, Python and package versions, load."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-        mem_kib = int(Path("/proc/meminfo").read_text().split()[1])
-    except OSError:
-        mem_kib = 0
-    versions = []
-    for p in PACKAGES:
-        try:
-            versions.append(f"{p} {metadata.version(p)}")
-        except metadata.PackageNotFoundError:
-            pass
-    load = os.getloadavg()[0]
-    return (f"{cpu}, {os.cpu_count()} cores, {mem_kib / 2**20:.0f} GiB, Python {platform.python_version()}, "
-            f"{', '.join(versions)}; load average {load:.1f} at start")
-
-
-# --- data --------------------------------------------------------------------
-
-
-def simulated(cache: Path, name: str, laps: int | None = None) -> Path:
-    """The run folder of ``telemax_lab`` (``laps`` None) or of ``telemax_loop``
-    with ``laps`` laps, seed 1, simulated into ``cache`` once."""
-    from slam.sim import load_scenario, simulate_scenario
-
-    out = cache / name
-    if (out / "truth.json").exists():
-        return out
-    scenario = load_scenario(LAB if laps is None else LOOP)
-    tree = scenario.model_dump()
-    tree["seed"] = SEED
-    if laps is not None:
-        tree["robot"]["laps"] = laps
-    log.info("simulating %s into %s", name, out)
-    simulate_scenario(type(scenario).model_validate(tree), out)
-    return out
 
 
 # --- ratio and real-time factor ------------------------------------------------
@@ -166,7 +113,7 @@ def bench_ratio(report: Report, cache: Path, out: Path, repeats: int) -> None:
     from slam.io.readers import read_recording
     from slam.pipeline import run_map
 
-    run = simulated(cache, "telemax_lab")
+    run = simulated(cache, "telemax_lab", SEED)
     configs = {name: load_config(CONFIG, sets) for name, sets in RATIO_VARIANTS.items()}
     frontend = configs["gating on"].frontend
     scans = read_recording(run, configs["gating on"].input).scans
@@ -202,13 +149,13 @@ def bench_ratio(report: Report, cache: Path, out: Path, repeats: int) -> None:
         rows.append([name, f"{wall:.2f}", f"{alone:.2f}", f"{ratio:.2f}×", f"{duration / wall:.0f}×"])
         split_rows.append([name] + [f"{split[s]:.3f}" for s in STAGES + ("other",)])
     report.markdown += [
-        f"### Gated pipeline vs KISS-ICP alone (telemax_lab, {duration:.1f} s, {len(scans):,} scans)", "",
+        f"## Gated pipeline vs KISS-ICP alone (telemax_lab, {duration:.1f} s, {len(scans):,} scans)", "",
         f"Median of {repeats} runs each, taking turns in one process. The pipeline is `run_map` (the library form "
         "of `gslam map`) with `--gating on`: reading the bag, KISS-ICP, validation, graph, optimisation, "
         "evaluation and writing the result folder (`map.ply`, the validation log, and the plots unless stated). "
         "KISS-ICP alone is the same scan matcher over the same scans, already in memory.", "",
-    ] + _table(["variant", "pipeline [s]", "KISS-ICP alone [s]", "ratio (target ≤ 1.3)", "RTF (target ≥ 100×)"],
-               rows) + ["", "Split of the pipeline's wall time [s]:", ""] + _table(
+    ] + _rows(["variant", "pipeline [s]", "KISS-ICP alone [s]", "ratio (target ≤ 1.3)", "RTF (target ≥ 100×)"],
+               rows) + ["", "Split of the pipeline's wall time [s]:", ""] + _rows(
         ["variant", "read", "front-end (KISS-ICP)", "validation", "graph build", "optimise", "write", "other"],
         split_rows,
     ) + [""]
@@ -216,7 +163,7 @@ def bench_ratio(report: Report, cache: Path, out: Path, repeats: int) -> None:
 
 def bench_cli(report: Report, cache: Path, out: Path, repeats: int) -> None:
     """``gslam map`` as a command in a fresh process: imports included."""
-    run = simulated(cache, "telemax_lab")
+    run = simulated(cache, "telemax_lab", SEED)
     walls = []
     for _ in range(repeats):
         cmd = [sys.executable, "-m", "slam.cli", "map", str(run), "--config", str(CONFIG),
@@ -249,7 +196,7 @@ def _child_map(run: str, out: str) -> None:
 def map_in_child(run: Path, out: Path) -> dict:
     """Map ``run`` in a fresh interpreter; its metrics, command wall time and
     peak resident memory (MiB, that child's ``ru_maxrss``)."""
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--child-map", str(run), str(out)]
+    cmd = [sys.executable, "-m", "scripts.bench", "perf", "--child-map", str(run), str(out)]
     t = time.perf_counter()
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     stdout = proc.stdout.read()
@@ -274,7 +221,7 @@ def linear_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
 def bench_growth(report: Report, cache: Path, out: Path, laps: list[int], repeats: int) -> None:
     rows, xs, walls, cmds, mems, n_scans = [], [], [], [], [], []
     for n in laps:
-        run = simulated(cache, f"telemax_loop_{n}", n)
+        run = simulated(cache, "telemax_loop", SEED, n)
         runs = [map_in_child(run, out / f"loop_{n}") for _ in range(repeats)]
         med = {k: statistics.median(r[k] for r in runs) for k in ("wall_s", "command_s", "peak_mib")}
         duration = runs[0]["duration_s"]
@@ -296,10 +243,10 @@ def bench_growth(report: Report, cache: Path, out: Path, laps: list[int], repeat
         report.add("growth", "fit", name, v, unit)
     per_scan = [w / s for w, s in zip(walls, n_scans)]
     report.markdown += [
-        "### Growth with run length (telemax_loop, gating on)", "",
+        "## Growth with run length (telemax_loop, gating on)", "",
         f"Each run mapped in a fresh process, median of {repeats}; `run_map` is the pipeline in-process, "
         "`command` adds interpreter start and imports; peak memory is that process's maximum resident set.", "",
-    ] + _table(["laps", "data [min]", "scans", "keyframes", "run_map [s]", "command [s]", "RTF (command)",
+    ] + _rows(["laps", "data [min]", "scans", "keyframes", "run_map [s]", "command [s]", "RTF (command)",
                 "peak memory [MiB]", "ms per scan"], rows) + [
         "",
         f"Least-squares fit over data hours h: wall = {w_slope:.1f} s/h · h + {w_icpt:.1f} s (R² = {w_r2:.4f}); "
@@ -318,7 +265,7 @@ def bench_isam2(report: Report, cache: Path, out: Path, laps: int, repeats: int)
     from slam.evaluation import evaluate
     from slam.pipeline import MappingPipeline
 
-    run = simulated(cache, f"telemax_loop_{laps}", laps)
+    run = simulated(cache, "telemax_loop", SEED, laps)
     cfg = load_config(CONFIG, ["validation.mode=on", "backend.optimizer=isam2", "keyframes.period_s=0.5"])
     pipe = MappingPipeline(run, cfg, out / "isam2")
     pipe.read()
@@ -370,10 +317,10 @@ def bench_isam2(report: Report, cache: Path, out: Path, laps: int, repeats: int)
         rows.append([label] + [f"{1e3 * med[f'{q}_{s}']:.2f}" for s in ISAM2_SIZES for q in ("median", "p99")]
                     + [f"{1e3 * med['max']:.1f}", f"{med['total']:.1f}", f"{err:.3f}", f"{dev:.2f}"])
     report.markdown += [
-        f"### iSAM2 per-keyframe latency (telemax_loop, {laps} laps, {n:,} keyframes every 0.5 s)", "",
+        f"## iSAM2 per-keyframe latency (telemax_loop, {laps} laps, {n:,} keyframes every 0.5 s)", "",
         "One keyframe's step as it runs online: build its factors, `ISAM2.update`, read back the pose for the "
         f"next prediction. Statistics over the 1,000 keyframes around each graph size, median of {repeats} runs.", "",
-    ] + _table(["relinearisation (threshold, skip)", "1k: median [ms]", "1k: p99 [ms]", "10k: median [ms]",
+    ] + _rows(["relinearisation (threshold, skip)", "1k: median [ms]", "1k: p99 [ms]", "10k: median [ms]",
                 "10k: p99 [ms] (target < 20)", "max [ms]", "whole run [s]", "ATE [m]", "max distance to batch [m]"],
                rows) + ["", f"Batch (Levenberg-Marquardt) over the same graph: ATE {ate(batch):.3f} m; with the loops "
                          f"{ate(batch_loops):.3f} m. Loop closing kept {lm['accepted']:,} of {lm['found']:,} loops "
@@ -441,7 +388,7 @@ def bench_diagnosis(report: Report, cache: Path, out: Path, repeats: int) -> Non
     rows = []
     cfg = load_config(CONFIG, ["validation.mode=on", "output.plots=false"])
     model = validation_sections(cfg)[0].model
-    result = run_map(simulated(cache, "telemax_lab"), cfg, out / "diag")
+    result = run_map(simulated(cache, "telemax_lab", SEED), cfg, out / "diag")
     olog = result.validation.observer_log
     steps = [olog.observations(k) for k in range(len(result.validation.step_t))]
     distinct = list({frozenset(o.items()): o for o in steps}.values())
@@ -460,64 +407,11 @@ def bench_diagnosis(report: Report, cache: Path, out: Path, repeats: int) -> Non
         rows.append([f"synthetic, {n} components, {len(model.relations)} relations", f"{len(patterns)} patterns",
                      f"{1e3 * cold:.3f}", f"{1e3 * warm:.4f}"])
     report.markdown += [
-        "### Diagnosis time per step", "",
+        "## Diagnosis time per step", "",
         "Cold: a fresh diagnoser meets each pattern for the first time (SAT calls, hitting sets). Memoised: the "
         "pattern was seen before. Synthetic models: a ring of components with relations to the neighbours one "
         f"and two apart, each with failure masking; patterns with 0–2 faulty components. Median of {repeats}.", "",
-    ] + _table(["model", "patterns", "cold [ms] (target < 10 at 32)", "memoised [ms] (target < 0.1)"], rows) + [""]
+    ] + _rows(["model", "patterns", "cold [ms] (target < 10 at 32)", "memoised [ms] (target < 0.1)"], rows) + [""]
 
 
 # --- main -------------------------------------------------------------------------
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench")
-    ap.add_argument("--cache", type=Path, default=ROOT / "runs" / "bench_cache",
-                    help="simulated runs, made once (the 2 h run is ~1.5 GB)")
-    ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--cli-repeats", type=int, default=3)
-    ap.add_argument("--growth-laps", type=int, nargs="+", default=[1, 7, 29])
-    ap.add_argument("--growth-repeats", type=int, default=3)
-    ap.add_argument("--isam2-laps", type=int, default=29)
-    ap.add_argument("--isam2-repeats", type=int, default=3)
-    ap.add_argument("--sections", nargs="+", default=["ratio", "growth", "isam2", "diagnosis"],
-                    choices=["ratio", "growth", "isam2", "diagnosis"])
-    ap.add_argument("--child-map", nargs=2, metavar=("RUN", "OUT"), help=argparse.SUPPRESS)
-    args = ap.parse_args(argv)
-    if args.child_map:
-        _child_map(*args.child_map)
-        return 0
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
-    for name in ("slam", "validation"):
-        logging.getLogger(name).setLevel(logging.WARNING)
-    args.out.mkdir(parents=True, exist_ok=True)
-    args.cache.mkdir(parents=True, exist_ok=True)
-    report = Report()
-    report.markdown += ["## Performance", "", f"Machine: {machine()}.", ""]
-    started = time.perf_counter()
-    work = args.out / "work"
-    sections = {
-        "ratio": lambda: (bench_ratio(report, args.cache, work, args.repeats),
-                          bench_cli(report, args.cache, work, args.cli_repeats)),
-        "growth": lambda: bench_growth(report, args.cache, work, args.growth_laps, args.growth_repeats),
-        "isam2": lambda: bench_isam2(report, args.cache, work, args.isam2_laps, args.isam2_repeats),
-        "diagnosis": lambda: bench_diagnosis(report, args.cache, work, args.repeats),
-    }
-    for name in args.sections:
-        log.info("section %s", name)
-        sections[name]()
-        write_report(report, args.out)  # after each section: a long run keeps what it measured
-    report.markdown.append(f"Benchmark wall time {time.perf_counter() - started:.0f} s; load average "
-                           f"{os.getloadavg()[0]:.1f} at the end.")
-    write_report(report, args.out)
-    log.info("wrote %s and %s", args.out / "bench.md", args.out / "bench.csv")
-    print("\n".join(report.markdown))
-    return 0
-
-
-def write_report(report: Report, out: Path) -> None:
-    """Write ``bench.md`` and ``bench.csv`` into ``out``."""
-    write_text(out / "bench.md", "\n".join(report.markdown) + "\n")
-    write_text(out / "bench.csv", report.csv_text())
-
