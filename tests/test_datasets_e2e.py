@@ -1,7 +1,7 @@
 """Every shared real data set through ``gslam map``, as a user runs it:
 one command per set with its config from ``configs/datasets/``.
 
-The bounds are the measured figures with a margin (README, "Real
+The bounds are the measured figures with a margin (the benches' pages in docs/results, "Real
 recordings"); they catch a reader or pipeline change that breaks a set.
 Skipped with the reason when the data folder is absent.
 """
@@ -37,7 +37,7 @@ def test_carmen_intel_graph_and_validation(tmp_path):
     assert m["rpe_trans_pct_1m"] < 12.0 and m["rpe_trans_pct_10m"] < 14.0
     # One scan every 2.9 s: each stream is judged by its own sample period,
     # so every observer observes (measured: 99.2 % of the steps) and the
-    # hand-set observers alarm on 7.1 % of them (README, "Real recordings").
+    # hand-set observers alarm on 7.1 % of them (docs/results/broad.md).
     assert min(m["observer_coverage"].values()) > 0.95
     assert 0.0 < m["alarm_fraction"] < 0.1
 
@@ -63,7 +63,7 @@ def test_husky_bag_gated(tmp_path):
     assert m["factor_counts"]["odometry"] == 718 and m["factor_counts"]["gyro"] >= 680
     # The shipped observers, learnt on the first 180 s, keep the compass
     # until its AHRS heading walks off at 196 s and exclude it from there to
-    # the end, where it stands 20-44 deg off (README, "Husky bag"): 399 of
+    # the end, where it stands 20-44 deg off (docs/results/husky.md): 399 of
     # 718 compass factors kept, alarms on half the steps.
     assert 380 <= m["factor_counts"]["compass"] <= 420
     assert 0.45 < m["alarm_fraction"] < 0.55

@@ -30,7 +30,7 @@ TUNING = {
     "tune_loops": "loop closing on the CARMEN logs kept for tuning",
 }
 QUICK = {  # the arguments of each bench under `all --quick`: every page in under 30 minutes on 2 cores
-    "gating": ["--seeds", "11-12", "--variants-file", "configs/bench_variants.yaml"],
+    "gating": ["--seeds", "11-12"],
     "perf": ["--quick"],
     "loops": ["--seeds", "1", "2", "--repeats", "1"],
     "carmen": [],

@@ -82,6 +82,24 @@ def publish(name: str, title: str, body: str, argv: Sequence[str] | None) -> Pat
     return path
 
 
+def include_in_readme(name: str) -> None:
+    """Copy the first table of ``docs/results/NAME.md``, with the line
+    naming its command, commit and date, into ``README.md`` between the
+    markers ``<!-- results/NAME -->`` and ``<!-- /results/NAME -->``."""
+    page = (RESULTS / f"{name}.md").read_text().splitlines()
+    written = next(line for line in page if line.startswith("Written by "))
+    start = next(i for i, line in enumerate(page) if line.startswith("| "))
+    end = next((i for i in range(start, len(page)) if not page[i].startswith("|")), len(page))
+    block = "\n".join([*page[start:end], "", written.split(", on ")[0] + "."])
+    readme = REPO / "README.md"
+    text = readme.read_text()
+    begin, close = f"<!-- results/{name} -->", f"<!-- /results/{name} -->"
+    if begin not in text or close not in text:
+        return
+    head, rest = text.split(begin, 1)
+    write_text(readme, head + begin + "\n" + block + "\n" + close + rest.split(close, 1)[1])
+
+
 def simulated(cache: Path, scenario: str, seed: int, laps: int | None = None) -> Path:
     """The run folder of ``configs/scenarios/SCENARIO.yaml`` with ``seed``
     (and, for a looping scenario, ``laps`` laps), simulated into ``cache``

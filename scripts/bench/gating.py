@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from scripts.bench.common import KERNELS, publish
+from scripts.bench.common import KERNELS, include_in_readme, publish
 from slam.ablate import AblationSpec, run_ablation
 from slam.compare import load_variants
 from slam.errors import GslamError
@@ -206,5 +206,6 @@ def main(argv: list[str] | None = None) -> int:
                              **_flat(json.loads(metrics.read_text()))})
     summary = summarise(rows, list(spec.variants))
     publish("gating", "Gating against the robust kernels and the oracles, every scenario", summary, argv)
+    include_in_readme("gating")
     print(summary)
     return 1 if result.failed else 0
