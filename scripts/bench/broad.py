@@ -58,6 +58,7 @@ from slam.config import PipelineConfig, load_config
 from slam.io.atomic import write_text
 from slam.io.datasets import data_root
 from slam.io.readers import read_recording
+from slam.measurements import FACTOR_DOFS
 from slam.pipeline import MappingPipeline
 from slam.recording import Recording
 from validation.config import parse_sections
@@ -144,7 +145,7 @@ def validate(rec: Recording, validation: dict, gating: dict, keyframe_period_s: 
     """Validation alone (no graph), on the keyframe times ``gslam map`` uses."""
     vcfg, gcfg = parse_sections(validation, gating)
     keyframes = np.arange(rec.gyro.t[0], rec.gyro.t[-1], keyframe_period_s)
-    return run_validation(rec, None, keyframes, vcfg, gcfg).metrics
+    return run_validation(rec, None, keyframes, vcfg, gcfg, FACTOR_DOFS, rec.faults, rec.magnetic_reference).metrics
 
 
 # Worker state for the grid: each process reads the trials once.

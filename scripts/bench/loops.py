@@ -210,7 +210,8 @@ def bench_corridor(report: Report, root: Path) -> None:
     rows, shared = [], {}
     for label, overrides in cases.items():
         if "oracle" in label:
-            overrides = overrides + ["validation.model={components: [ODO, IMU_GYRO, IMU_YAW, SM, GPS, LOOP]}",
+            overrides = overrides + ["validation.model={components: [ODO_DIST, ODO_YAW, ODO, IMU_GYRO, IMU_YAW, SM_DIST, SM_LAT, SM_YAW, SM, "
+                                     "GPS, LOOP]}",
                                      "validation.observers.relations=[]", "validation.observers.magnetometer.enabled=false",
                                      "validation.observers.gps.enabled=false"]
         start = time.perf_counter()

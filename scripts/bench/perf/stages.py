@@ -266,7 +266,8 @@ def bench_isam2(report: Report, cache: Path, out: Path, laps: int, repeats: int)
     from slam.pipeline import MappingPipeline
 
     run = simulated(cache, "telemax_loop", SEED, laps)
-    cfg = load_config(CONFIG, ["validation.mode=on", "backend.optimizer=isam2", "keyframes.period_s=0.5"])
+    cfg = load_config(CONFIG, ["validation.mode=on", "backend.optimizer=isam2", "keyframes.period_s=0.5",
+                              "loops.enabled=true"])
     pipe = MappingPipeline(run, cfg, out / "isam2")
     pipe.read()
     pipe.match_scans()
