@@ -42,8 +42,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import csv
-import io
 import itertools
 import logging
 import sys
@@ -53,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import publish
+from scripts.bench.common import csv_text, publish
 from slam.config import PipelineConfig, load_config
 from slam.io.atomic import write_text
 from slam.io.datasets import data_root
@@ -251,14 +249,6 @@ def markdown(rows: list[TrialResult], shipped: Params, choices: dict[str, Params
     return "\n".join(lines) + "\n"
 
 
-def _csv(rows: list[dict]) -> str:
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows(rows)
-    return buf.getvalue()
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=None, help="folder of BROAD .mat trials (default: DATA_ROOT/broad)")
@@ -282,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     names = [p.stem for p in paths]
 
     grid = run_grid(paths, args.config, args.workers)
-    write_text(args.out / "broad_grid.csv", _csv([
+    write_text(args.out / "broad_grid.csv", csv_text([
         {**asdict(params), "trial": name, **metrics} for params, row in grid.items() for name, metrics in row.items()
     ]))
     shipped = choose(grid, names)
@@ -307,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(row)
         log.info("%s", row)
 
-    write_text(args.out / "broad_trials.csv", _csv([asdict(r) for r in rows]))
+    write_text(args.out / "broad_trials.csv", csv_text([asdict(r) for r in rows]))
     text = markdown(rows, shipped, choices)
     write_text(args.out / "broad.md", text)
     publish("broad", "BROAD: the compass observers, thresholds chosen leave-one-trial-out", text, argv)

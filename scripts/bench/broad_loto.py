@@ -25,7 +25,6 @@ Writes ``broad_loto.md`` (the tables) and ``broad_loto.csv``.
 from __future__ import annotations
 
 import argparse
-import csv
 import io
 import logging
 import sys
@@ -34,7 +33,7 @@ import time
 from pathlib import Path
 
 
-from scripts.bench.common import base_config, publish
+from scripts.bench.common import base_config, csv_text, publish
 from slam.calibrate import learn, load_run
 from slam.config import load_config, validation_sections
 from slam.io.atomic import write_text
@@ -172,11 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     text = tables(rows)
     write_text(args.out / "broad_loto.md", text)
     publish("broad_loto", "BROAD: every trial mapped with observers calibrated on the other twelve", text, argv)
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    write_text(args.out / "broad_loto.csv", buf.getvalue())
+    write_text(args.out / "broad_loto.csv", csv_text(rows))
     print(text)
     print(f"{time.perf_counter() - t0:.0f} s")
     return 0

@@ -36,7 +36,6 @@ the pipeline's per-step SM recall over its true intervals. Writes
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import io
 import logging
@@ -46,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import KERNELS, publish
+from scripts.bench.common import KERNELS, csv_text, publish
 from slam.calibrate import calibrate
 from slam.compare import load_variants
 from slam.config import load_config, validation_sections
@@ -215,11 +214,7 @@ def main(argv: list[str] | None = None) -> int:
     text = table(rows, rates)
     write_text(args.out / "carmen_cuts.md", text)
     publish("carmen_cuts", "CARMEN with the laser cut to 4 m: gated against ungated, the kernels and the oracles", text, argv)
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=sorted({k for r in rows for k in r}), lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    write_text(args.out / "carmen_cuts.csv", buf.getvalue())
+    write_text(args.out / "carmen_cuts.csv", csv_text(rows, sorted({k for r in rows for k in r})))
     print(text)
     print(f"{time.perf_counter() - t_all:.0f} s")
     return 0

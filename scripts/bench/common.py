@@ -5,7 +5,9 @@ results page each bench writes into ``docs/results/``."""
 from __future__ import annotations
 
 import copy
+import csv
 import datetime
+import io
 import os
 import platform
 import shlex
@@ -31,6 +33,15 @@ def table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join("–" if c is None else str(c) for c in row) + " |" for row in rows]
     return "\n".join(lines) + "\n"
+
+
+def csv_text(rows: Sequence[dict], fieldnames: Sequence[str] | None = None) -> str:
+    """Rows as CSV with a header (default columns: the first row's keys)."""
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(fieldnames or rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buf.getvalue()
 
 
 def machine() -> str:

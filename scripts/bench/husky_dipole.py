@@ -54,7 +54,6 @@ touching the reported ones; ``--sets`` and ``--passes`` run a subset.
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import io
 import logging
@@ -65,7 +64,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from scripts.bench.common import base_config, publish
+from scripts.bench.common import base_config, csv_text, publish
 from scripts.bench.judges import (
     AFTER_LABEL_S,
     REAL_DRIFT,
@@ -250,11 +249,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{r['judged_steps_compass_right']} |\n")
     write_text(args.out / "husky_dipole.md", out.getvalue())
     publish("husky_dipole", "The Husky bag with injected compass dipoles", out.getvalue(), argv)
-    table = io.StringIO()
-    writer = csv.DictWriter(table, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows(rows)
-    write_text(args.out / "husky_dipole.csv", table.getvalue())
+    write_text(args.out / "husky_dipole.csv", csv_text(rows))
     print(out.getvalue())
     print(f"{time.perf_counter() - t_all:.0f} s")
     return 0
