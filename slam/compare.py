@@ -165,7 +165,7 @@ def _run_variants(
 
     matplotlib is imported here once: the comparison's figures need it, and
     each variant's figures are drawn by a process forked from this one
-    (slam.io.plot_writer), which then starts with it loaded."""
+    (slam.io.result_writer), which then starts with it loaded."""
     import slam.plots  # noqa: F401
 
     recording, frontend, frontend_cfg = None, None, None

@@ -352,9 +352,25 @@ class EvaluationConfig(Strict):
 
 
 class OutputConfig(Strict):
+    """What a result holds beside the trajectory and the metrics.
+
+    ``map_voxel_m``: the spacing of ``map.ply``'s points. ``grid``:
+    ``map.pgm`` + ``map.yaml``, an occupancy grid of ``grid_resolution_m``
+    cells (slam.occupancy: a beam's end is a hit of ``grid_hit_probability``,
+    each cell it crosses a miss of ``grid_miss_probability``, a beam without
+    a return frees ``grid_no_return_m``). ``mcap``: ``run.mcap``
+    (slam.io.run_mcap).
+    """
+
     map_voxel_m: float = Field(0.05, gt=0.0)
     plots: bool = True
     progress: bool = True
+    grid: bool = True
+    grid_resolution_m: float = Field(0.05, gt=0.0)
+    grid_hit_probability: float = Field(0.7, gt=0.5, lt=1.0)
+    grid_miss_probability: float = Field(0.4, gt=0.0, lt=0.5)
+    grid_no_return_m: float = Field(5.0, ge=0.0)
+    mcap: bool = True
 
 
 class PipelineConfig(Strict):

@@ -89,6 +89,15 @@ class ScanProjector:
         rk = r[row, beam]
         return np.column_stack([rk * self.cos[beam], rk * self.sin[beam]]), row
 
+    def world_points(self, ranges: np.ndarray, poses: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`planar_points` of scans taken at ``poses`` (one per row of
+        ``ranges``; the laser at the pose), in the world frame (m)."""
+        p, row = self.planar_points(ranges)
+        c, s = np.cos(poses.yaw[row]), np.sin(poses.yaw[row])
+        x = poses.x[row] + c * p[:, 0] - s * p[:, 1]
+        y = poses.y[row] + s * p[:, 0] + c * p[:, 1]
+        return np.column_stack([x, y]), row
+
 
 @dataclass
 class FrontendResult:

@@ -10,8 +10,9 @@ none.
 
 Two steps run beside the others on the second core (``concurrent``, the
 default): KISS-ICP registers the scans while the other topics are read and
-the next steps prepared (:mod:`slam.scan_matching`), and the figures are drawn
-while the numeric results are written (:mod:`slam.io.plot_writer`). Both
+the next steps prepared (:mod:`slam.scan_matching`), and the figures, the
+occupancy grid and ``run.mcap`` are made while the numeric results are
+written (:mod:`slam.io.result_writer`). Both
 are the same code on the same data as in the plain order
 (``concurrent=False``), so the results are the same bytes. gtsam and
 validation are imported while the scans are matched, not before.
@@ -33,7 +34,7 @@ from slam.config import PipelineConfig, dump_config
 from slam.errors import GslamError
 from slam.frontend import FrontendResult, ScanProjector, run_frontend
 from slam.io.outdir import result_folder
-from slam.io.plot_writer import MapFigures, PlotWriter
+from slam.io.result_writer import FinalEstimate, MapInputs, ResultWriter
 from slam.measurements import Measurements, build_measurements, interpolate_poses, select_keyframes
 from slam.scan_matching import BackgroundScanMatching, import_next_steps
 from slam.recording import Recording, Trajectory
@@ -45,7 +46,7 @@ log = logging.getLogger(__name__)
 
 RESULT_FILES = (
     "config.yaml", "metrics.json", "trajectory.tum", "groundtruth.tum", "validation.csv", "loops.csv", "map.ply",
-    "trajectory.png", "map.png",
+    "map.pgm", "map.yaml", "run.mcap", "trajectory.png", "map.png",
 )
 """Every file a map result may hold (which of them depends on the run)."""
 
@@ -70,9 +71,11 @@ class _Timings:
     graph_build_s: float = 0.0
     optimise_s: float = 0.0
     write_s: float = 0.0
+    grid_s: float = 0.0  # the occupancy grid, map.pgm and map.yaml
+    mcap_s: float = 0.0  # run.mcap
     prepare_s: float = 0.0  # beside scan matching: imports, the files that do not need the estimate
     frontend_wait_s: float = 0.0  # waiting for scan matching in the second process
-    plots_wait_s: float = 0.0  # waiting for the figures in the second process
+    plots_wait_s: float = 0.0  # waiting for the figures, grid and bag in the second process
 
 
 class MappingPipeline:
@@ -101,7 +104,7 @@ class MappingPipeline:
         self.input_path = Path(input_path)
         self.concurrent = concurrent
         self.scan_matching: BackgroundScanMatching | None = None
-        self.plots: PlotWriter | None = None
+        self.outputs: ResultWriter | None = None
         self.inputs = [self.input_path, *map(Path, inputs)]
         self.force = force
         self.config = config
@@ -151,15 +154,17 @@ class MappingPipeline:
 
     def start_helpers(self) -> None:
         """The second process's work: scan matching (unless it is reused)
-        and the figures; both wait for their data."""
+        and the result files made from the estimate; both wait for their
+        data."""
         cfg = self.config
-        if cfg.output.plots:
-            self.plots = PlotWriter(self.concurrent)
+        out = cfg.output
+        if out.plots or out.grid or out.mcap:
+            self.outputs = ResultWriter(self.concurrent, out.plots, out.mcap)
         if self.recording is None and self.frontend is None and self._matches_scans():
             self.scan_matching = BackgroundScanMatching(cfg.frontend, self.progress, self.concurrent)
 
     def close_helpers(self) -> None:
-        for helper in (self.scan_matching, self.plots):
+        for helper in (self.scan_matching, self.outputs):
             if helper is not None:
                 helper.close()
 
@@ -451,28 +456,64 @@ class MappingPipeline:
         return out
 
     def start_figures(self, folder: Path) -> None:
-        """Hand the figures to their processes as soon as the estimate is
-        final, then the map's points (kept for ``map.ply``)."""
+        """Hand the estimate to the result writer as soon as it is final,
+        then the map's points (kept for ``map.ply``), the keyframes' scans
+        for the occupancy grid, and the rest of ``run.mcap``."""
         t = time.perf_counter()
-        if self.plots is not None:
+        if self.outputs is not None:
             rec = self.recording
-            self.plots.submit(MapFigures(folder, rec.name, self.backend.trajectory, rec.groundtruth, rec.faults))
+            self.outputs.submit(FinalEstimate(folder, rec.name, self.backend.trajectory, rec.groundtruth, rec.faults))
         self.points = self.map_points()
-        if self.plots is not None:
-            self.plots.submit_points(self.points)
+        if self.outputs is not None:
+            self.outputs.submit_map(self.map_inputs())
         self.timings.write_s += time.perf_counter() - t
+
+    def map_inputs(self) -> MapInputs:
+        """What the grid, ``map.png`` and ``run.mcap`` are made from
+        (``output.grid``, ``output.mcap``): the keyframes' scans and the
+        validator's statuses per step (:mod:`slam.validation_status`)."""
+        rec, meas, out = self.recording, self.measurements, self.config.output
+        inputs = MapInputs(points=self.points)
+        if rec.scans is not None and meas.scan_index is not None and (out.grid or out.mcap):
+            inputs.ranges, inputs.angles = rec.scans.ranges[meas.scan_index], rec.scans.angles
+            inputs.beam_limits = self._beam_limits()
+        if out.grid:
+            from slam.occupancy import GridModel
+
+            inputs.grid = GridModel(out.grid_resolution_m, out.grid_hit_probability, out.grid_miss_probability,
+                                    out.grid_no_return_m)
+        if out.mcap:
+            from slam.io.run_mcap import RunContent
+
+            est = self.backend.trajectory
+            inputs.mcap = content = RunContent(rec.t0, est)
+            truth = self._keyframe_truth()
+            if truth is not None:
+                content.reference = Trajectory(est.t, truth[:, 0], truth[:, 1], truth[:, 2])
+            if self.validation is not None:
+                from slam.config import validation_sections
+                from slam.validation_status import step_statuses
+
+                model = validation_sections(self.config)[0].model
+                content.statuses = step_statuses(self.validation, model.components if model is not None else ())
+        return inputs
 
     def write(self, folder: Path) -> None:
         """Write the numeric results into ``folder`` (the temporary folder
-        that is renamed into place afterwards) while the figures are drawn,
-        then wait for them; metrics.json last."""
+        that is renamed into place afterwards) while the figures, grid and
+        bag are made, then wait for them; metrics.json last."""
         t = time.perf_counter()
         self._write_into(folder, self.points)
         self.timings.write_s += time.perf_counter() - t
-        if self.plots is not None:
+        if self.outputs is not None:
             t = time.perf_counter()
-            self.plots.wait()
+            made = self.outputs.wait()
             self.timings.plots_wait_s = time.perf_counter() - t
+            self.timings.grid_s, self.timings.mcap_s = made.grid_s, made.mcap_s
+            if made.grid is not None:
+                self.metrics["grid"] = made.grid
+            if made.mcap_messages is not None:
+                self.metrics["mcap_messages"] = made.mcap_messages
         # Everything but renaming the folder into place and writing this file.
         self.metrics["runtime_s"] = round(time.perf_counter() - self._start, 4)
         self._add_timings()
@@ -520,6 +561,8 @@ class MappingPipeline:
             "graph_build": round(tm.graph_build_s, 4),
             "optimise": round(tm.optimise_s, 4),
             "write": round(tm.write_s, 4),
+            "grid": round(tm.grid_s, 4),
+            "mcap": round(tm.mcap_s, 4),
             "prepare": round(tm.prepare_s, 4),
             "frontend_wait": round(tm.frontend_wait_s, 4),
             "plots_wait": round(tm.plots_wait_s, 4),
@@ -555,17 +598,21 @@ class MappingPipeline:
         rec, meas = self.recording, self.measurements
         if rec.scans is None or meas.scan_index is None:
             return None
-        est, fe, voxel = self.backend.trajectory, self.config.frontend, self.config.output.map_voxel_m
-        project = ScanProjector(rec.scans.angles, fe.min_range_m, min(fe.max_range_m, rec.scans.range_max))
+        est, voxel = self.backend.trajectory, self.config.output.map_voxel_m
+        project = ScanProjector(rec.scans.angles, *self._beam_limits())
         chunks = []
         for lo in range(0, len(meas.scan_index), chunk):
-            p, row = project.planar_points(rec.scans.ranges[meas.scan_index[lo : lo + chunk]])
-            k = row + lo
-            c, s = np.cos(est.yaw[k]), np.sin(est.yaw[k])
-            xy = np.column_stack([est.x[k] + c * p[:, 0] - s * p[:, 1], est.y[k] + s * p[:, 0] + c * p[:, 1]])
-            chunks.append(voxel_downsample(xy, voxel))
+            k = slice(lo, lo + chunk)
+            poses = Trajectory(est.t[k], est.x[k], est.y[k], est.yaw[k])
+            chunks.append(voxel_downsample(project.world_points(rec.scans.ranges[meas.scan_index[k]], poses)[0], voxel))
         points = np.concatenate(chunks) if chunks else np.zeros((0, 2))
         return voxel_downsample(points, voxel)
+
+    def _beam_limits(self) -> tuple[float, float]:
+        """The ranges (m) a beam must lie within to be a return: the
+        front-end's, and the scanner's own maximum."""
+        fe = self.config.frontend
+        return fe.min_range_m, min(fe.max_range_m, self.recording.scans.range_max)
 
 
 def run_map(

@@ -1,4 +1,5 @@
-"""Result figures as PNG: trajectories over a reference, and point maps.
+"""Result figures as PNG: trajectories over a reference, occupancy grids
+and point maps.
 
 Built with matplotlib's object-oriented API (``Figure`` without pyplot), so
 no GUI backend and no global figure state are involved; every figure is
@@ -17,6 +18,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from slam.io.atomic import atomic_path
+from slam.occupancy import GridMap
 from slam.recording import Interval, Trajectory
 
 logger = logging.getLogger(__name__)
@@ -216,9 +218,33 @@ def plot_map(
     ax.scatter(
         pts[:, 0], pts[:, 1], s=2.0, c="0.3", marker=".", linewidths=0, label=f"map ({len(pts)} points)"
     )
-    if trajectory is not None and len(trajectory):
-        ax.plot(trajectory.x, trajectory.y, color="tab:blue", linewidth=1.2, label="trajectory")
-        ax.plot(trajectory.x[0], trajectory.y[0], "o", color="tab:blue", markersize=6)
-        ax.plot(trajectory.x[-1], trajectory.y[-1], "x", color="tab:blue", markersize=8, mew=2)
+    _draw_path(ax, trajectory)
     ax.legend(loc="best", fontsize="small", markerscale=10)
     save_figure(fig, path)
+
+
+def plot_grid_map(path: str | Path, grid: GridMap, trajectory: Trajectory | None = None, title: str = "") -> None:
+    """Top-down occupancy grid as ``map.pgm`` shows it (black occupied,
+    white free, grey unknown) in world metres, with an optional trajectory
+    on top, written as a PNG to ``path``."""
+    from slam.io.map_server import PIXELS, map_image
+    from slam.occupancy import UNKNOWN
+
+    fig, ax = _new_axes(title)
+    ax.grid(False)
+    ax.set_facecolor(str(PIXELS[UNKNOWN] / 255))  # around the grid, where the axes reach past it: unknown too
+    ax.imshow(map_image(grid.cells), cmap="gray", vmin=0, vmax=255, extent=grid.extent(), origin="upper",
+              interpolation="antialiased", zorder=0)
+    _draw_path(ax, trajectory)
+    if trajectory is not None and len(trajectory):
+        ax.legend(loc="best", fontsize="small")
+    save_figure(fig, path)
+
+
+def _draw_path(ax: Axes, trajectory: Trajectory | None) -> None:
+    """The trajectory, its start (circle) and end (cross)."""
+    if trajectory is None or not len(trajectory):
+        return
+    ax.plot(trajectory.x, trajectory.y, color="tab:blue", linewidth=1.2, label="trajectory")
+    ax.plot(trajectory.x[0], trajectory.y[0], "o", color="tab:blue", markersize=6)
+    ax.plot(trajectory.x[-1], trajectory.y[-1], "x", color="tab:blue", markersize=8, mew=2)

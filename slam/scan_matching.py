@@ -30,7 +30,7 @@ from slam.scan_prep import PreparedHeader, prepared_chunks, register_prepared
 # What the steps after scan matching import, loaded while it runs.
 NEXT_STEPS = (
     "slam.backend", "slam.truth", "slam.evaluation", "slam.odometry_scale", "slam.recheck", "validation.validator",
-    "slam.io.tum",
+    "slam.io.tum", "slam.validation_status",
     "numpy.ma",  # numpy's median loads it on first use
 )
 

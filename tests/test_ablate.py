@@ -186,6 +186,9 @@ def test_summary_has_one_row_per_job_equal_to_metrics_json(finished):
     md = (res.out_dir / "summary.md").read_text()
     assert "| gated | 20 | 1/1 |" in md
     assert (res.out_dir / "plots" / "gating.inflation.png").exists()
+    # A sweep's jobs write no grid and no bag unless the spec asks (as for plots).
+    job = res.out_dir / "jobs" / rows[0]["job_id"]
+    assert not (job / "run.mcap").exists() and not (job / "map.pgm").exists()
 
 
 def test_killed_sweep_resumes_only_missing_jobs(finished, tmp_path):

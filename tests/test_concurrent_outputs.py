@@ -1,7 +1,7 @@
 """The concurrent pipeline writes what the plain one writes.
 
 ``gslam map`` matches scans and draws figures in a second process
-(slam.background, slam.scan_matching, slam.io.plot_writer) and writes its large
+(slam.background, slam.scan_matching, slam.io.result_writer) and writes its large
 files vectorised (map.ply with numpy, TUM files a block of lines at a
 time). Each test compares against the plain path: the same run mapped with
 ``concurrent=False``, open3d's PLY writer, a TUM writer that formats one
@@ -181,17 +181,17 @@ def test_closing_unfinished_background_work_ends_its_process():
 
 @needs_fork
 def test_a_failing_figure_is_an_error_of_the_map_and_leaves_no_process(tmp_path, monkeypatch):
-    import slam.io.plot_writer as plot_writer
+    import slam.io.result_writer as result_writer
 
-    def broken(figures):
+    def broken(run, grid, points):
         raise ValueError("no room for the legend")
 
-    monkeypatch.setattr(plot_writer, "draw_map", broken)  # the forked drawers inherit it
+    monkeypatch.setattr(result_writer, "draw_map", broken)  # the forked drawers inherit it
     est = Trajectory(t=np.arange(3.0), x=np.zeros(3), y=np.arange(3.0), yaw=np.zeros(3))
     before = _children()
-    writer = plot_writer.PlotWriter(concurrent=True)
-    writer.submit(plot_writer.MapFigures(tmp_path, "run", est, None, {}))
-    writer.submit_points(np.zeros((4, 2)))
+    writer = result_writer.ResultWriter(concurrent=True)
+    writer.submit(result_writer.FinalEstimate(tmp_path, "run", est, None, {}))
+    writer.submit_map(result_writer.MapInputs(points=np.zeros((4, 2))))
     with pytest.raises(ValueError, match="no room for the legend"):
         writer.wait()
     writer.close()

@@ -11,16 +11,24 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_typestore
 
 from conftest import real_data
 from slam.cli import main
+from slam.io.map_server import read_map
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def result_folder(tmp_path: Path, relative: str, gating: str) -> Path:
+    return tmp_path / f"{Path(relative).stem}_{gating}"
+
+
 def gslam_map(tmp_path: Path, relative: str, config: str, gating: str = "off", *extra: str) -> dict:
-    out = tmp_path / f"{Path(relative).stem}_{gating}"
+    out = result_folder(tmp_path, relative, gating)
     code = main(["-q", "map", str(real_data(relative)), "--config", str(ROOT / "configs/datasets" / config),
                  "--out", str(out), "--gating", gating, "--set", "output.plots=false", *extra])
     assert code == 0
@@ -40,6 +48,18 @@ def test_carmen_intel_graph_and_validation(tmp_path):
     # hand-set observers alarm on 7.1 % of them (docs/results/broad.md).
     assert min(m["observer_coverage"].values()) > 0.95
     assert 0.0 < m["alarm_fraction"] < 0.1
+    # The occupancy grid: map_server's files read back to the grid run.mcap holds.
+    out = result_folder(tmp_path, "carmen/intel-corrected.log.gz", "on")
+    loaded = read_map(out / "map.yaml")
+    with Reader(out / "run.mcap") as bag:
+        (conn, _, data), = bag.messages([c for c in bag.connections if c.topic == "/map"])
+        grid = get_typestore(Stores.ROS2_HUMBLE).deserialize_cdr(data, conn.msgtype)
+        counts = {c.topic: c.msgcount for c in bag.connections}
+    np.testing.assert_array_equal(grid.data.reshape(grid.info.height, grid.info.width), loaded.data)
+    assert loaded.resolution == 0.05 and loaded.origin[:2] == pytest.approx(
+        (grid.info.origin.position.x, grid.info.origin.position.y))
+    assert m["grid"]["occupied_cells"] > 5000 and m["grid"]["free_cells"] > 100_000
+    assert counts["/scan_registered"] == counts["/tf"] == 910 and counts["/validation"] == m["validation_steps"]
 
 
 def test_carmen_intel_judged_by_a_fixed_gap_observes_nothing_and_says_so(tmp_path, capsys):
@@ -67,6 +87,10 @@ def test_husky_bag_gated(tmp_path):
     # 718 compass factors kept, alarms on half the steps.
     assert 380 <= m["factor_counts"]["compass"] <= 420
     assert 0.45 < m["alarm_fraction"] < 0.55
+    # No laser: no grid, and a bag of the path and the validator's statuses.
+    out = result_folder(tmp_path, "rosbag/test1_husky_2015.bag", "on")
+    assert not (out / "map.pgm").exists() and not (out / "map.yaml").exists() and "grid" not in m
+    assert m["mcap_messages"] == {"/path": 1, "/tf": 719, "/validation": m["validation_steps"]}
 
 
 def test_broad_attached_magnet_gating_restores_the_heading(tmp_path):

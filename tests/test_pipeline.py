@@ -21,7 +21,7 @@ from tests.conftest import TELEMAX_CONFIG, short_scenario
 
 MAP_FILES = {
     "trajectory.tum", "groundtruth.tum", "metrics.json", "config.yaml",
-    "trajectory.png", "map.ply", "map.png", ".gslam-result.json",
+    "trajectory.png", "map.ply", "map.png", "map.pgm", "map.yaml", "run.mcap", ".gslam-result.json",
 }
 METRICS = ("ate_rmse_m", "rpe_trans_pct", "rpe_rot_deg_per_m", "final_error_m", "n_poses", "runtime_s")
 VALIDATION_METRICS = (
@@ -64,7 +64,7 @@ def test_map_writes_every_documented_file(mapped, short_run):
         assert isinstance(metrics[key], (int, float)), key
     assert metrics["n_poses"] == len(res.trajectory)
     assert set(metrics["timings_s"]) == {
-        "read", "frontend", "validation", "loops", "graph_build", "optimise", "write",
+        "read", "frontend", "validation", "loops", "graph_build", "optimise", "write", "grid", "mcap",
         "prepare", "frontend_wait", "plots_wait",
     }
     assert not any(k in metrics for k in ("alarm_fraction", "validation_steps"))

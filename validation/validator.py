@@ -85,7 +85,7 @@ class ValidationOutcome:
                     cols[name] = values.astype(int) if values.dtype == bool else values
         if self.results is not None:
             cols["consistent"] = [int(r.consistent) for r in self.results]
-            cols["diagnoses"] = [_format_diagnoses(r) for r in self.results]
+            cols["diagnoses"] = [format_diagnoses(r) for r in self.results]
         for factor in sorted(self.step_scales):
             for i, dof in enumerate(self.factor_dofs[factor]):
                 cols[f"gate.{factor}.{dof}"] = _action_names(self.step_scales[factor][:, i])
@@ -103,7 +103,7 @@ def _action_names(scales: np.ndarray) -> list[str]:
     return np.where(~np.isfinite(scales), "exclude", np.where(scales > 1.0, "inflate", "include")).tolist()
 
 
-def _format_diagnoses(result: DiagnosisResult) -> str:
+def format_diagnoses(result: DiagnosisResult) -> str:
     if not result.consistent:
         return "none"
     return " | ".join("{" + ",".join(sorted(d)) + "}" for d in result.diagnoses)

@@ -250,6 +250,9 @@ def expand_jobs(spec: AblationSpec, source: str = "spec") -> list[Job]:
     base_tree = load_yaml(spec.config)
     fixed = list(spec.set.items())
     plots = [("output.plots", spec.plots), ("output.progress", False)]
+    # A sweep's jobs are read as numbers: their grid and bag follow plots
+    # unless the spec sets them.
+    viewers = [("output.grid", spec.plots), ("output.mcap", spec.plots)]
     configs: dict[tuple[str, str], tuple[list[str], str, list[tuple[str, Any]]]] = {}
 
     def config_for(variant: str, point: dict[str, Any]) -> tuple[list[str], str, list[tuple[str, Any]]]:
@@ -258,7 +261,7 @@ def expand_jobs(spec: AblationSpec, source: str = "spec") -> list[Job]:
             scen, conf = _split(fixed + list(spec.variants[variant].items()) + list(point.items()))
             where = f"{source}: variant '{variant}'" + (f", sweep point {point}" if point else "")
             try:
-                strings = config_overrides(base_tree, conf + plots)
+                strings = config_overrides(base_tree, viewers + conf + plots)
                 cfg = load_config(spec.config, strings)
             except GslamError as e:
                 raise GslamError(f"{where}: {_strip_source(str(e), spec.config)}") from None

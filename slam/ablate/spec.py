@@ -132,8 +132,9 @@ class AblationSpec(StrictFrozen):
 
     ``variants``: name -> dotted overrides (as ``configs/variants.yaml``);
     none given means one variant ``base``. ``set``: overrides for every job.
-    ``plots``: write each run's PNG figures (off by default: they cost more
-    than a short run's mapping). ``metrics``: the metric columns of
+    ``plots``: write each run's PNG figures, and (unless ``set`` or a
+    variant says otherwise) its occupancy grid and ``run.mcap`` (off by
+    default: they cost more than a short run's mapping). ``metrics``: the metric columns of
     ``summary.md`` (default: ATE, detection delay, alarm fraction,
     isolation precision and recall, faults missed, runtime).
     """

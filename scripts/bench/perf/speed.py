@@ -50,7 +50,8 @@ SEED = 5
 PEERS = {"gslam": "kiss 1 thread", "gslam all cores": "kiss", "before": "kiss 1 thread"}
 """The program each gslam program is compared with."""
 TARGETS = {"gslam": 1.15, "gslam all cores": 1.3}
-STEPS = ("read", "prepare", "frontend", "frontend_wait", "validation", "loops", "graph_build", "optimise", "write", "plots_wait")
+STEPS = ("read", "prepare", "frontend", "frontend_wait", "validation", "loops", "graph_build", "optimise", "write", "grid",
+         "mcap", "plots_wait")
 TIMING_KEYS = ("runtime_s", "realtime_factor", "timings_s", "validation_time_s")
 
 
