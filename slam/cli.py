@@ -159,8 +159,14 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     res = run_compare(args.input, _config_path(args.config), args.out, _config_path(args.variants), only,
                       args.set or [], progress=not args.quiet, force=args.force)
     print((res.out_dir / "comparison.md").read_text())
-    print(f"wrote {res.out_dir}")
+    print(f"wrote {res.out_dir}" + _report_hint(res.out_dir))
     return 0
+
+
+def _report_hint(folder: Path) -> str:
+    """A pointer to ``report.html`` where the folder has one, else nothing."""
+    page = folder / "report.html"
+    return f"; open {page} in a browser for the tables and figures" if page.is_file() else ""
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -174,7 +180,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     else:
         print(f"reused {res.run_dir} (the same scenario and seed)")
     print((res.compare.out_dir / "comparison.md").read_text())
-    print(f"result folders, tables and figures in {res.compare.out_dir}")
+    print(f"result folders, tables and figures in {res.compare.out_dir}" + _report_hint(res.compare.out_dir))
     return 0
 
 
@@ -187,7 +193,7 @@ def _cmd_ablate(args: argparse.Namespace) -> int:
                        progress=not args.quiet, source=str(spec_path), force=args.force)
     print(res.summary.md_path.read_text())
     print(f"{len(res.jobs)} jobs: {len(res.ran)} ran, {len(res.skipped)} already finished, "
-          f"{len(res.failed)} failed ({res.wall_s:.1f} s); wrote {res.out_dir}")
+          f"{len(res.failed)} failed ({res.wall_s:.1f} s); wrote {res.out_dir}" + _report_hint(res.out_dir))
     for job_id, error in res.failed.items():
         print(f"  failed {job_id}: {error}")
     return 1 if res.failed else 0

@@ -6,9 +6,11 @@ folder ``OUT/<variant>/`` as ``gslam map`` writes it. ``OUT`` follows the
 rule of :mod:`slam.io.outdir` and is built whole beside its place. Beside
 the variants:
 ``comparison.csv`` and ``comparison.md`` (one row per variant; the runtime
-counts reading and scan matching for every variant, though they run once) and the
-figures a reader of the paper expects (trajectories over ground truth,
-compass-yaw trends, observer alarms over the true fault intervals).
+counts reading and scan matching for every variant, though they run once),
+the figures a reader of the paper expects (trajectories over ground truth,
+compass-yaw trends, observer alarms over the true fault intervals), and
+``report.html``, all of it and each variant's map on one page
+(``output.report``; :mod:`slam.report`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import csv
 import io
 import logging
 import re
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,11 +30,12 @@ from slam.config import PipelineConfig, config_files, load_config, load_yaml
 from slam.errors import GslamError
 from slam.io.outdir import result_folder
 from slam.pipeline import RESULT_FILES, MapResult, MappingPipeline
+from slam.report import Figure, Section, Table, write_report
 from slam.resources import shipped_config
 
 log = logging.getLogger(__name__)
 
-COMPARE_FILES = ("comparison.csv", "comparison.md", "trajectories.png", "trajectories_full.png",
+COMPARE_FILES = ("comparison.csv", "comparison.md", "report.html", "trajectories.png", "trajectories_full.png",
                  "compass_trends.png", "observer_alarms.png")
 """The files of a comparison beside its variants' folders."""
 _VARIANT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
@@ -53,10 +57,12 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
 
 @dataclass
 class CompareResult:
-    """The comparison folder and each variant's result."""
+    """The comparison folder, each variant's result, and the seconds
+    ``report.html`` took (0 without one)."""
 
     out_dir: Path
     results: dict[str, MapResult]
+    report_s: float = 0.0
 
     def table(self) -> list[dict[str, Any]]:
         rows = []
@@ -96,15 +102,18 @@ def _yaml_scalar(value: Any) -> str:
     return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
 
 
-def _markdown(rows: list[dict[str, Any]], title: str) -> str:
+def _table(rows: list[dict[str, Any]]) -> Table:
+    """The comparison table's headers and formatted cells."""
     headers = ["variant"] + [h for _, h, _ in COLUMNS]
-    lines = [f"# {title}", "", "| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
-    for row in rows:
-        cells = [row["variant"]]
-        for key, _, fmt in COLUMNS:
-            v = row.get(key)
-            cells.append("–" if v is None else fmt.format(v))
-        lines.append("| " + " | ".join(cells) + " |")
+    cells = [[row["variant"]] + ["–" if row.get(k) is None else fmt.format(row[k]) for k, _, fmt in COLUMNS]
+             for row in rows]
+    return Table(headers, cells)
+
+
+def _markdown(rows: list[dict[str, Any]], title: str) -> str:
+    table = _table(rows)
+    lines = [f"# {title}", "", "| " + " | ".join(table.headers) + " |", "|" + "---|" * len(table.headers)]
+    lines += ["| " + " | ".join(cells) + " |" for cells in table.rows]
     return "\n".join(lines) + "\n"
 
 
@@ -132,7 +141,7 @@ def run_compare(
     out_dir = Path(out_dir)
     variants_path = Path(variants_path) if variants_path is not None else shipped_config("variants.yaml")
     variants = load_variants(variants_path, only)
-    load_config(config_path, overrides or [])  # errors of the config and --set first
+    base = load_config(config_path, overrides or [])  # errors of the config and --set first
     configs = {name: _variant_config(config_path, overrides or [], variants_path, name, ov) for name, ov in variants.items()}
     names = [*COMPARE_FILES, *(f"{v}/{f}" for v in variants for f in RESULT_FILES)]
     inputs = [input_path, *config_files(config_path), variants_path]
@@ -143,9 +152,10 @@ def run_compare(
         (tmp / "comparison.csv").write_text(_csv(rows))
         (tmp / "comparison.md").write_text(_markdown(rows, f"{recording.name}: variants compared"))
         _figures(tmp, results, recording)
+        report_s = _report(tmp, rows, recording.name) if base.output.report else 0.0
     for name, res in results.items():
         res.out_dir = out_dir / name
-    return CompareResult(out_dir, results)
+    return CompareResult(out_dir, results, report_s)
 
 
 def _variant_config(config_path, overrides: list[str], variants_path: Path, name: str, ov: list[str]) -> PipelineConfig:
@@ -185,6 +195,32 @@ def _run_variants(
         recording, frontend, frontend_cfg = pipe.recording, pipe.frontend, cfg.frontend
         log.info("%s: ATE %s m", name, results[name].metrics.get("ate_rmse_m"))
     return results, recording
+
+
+def _report(folder: Path, rows: list[dict[str, Any]], name: str) -> float:
+    """``report.html``: the table, the comparison's figures and each
+    variant's map; the seconds it took."""
+    t = time.perf_counter()
+    variants = [row["variant"] for row in rows]
+    sections = [
+        Section("Variants compared", "Runtime counts reading and scan matching for every variant, though they "
+                "run once. Each variant's result folder holds its files (trajectory.tum, metrics.json, map.pgm, "
+                "run.mcap).", tables=[_table(rows)]),
+        Section("Trajectories", figures=[
+            Figure(folder / "trajectories.png", "every variant over the reference, around it"),
+            Figure(folder / "trajectories_full.png", "every variant over the reference, whole"),
+        ]),
+        Section("Yaw trends (the paper's Fig. 2)", "The gated variant's yaw streams and their trend symbols.",
+                figures=[Figure(folder / "compass_trends.png", "yaw streams and trends")]),
+        Section("Observer timelines (the paper's Fig. 3)", "The gated variant's observer alarms and blamed "
+                "sensors over the true faults.", figures=[Figure(folder / "observer_alarms.png", "observers")]),
+        Section("Maps", "Each variant's occupancy grid and trajectory (map.png).", small=True,
+                figures=[Figure(folder / v / "map.png", v) for v in variants]),
+    ]
+    write_report(folder / "report.html", f"{name}: variants compared", sections)
+    elapsed = time.perf_counter() - t
+    log.info("report.html in %.2f s", elapsed)
+    return elapsed
 
 
 def _figures(out: Path, results: dict[str, MapResult], recording) -> None:

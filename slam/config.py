@@ -359,7 +359,8 @@ class OutputConfig(Strict):
     cells (slam.occupancy: a beam's end is a hit of ``grid_hit_probability``,
     each cell it crosses a miss of ``grid_miss_probability``, a beam without
     a return frees ``grid_no_return_m``). ``mcap``: ``run.mcap``
-    (slam.io.run_mcap).
+    (slam.io.run_mcap). ``report``: ``report.html`` of ``gslam compare``
+    and ``gslam ablate`` (slam.report).
     """
 
     map_voxel_m: float = Field(0.05, gt=0.0)
@@ -371,6 +372,7 @@ class OutputConfig(Strict):
     grid_miss_probability: float = Field(0.4, gt=0.0, lt=0.5)
     grid_no_return_m: float = Field(5.0, ge=0.0)
     mcap: bool = True
+    report: bool = True
 
 
 class PipelineConfig(Strict):

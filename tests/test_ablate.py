@@ -6,6 +6,7 @@ well under a second per job)."""
 
 from __future__ import annotations
 
+import base64
 import csv
 import json
 import shutil
@@ -186,6 +187,12 @@ def test_summary_has_one_row_per_job_equal_to_metrics_json(finished):
     md = (res.out_dir / "summary.md").read_text()
     assert "| gated | 20 | 1/1 |" in md
     assert (res.out_dir / "plots" / "gating.inflation.png").exists()
+    # report.html: the same table and the plots, embedded.
+    page = (res.out_dir / "report.html").read_text()
+    assert "<tr><td>gated</td><td>20</td><td>1/1</td>" in page
+    plot = base64.b64encode((res.out_dir / "plots" / "gating.inflation.png").read_bytes()).decode()
+    assert f'<img src="data:image/png;base64,{plot}" alt="against gating.inflation">' in page
+    assert res.summary.report_s > 0
     # A sweep's jobs write no grid and no bag unless the spec asks (as for plots).
     job = res.out_dir / "jobs" / rows[0]["job_id"]
     assert not (job / "run.mcap").exists() and not (job / "map.pgm").exists()

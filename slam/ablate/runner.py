@@ -5,7 +5,8 @@ Output folder ``OUT``:
 * ``OUT/inputs/<scenario>-<hash>-seed<N>/``: each simulated input, once;
 * ``OUT/jobs/<id>/``: each job's result folder, as ``gslam map`` writes it;
 * ``OUT/failed/<id>.json``: the one-line error of a job that failed;
-* ``OUT/spec.yaml``, ``OUT/summary.csv``, ``OUT/summary.md``, ``OUT/plots/``.
+* ``OUT/spec.yaml``, ``OUT/summary.csv``, ``OUT/summary.md``, ``OUT/plots/``,
+  ``OUT/report.html`` (``output.report`` of the spec's config).
 
 Jobs that read and scan-match the same thing run together in one worker
 and share that work (:mod:`slam.ablate.sharing`).
@@ -45,7 +46,9 @@ from slam.errors import GslamError
 from slam.io.atomic import write_text
 from slam.io.outdir import TEMP_TAG, open_container
 
-CONTAINER_NAMES = ("spec.yaml", "summary.csv", "summary.md", ".lock", "plots/", "inputs/", "jobs/", "failed/")
+CONTAINER_NAMES = (
+    "spec.yaml", "summary.csv", "summary.md", "report.html", ".lock", "plots/", "inputs/", "jobs/", "failed/",
+)
 """What a sweep writes into its folder (each job's result inside ``jobs/``)."""
 
 log = logging.getLogger(__name__)
@@ -235,9 +238,18 @@ def run_ablation(
                         on_outcome(outcome)
                     bar.set_postfix(failed=len(result.failed))
                     bar.update(1)
-        result.summary = write_summary(out_dir, jobs, spec)
+        result.summary = write_summary(out_dir, jobs, spec, wants_report(spec))
     result.wall_s = time.perf_counter() - t0
     return result
+
+
+def wants_report(spec: AblationSpec) -> bool:
+    """``output.report`` of the spec's config, or of its ``set``."""
+    from slam.config import load_config
+
+    if "output.report" in spec.set:
+        return bool(spec.set["output.report"])
+    return load_config(spec.config).output.report
 
 
 def _clean_leftovers(out_dir: Path) -> None:

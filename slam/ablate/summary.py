@@ -15,6 +15,7 @@ import csv
 import io
 import json
 import math
+import time
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,10 +24,13 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from slam import report
 from slam.ablate.jobs import Job
 from slam.ablate.spec import AblationSpec
 from slam.io.atomic import write_text
 from slam.plots import save_figure
+from slam.report import Figure as ReportFigure
+from slam.report import Section, Table
 
 JOB_COLUMNS = ("job_id", "status", "error", "input", "seed", "variant")
 # (column, label) of the headline metrics in summary.md and the figures.
@@ -45,13 +49,15 @@ TIMING_COLUMNS = ("runtime_s", "realtime_factor", "validation_time_s")
 
 @dataclass
 class Summary:
-    """The rows of ``summary.csv`` and the files written."""
+    """The rows of ``summary.csv``, the files written, and the seconds
+    ``report.html`` took (0 without one)."""
 
     rows: list[dict[str, Any]]
     columns: list[str]
     csv_path: Path
     md_path: Path
     figures: list[Path]
+    report_s: float = 0.0
 
 
 def flatten(metrics: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -87,8 +93,9 @@ def job_row(out_dir: Path, job: Job) -> dict[str, Any]:
     return row
 
 
-def write_summary(out_dir: Path, jobs: list[Job], spec: AblationSpec) -> Summary:
-    """Write ``summary.csv``, ``summary.md`` and ``plots/*.png`` into ``out_dir``."""
+def write_summary(out_dir: Path, jobs: list[Job], spec: AblationSpec, report_html: bool = True) -> Summary:
+    """Write ``summary.csv``, ``summary.md``, ``plots/*.png`` and, with
+    ``report_html``, ``report.html`` into ``out_dir``."""
     rows = [job_row(out_dir, job) for job in jobs]
     sweep_keys = spec.sweep_keys()
     columns = list(JOB_COLUMNS) + sweep_keys
@@ -98,7 +105,12 @@ def write_summary(out_dir: Path, jobs: list[Job], spec: AblationSpec) -> Summary
     write_text(csv_path, _csv(rows, columns))
     write_text(md_path, _markdown(rows, spec, sweep_keys))
     figures = _figures(out_dir / "plots", rows, spec, sweep_keys)
-    return Summary(rows, columns, csv_path, md_path, figures)
+    summary = Summary(rows, columns, csv_path, md_path, figures)
+    if report_html:
+        t = time.perf_counter()
+        write_report(out_dir, rows, spec, figures)
+        summary.report_s = time.perf_counter() - t
+    return summary
 
 
 def _csv(rows: list[dict[str, Any]], columns: list[str]) -> str:
@@ -148,34 +160,65 @@ def _groups(rows: list[dict[str, Any]], keys: list[str]) -> dict[tuple, list[dic
     return groups
 
 
-def _markdown(rows: list[dict[str, Any]], spec: AblationSpec, keys: list[str]) -> str:
+def summary_tables(rows: list[dict[str, Any]], spec: AblationSpec, keys: list[str]) -> dict[str, Table]:
+    """Per input, the table of ``summary.md``: a row per variant and sweep
+    point, mean ± std over seeds of each headline metric."""
     metrics = [(m, dict(HEADLINE).get(m, m)) for m in spec.metrics] if spec.metrics else list(HEADLINE)
-    n_ok = sum(r["status"] == "ok" for r in rows)
-    lines = [f"# {spec.name}", ""]
-    if spec.description:
-        lines += [spec.description.strip(), ""]
     short = short_names(keys)
-    lines += [f"{len(rows)} jobs, {n_ok} finished, {len(rows) - n_ok} failed or missing. "
-              "Mean ± std (sample) over seeds; n = finished / jobs."]
-    lines += [f"`{s}`: `{k}`" + ("  " if i < len(keys) - 1 else "") for i, (k, s) in enumerate(short.items()) if s != k]
-    lines.append("")
     by_input: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for r in rows:
         by_input[r["input"]].append(r)
+    tables = {}
     for name, group in by_input.items():
         headers = ["variant"] + [short[k] for k in keys] + ["n"] + [label for _, label in metrics]
-        lines += [f"## {name}", "", "| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+        cells = []
         for (_, variant, *_), members in _groups(group, keys).items():
             ok = sum(r["status"] == "ok" for r in members)
             point = [_fmt(members[0].get(k)) if members[0].get(k) is not None else "–" for k in keys]
-            cells = [variant] + point + [f"{ok}/{len(members)}"]
-            cells += [_mean_std(_numbers(members, m)) for m, _ in metrics]
-            lines.append("| " + " | ".join(cells) + " |")
+            cells.append([variant] + point + [f"{ok}/{len(members)}"] + [_mean_std(_numbers(members, m)) for m, _ in metrics])
+        tables[name] = Table(headers, cells)
+    return tables
+
+
+def _intro(rows: list[dict[str, Any]], keys: list[str]) -> list[str]:
+    """The lines under the title: the count of jobs, the swept keys' full names."""
+    n_ok = sum(r["status"] == "ok" for r in rows)
+    short = short_names(keys)
+    lines = [f"{len(rows)} jobs, {n_ok} finished, {len(rows) - n_ok} failed or missing. "
+             "Mean ± std (sample) over seeds; n = finished / jobs."]
+    lines += [f"`{s}`: `{k}`" + ("  " if i < len(keys) - 1 else "") for i, (k, s) in enumerate(short.items()) if s != k]
+    return lines
+
+
+def _markdown(rows: list[dict[str, Any]], spec: AblationSpec, keys: list[str]) -> str:
+    lines = [f"# {spec.name}", ""]
+    if spec.description:
+        lines += [spec.description.strip(), ""]
+    lines += _intro(rows, keys)
+    lines.append("")
+    for name, table in summary_tables(rows, spec, keys).items():
+        lines += [f"## {name}", "", "| " + " | ".join(table.headers) + " |", "|" + "---|" * len(table.headers)]
+        lines += ["| " + " | ".join(cells) + " |" for cells in table.rows]
         lines.append("")
     failed = [r for r in rows if r["status"] == "failed"]
     if failed:
         lines += ["## Failed jobs", ""] + [f"- `{r['job_id']}`: {r['error']}" for r in failed] + [""]
     return "\n".join(lines)
+
+
+def write_report(out_dir: Path, rows: list[dict[str, Any]], spec: AblationSpec, figures: list[Path]) -> None:
+    """``report.html``: the description, each input's table, the failed
+    jobs and the plots, on one page (:mod:`slam.report`)."""
+    keys = spec.sweep_keys()
+    sections = [Section(name, tables=[table]) for name, table in summary_tables(rows, spec, keys).items()]
+    failed = [r for r in rows if r["status"] == "failed"]
+    if failed:
+        sections.append(Section("Failed jobs", tables=[Table(["job", "error"], [[r["job_id"], str(r["error"])] for r in failed])]))
+    sections.append(Section("Plots", "Each headline metric against each swept value: mean ± std over seeds and "
+                            "the other swept values.", figures=[ReportFigure(p, f"against {p.stem}") for p in figures]))
+    intro = " ".join([spec.description.strip()] if spec.description else []) + " " + " ".join(
+        line.replace("`", "") for line in _intro(rows, keys))
+    report.write_report(out_dir / "report.html", spec.name, sections, intro.strip())
 
 
 def _figures(plot_dir: Path, rows: list[dict[str, Any]], spec: AblationSpec, keys: list[str]) -> list[Path]:

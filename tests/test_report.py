@@ -1,0 +1,84 @@
+"""report.html (slam.report) of gslam compare: one file that holds the
+table and every figure, checked as text and in a real headless browser."""
+
+from __future__ import annotations
+
+import base64
+import csv
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from slam.compare import run_compare
+from slam.report import Figure, Section, Table, render
+from tests.conftest import TELEMAX_CONFIG
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+IMAGE = re.compile(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)" alt="([^"]*)">')
+
+
+@pytest.fixture(scope="module")
+def compared(short_run, tmp_path_factory):
+    out = tmp_path_factory.mktemp("compare") / "cmp"
+    return run_compare(short_run.run_dir, TELEMAX_CONFIG, out, only=["ungated", "gated"])
+
+
+def test_render_embeds_figures_and_escapes_text(tmp_path):
+    png = tmp_path / "a.png"
+    png.write_bytes(b"\x89PNG\r\n\x1a\nnot really")
+    page = render("x < y", [
+        Section("s & t", "a <note>", tables=[Table(["h"], [["<b>"]])], figures=[Figure(png, "fig")]),
+        Section("only missing figures", figures=[Figure(tmp_path / "none.png", "gone")]),
+    ])
+    assert "<title>x &lt; y</title>" in page and "<td>&lt;b&gt;</td>" in page and "a &lt;note&gt;" in page
+    (data, alt), = IMAGE.findall(page)
+    assert base64.b64decode(data) == png.read_bytes() and alt == "fig"
+    assert "only missing figures" not in page
+    assert "<script" not in page and "http" not in page  # nothing to fetch, nothing to run
+
+
+def test_compare_report_holds_the_table_and_every_figure(compared):
+    folder = compared.out_dir
+    page = (folder / "report.html").read_text()
+    rows = list(csv.DictReader((folder / "comparison.csv").open()))
+    for row in rows:
+        ate = f"{float(row['ate_rmse_m']):.3f}"
+        assert f"<tr><td>{row['variant']}</td><td>{ate}</td>" in page
+    images = dict((alt, base64.b64decode(data)) for data, alt in IMAGE.findall(page))
+    expected = {
+        "every variant over the reference, around it": folder / "trajectories.png",
+        "every variant over the reference, whole": folder / "trajectories_full.png",
+        "yaw streams and trends": folder / "compass_trends.png",
+        "observers": folder / "observer_alarms.png",
+        "ungated": folder / "ungated" / "map.png",
+        "gated": folder / "gated" / "map.png",
+    }
+    assert set(images) == set(expected)
+    for alt, path in expected.items():
+        assert images[alt] == path.read_bytes(), alt
+    assert compared.report_s > 0
+
+
+def test_report_can_be_turned_off(short_run, tmp_path):
+    res = run_compare(short_run.run_dir, TELEMAX_CONFIG, tmp_path / "c", only=["ungated"],
+                      overrides=["output.report=false", "output.mcap=false", "output.plots=false"])
+    assert not (res.out_dir / "report.html").exists() and res.report_s == 0.0
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium on this machine (Debian: apt-get install chromium)")
+def test_compare_report_renders_in_headless_chromium(compared, tmp_path):
+    # The page with a probe added: once loaded, it writes how many images
+    # the browser decoded (complete, with a width) into the page.
+    probe = ("<script>addEventListener('load', () => { const i = [...document.images];"
+             " document.body.insertAdjacentHTML('beforeend', '<pre id=probe>' +"
+             " i.filter(x => x.complete && x.naturalWidth > 0).length + '/' + i.length + '</pre>'); });</script>")
+    page = tmp_path / "report.html"
+    page.write_text((compared.out_dir / "report.html").read_text().replace("</body>", probe + "</body>"))
+    args = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=10000"]
+    dom = subprocess.run([*args, "--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=120).stdout
+    decoded = re.search(r'<pre id="probe">(\d+)/(\d+)</pre>', dom)
+    assert decoded is not None, dom[-2000:]
+    assert decoded.group(1) == decoded.group(2) == str(len(IMAGE.findall(page.read_text())))
