@@ -34,7 +34,7 @@ from slam.factors import (
     yaw_only_noise,
     yaw_prior_factor,
 )
-from slam.loops.factors import LoopFactors, loop_factor
+from slam.loops.factors import LoopFactors, loop_factor, loop_noise
 from slam.measurements import FACTOR_DOFS, FACTOR_TYPES, Measurements, RelativeConstraint
 from slam.recording import Trajectory
 
@@ -186,7 +186,10 @@ class GraphBuilder:
             out.append(position_prior_factor(k, m.gps.xy[k], gaussian(m.gps.sigma[k] * w, self.robust["gps"])))
             self.counts["gps"] += 1
         for c in self.constraints.get(k, ()):
-            noise = gaussian(c.sigma, self.robust.get(c.kind))
+            if c.information is not None:
+                noise = loop_noise(c.information, self.robust.get(c.kind))
+            else:
+                noise = gaussian(c.sigma, self.robust.get(c.kind))
             out.append(gtsam.BetweenFactorPose2(pose_key(c.i), pose_key(c.j), gtsam.Pose2(*c.delta), noise))
             self.counts[c.label] = self.counts.get(c.label, 0) + 1
         return out + self.loop_factors(k)
@@ -299,6 +302,7 @@ def optimise(
     constraints: Sequence[RelativeConstraint] = (),
     marginals: bool = False,
     loops: LoopFactors | None = None,
+    initial_poses: np.ndarray | None = None,
 ) -> BackendResult:
     """Build the keyframe graph and optimise it (batch, GNC or iSAM2).
 
@@ -310,7 +314,9 @@ def optimise(
     covariances (:class:`gtsam.Marginals`; batch optimisers only).
     ``loops``: loop closures to add. A keyframe that closes a loop starts
     where the loop puts it, not where dead reckoning does (far off after a
-    long drift, too far for Levenberg-Marquardt).
+    long drift, too far for Levenberg-Marquardt). ``initial_poses`` (K, 3),
+    world frame: where the batch optimisers start instead (an estimate
+    that already holds the loops, e.g. the submaps').
     """
     n = len(meas)
     builder = GraphBuilder(meas, weights if weights is not None else unit_weights(n), config, constraints, loops)
@@ -330,7 +336,9 @@ def optimise(
     pose = gtsam.Pose2(*initial_pose)
     loop_indices = []
     for k in steps:
-        if k > 0:
+        if initial_poses is not None:
+            pose = gtsam.Pose2(*initial_poses[k])
+        elif k > 0:
             pose = builder.predict(k, pose)
             if closing := builder.loops_at(k):
                 pose = _closed_at(initial.atPose2(pose_key(closing[0].i)), closing[0], pose)

@@ -82,6 +82,12 @@ def _end_with_parent(parent: int) -> None:
 def _child(conn, fn: Callable[..., Any], args: tuple, parent: int) -> None:
     _end_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it ends the child
+    # The parent ends a child with SIGTERM; a handler it had when it forked
+    # (one that holds signals back while a result is renamed into place)
+    # must not keep the child alive.
+    for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+        if sig is not None:
+            signal.signal(sig, signal.SIG_DFL)
     try:
         value = ("ok", fn(conn.recv, *args))
     except BaseException as e:  # noqa: BLE001 - every failure goes back to the parent

@@ -25,6 +25,7 @@ from pydantic import Field, ValidationError, field_validator, model_validator
 
 from slam.errors import GslamError
 from slam.loops.config import LoopsConfig
+from slam.submaps.config import SubmapsConfig
 from slam.io.yamlfile import SAFE_LOADER, check_finite, load_yaml, non_finite, read_text_file, yaml_number
 from validation.yamlio import Strict
 
@@ -391,6 +392,7 @@ class PipelineConfig(Strict):
     evaluation: EvaluationConfig = EvaluationConfig()
     output: OutputConfig = OutputConfig()
     loops: LoopsConfig = LoopsConfig()
+    submaps: SubmapsConfig = SubmapsConfig()
     validation: dict[str, Any] = Field(default_factory=lambda: _section_defaults()[0])
     gating: dict[str, Any] = Field(default_factory=lambda: _section_defaults()[1])
 

@@ -3,6 +3,8 @@ back-end. Frames and units as in :mod:`slam.recording`."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 EARTH_RADIUS_M = 6_378_137.0  # WGS-84 equatorial radius
@@ -57,3 +59,22 @@ def geodetic_from_enu(east, north, lat0_deg: float, lon0_deg: float):
     lat = lat0_deg + np.degrees(np.asarray(north) / EARTH_RADIUS_M)
     lon = lon0_deg + np.degrees(np.asarray(east) / (EARTH_RADIUS_M * np.cos(lat0)))
     return lat, lon
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The planar pose ``a * b`` of two poses (x, y, yaw)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2])])
+
+
+def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The planar pose ``inverse(a) * b`` of two poses (x, y, yaw)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return np.array([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[2] - a[2])])
+
+
+def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Points (n, 2) given in the frame of ``pose`` (x, y, yaw), in its parent frame."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return points @ np.array([[c, s], [-s, c]]) + np.asarray(pose[:2])

@@ -148,7 +148,9 @@ class RelativeConstraint:
     ``delta`` (x, y, yaw) in the frame of ``i``, ``sigma`` (3,) m, m, rad,
     ``inf`` for a degree of freedom it says nothing about; ``kind`` is the
     factor type whose robust kernel it takes, ``label`` what it is (counted
-    per label in the result)."""
+    per label in the result). ``information`` (3, 3), when given, replaces
+    ``sigma``: the noise of the between factor's error (in the frame of
+    ``j``), possibly singular."""
 
     i: int
     j: int
@@ -156,6 +158,7 @@ class RelativeConstraint:
     sigma: np.ndarray
     kind: str
     label: str
+    information: np.ndarray | None = None
 
 
 @dataclass

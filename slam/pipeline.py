@@ -68,6 +68,7 @@ class _Timings:
     frontend_s: float = 0.0
     validation_s: float = 0.0
     loops_s: float = 0.0
+    submaps_s: float = 0.0
     graph_build_s: float = 0.0
     optimise_s: float = 0.0
     write_s: float = 0.0
@@ -120,6 +121,7 @@ class MappingPipeline:
         self.constraints: list = []
         self.backend: BackendResult | None = None
         self.loop_search = None
+        self.submaps = None
         self.loop_observation = None
         self.loop_factors = None
         self.metrics: dict[str, Any] = {}
@@ -141,6 +143,7 @@ class MappingPipeline:
                 self.validate()
                 self.learn_odometry_scale()
                 self.recheck()
+                self.build_submaps()
                 self.close_loops()
                 self.optimise()
                 self.start_figures(tmp)
@@ -332,6 +335,47 @@ class MappingPipeline:
         self.extra_metrics.update(oracle.metrics())
         self.extra_outputs["validation.csv"] = oracle.csv_text()
 
+    def build_submaps(self) -> None:
+        """Scan-to-submap constraints (:mod:`slam.submaps`) over the
+        keyframes' scans, searched around the dead-reckoning chain (with the
+        validator's weights). The local and near ones join the graph as scan
+        matching, gated with it (:meth:`_submap_factors`); the loops are
+        judged in :meth:`close_loops`."""
+        cfg, meas = self.config.submaps, self.measurements
+        if not cfg.enabled or self.frontend is None or meas.scan_index is None:
+            return
+        from slam.loops.chain import fuse_steps
+        from slam.submaps.build import build_submap_constraints
+
+        t = time.perf_counter()
+        steps, step_cov = fuse_steps(meas, self.weights)
+        self.submaps = build_submap_constraints(
+            self.recording.scans, meas.scan_index, steps, step_cov, self.config.frontend, cfg
+        )
+        self.constraints = [*self.constraints, *self._submap_factors()]
+        self.timings.submaps_s = time.perf_counter() - t
+
+    def _submap_factors(self) -> list:
+        """The local and near submap constraints as between factors. A
+        constraint rests on the scans of its submap and on its own: each
+        degree of freedom takes the largest scan-matching weight over those
+        keyframes (an excluded one drops that degree of freedom)."""
+        from slam.backend import dof_weights
+        from slam.measurements import RelativeConstraint
+
+        sm = self.weights.get("scan_matching")
+        w = dof_weights(sm, "scan_matching") if sm is not None else np.ones((len(self.measurements), 3))
+        out = []
+        for c in self.submaps.of_kind("intra", "near"):
+            steps = [c.scan, *self.submaps.submap_keyframes(c.submap)]
+            worst = w[steps].max(axis=0)
+            if not np.all(np.isfinite(worst)) and not np.any(np.isfinite(worst)):
+                continue
+            scale = np.where(np.isfinite(worst), 1.0 / worst, 0.0)
+            info = c.information * np.outer(scale, scale)
+            out.append(RelativeConstraint(c.anchor, c.scan, c.delta, np.full(3, np.inf), "scan_matching", "submap", info))
+        return out
+
     def close_loops(self) -> None:
         """Find loop closures, check them (loop observer, LOOP in the
         diagnosis with validation on, ground truth in oracle mode) and keep
@@ -346,6 +390,13 @@ class MappingPipeline:
         start = time.perf_counter()
         self.loop_search = search = self.find_loops()
         obs = observe_loops(search.chain, search.loops, cfg.observer)
+        if search.rejected:  # rejected before the observer (the submaps' GNC)
+            from validation.loops.observer import count_reasons
+
+            for v in obs.verdicts:
+                if v.loop.id in search.rejected:
+                    v.accepted, v.reason = False, search.rejected[v.loop.id]
+            obs.counts = count_reasons(obs.verdicts)
         self._gate_loops(obs)
         self.loop_observation = obs
         kernel = cfg.robust_kernel if cfg.robust_kernel is not None else self.config.backend.robust_kernel
@@ -360,7 +411,8 @@ class MappingPipeline:
         """The loops of this run before they are checked (slam.loops.search)."""
         from slam.loops.search import find_loops
 
-        return find_loops(self.recording, self.measurements, self.weights, self.config, self._initial_pose())
+        return find_loops(self.recording, self.measurements, self.weights, self.config, self._initial_pose(),
+                          self.submaps)
 
     def _gate_loops(self, obs) -> None:
         from slam.config import validation_sections
@@ -409,9 +461,15 @@ class MappingPipeline:
         # Building the batch graph takes milliseconds: a bar would only ever
         # show 0 %. iSAM2 updates per keyframe take long enough to show one.
         progress = self.progress and self.config.backend.optimizer == "isam2"
+        start = None
+        if self.submaps is not None:  # the submaps' estimate already holds their loops
+            from validation.loops.chain import between, compose
+
+            est = self.submaps.estimate
+            start = compose(np.repeat(pose0[None], len(est), axis=0), between(np.repeat(est[:1], len(est), axis=0), est))
         self.backend = optimise(
             self.measurements, pose0, self.config.backend, self.weights, progress=progress,
-            constraints=self.constraints, loops=self.loop_factors,
+            constraints=self.constraints, loops=self.loop_factors, initial_poses=start,
         )
         self.timings.graph_build_s = self.backend.build_time_s
         self.timings.optimise_s = self.backend.optimise_time_s
@@ -428,6 +486,8 @@ class MappingPipeline:
         m["fallback_steps"] = self.backend.fallback_steps
         if self.loop_observation is not None:
             m["loops"] = self._loop_metrics()
+        if self.submaps is not None:
+            m["submaps"] = self._submap_metrics()
         if self.validation is not None:
             m.update(self.validation.metrics)
         m.update(self.extra_metrics)
@@ -453,6 +513,30 @@ class MappingPipeline:
             out["true_found"] = int(sum(ok))
             out["wrong_accepted"] = int(sum(1 for v, good in zip(obs.verdicts, ok) if v.accepted and not good))
             out["true_rejected"] = int(sum(1 for v, good in zip(obs.verdicts, ok) if not v.accepted and good))
+        return out
+
+    def _submap_metrics(self) -> dict[str, Any]:
+        """Submaps, searches and constraints by kind; with ground truth, how
+        many kept and dropped constraints are wrong (as for loops)."""
+        res = self.submaps
+        out: dict[str, Any] = {"submaps": len(res.local.submaps), "searches": res.searches,
+                               "time_s": round(res.time_s, 3)}
+        kinds = ("intra", "near", "loop")
+        out["kept"] = {k: len(res.of_kind(k)) for k in kinds}
+        out["dropped"] = {k: sum(c.kind == k for c in res.dropped) for k in kinds}
+        truth = self._keyframe_truth()
+        if truth is not None:
+            from validation.loops.gating import pinned_error
+            from validation.loops.chain import between
+
+            ev = self.config.evaluation
+
+            def wrong(c) -> bool:
+                e = pinned_error(c.information, between(between(truth[c.anchor], truth[c.scan]), c.delta))
+                return bool(np.hypot(e[0], e[1]) > ev.sm_fault_trans_m or abs(e[2]) > np.radians(ev.sm_fault_yaw_deg))
+
+            out["wrong_kept"] = {k: sum(wrong(c) for c in res.of_kind(k)) for k in kinds}
+            out["wrong_dropped"] = {k: sum(wrong(c) for c in res.dropped if c.kind == k) for k in kinds}
         return out
 
     def start_figures(self, folder: Path) -> None:
@@ -558,6 +642,7 @@ class MappingPipeline:
             "frontend": round(tm.frontend_s, 4),
             "validation": round(tm.validation_s, 4),
             "loops": round(tm.loops_s, 4),
+            "submaps": round(tm.submaps_s, 4),
             "graph_build": round(tm.graph_build_s, 4),
             "optimise": round(tm.optimise_s, 4),
             "write": round(tm.write_s, 4),

@@ -64,7 +64,7 @@ def test_map_writes_every_documented_file(mapped, short_run):
         assert isinstance(metrics[key], (int, float)), key
     assert metrics["n_poses"] == len(res.trajectory)
     assert set(metrics["timings_s"]) == {
-        "read", "frontend", "validation", "loops", "graph_build", "optimise", "write", "grid", "mcap",
+        "read", "frontend", "validation", "loops", "submaps", "graph_build", "optimise", "write", "grid", "mcap",
         "prepare", "frontend_wait", "plots_wait",
     }
     assert not any(k in metrics for k in ("alarm_fraction", "validation_steps"))

@@ -104,10 +104,12 @@ class FileLoopsConfig(Strict):
 class LoopsConfig(Strict):
     """Loop closing (slam.loops) and the loop observer (validation.loops).
 
-    ``source``: ``scans`` detects loops by place recognition and geometric
-    search on the laser's local maps and verifies them by registration;
-    ``file`` takes the loops the recording lists (libRSF); ``auto`` uses the
-    file's when the recording has any, else scans.
+    ``source``: ``submaps`` takes the loops the scan-to-submap search found
+    (slam.submaps; needs ``submaps.enabled``); ``scans`` detects loops by
+    place recognition and geometric search on the laser's local maps and
+    verifies them by registration (the keys below); ``file`` takes the
+    loops the recording lists (libRSF); ``auto`` uses the file's when the
+    recording has any, else the submaps' when they are enabled, else scans.
 
     Detection walks the keyframes in order, as on the robot. Every
     ``query_spacing_m`` of path, the current keyframe becomes a place and
@@ -133,7 +135,7 @@ class LoopsConfig(Strict):
     """
 
     enabled: bool = False
-    source: Literal["auto", "scans", "file"] = "auto"
+    source: Literal["auto", "submaps", "scans", "file"] = "auto"
     local_map_m: float = Field(3.0, ge=0.0)
     query_map_m: float = Field(3.0, ge=0.0)
     local_map_scans: int = Field(10, ge=1)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -28,7 +28,9 @@ class LoopSearch:
 
     ``chain``: the dead-reckoning chain they are judged against;
     ``detection``: detection's counts (None for listed loops); ``source``:
-    ``scans``, ``file`` or ``none``; ``time_s``: wall time.
+    ``submaps``, ``scans``, ``file`` or ``none``; ``time_s``: wall time;
+    ``rejected``: loops (by id) the search itself rejected, and why (the
+    submaps' GNC: ``gnc``), which the observer reports as rejected.
     """
 
     chain: Chain
@@ -36,6 +38,7 @@ class LoopSearch:
     detection: Detection | None
     source: str
     time_s: float
+    rejected: dict[int, str] = field(default_factory=dict)
 
 
 def find_loops(
@@ -44,15 +47,28 @@ def find_loops(
     weights: dict[str, np.ndarray] | None,
     config: PipelineConfig,
     initial_pose: np.ndarray,
+    submaps=None,
 ) -> LoopSearch:
     """Loops of one run from its keyframe measurements (``weights``: the
-    validator's, so the chain leaves out what validation excluded)."""
+    validator's, so the chain leaves out what validation excluded);
+    ``submaps``: the run's :class:`slam.submaps.build.SubmapResult`, if any."""
     cfg = config.loops
     start = time.perf_counter()
     chain = build_chain(meas, weights, initial_pose)
     source = cfg.source
     if source == "auto":
-        source = "file" if recording.place_matches is not None else "scans"
+        source = "file" if recording.place_matches is not None else "submaps" if submaps is not None else "scans"
+    if source == "submaps":
+        if submaps is None:
+            raise GslamError(
+                f"loops.source is submaps, but {recording.name} has no submaps "
+                "(submaps.enabled is false, or the run has no laser scans or no scan matching)"
+            )
+        kept, dropped = submap_loops(submaps.of_kind("loop")), submap_loops(submaps.dropped_of_kind("loop"))
+        for k, lp in enumerate(dropped, start=len(kept)):
+            lp.id = k
+        rejected = {lp.id: "gnc" for lp in dropped}
+        return LoopSearch(chain, kept + dropped, None, source, time.perf_counter() - start, rejected)
     if source == "file":
         if recording.place_matches is None:
             raise GslamError(f"loops.source is file, but {recording.name} lists no loop closures")
@@ -70,3 +86,13 @@ def find_loops(
     )
     det = LoopDetector(points, chain, cfg).run()
     return LoopSearch(chain, det.loops, det, source, time.perf_counter() - start)
+
+
+def submap_loops(constraints) -> list[LoopConstraint]:
+    """Loop constraints of the submaps' search (:class:`slam.submaps.graph.Constraint`)
+    as loops: the carrier scan's keyframe to the matched scan's."""
+    return [
+        LoopConstraint(k, c.anchor, c.scan, np.asarray(c.delta, dtype=float), c.information, "submaps",
+                       {"score": round(float(c.score), 4), "submap": c.submap})
+        for k, c in enumerate(constraints)
+    ]

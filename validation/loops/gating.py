@@ -122,7 +122,8 @@ def oracle_loops(obs: LoopObservation, truth: np.ndarray, max_trans_m: float, ma
 
 def loop_is_true(loop: LoopConstraint, truth: np.ndarray, max_trans_m: float, max_yaw_rad: float) -> bool:
     """Whether ``loop`` agrees with the true keyframe poses (K, 3): within
-    ``max_trans_m`` and ``max_yaw_rad``; a position-only loop, whose stated
+    ``max_trans_m`` and ``max_yaw_rad`` in the directions it pins
+    (:func:`pinned_error`); a position-only loop, whose stated
     sigma is usually larger, within three of its sigmas (at least
     ``max_trans_m``)."""
     from validation.loops.chain import between
@@ -131,5 +132,14 @@ def loop_is_true(loop: LoopConstraint, truth: np.ndarray, max_trans_m: float, ma
         sigma = 1.0 / np.sqrt(max(loop.information[0, 0], 1e-12))
         limit = max(max_trans_m, 3.0 * sigma)
         return bool(np.hypot(*(truth[loop.i, :2] - truth[loop.j, :2])) <= limit)
-    err = between(between(truth[loop.i], truth[loop.j]), loop.delta)
+    err = pinned_error(loop.information, between(between(truth[loop.i], truth[loop.j]), loop.delta))
     return bool(np.hypot(err[0], err[1]) <= max_trans_m and abs(err[2]) <= max_yaw_rad)
+
+
+def pinned_error(information: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """``error`` (3,) without its components along the directions
+    ``information`` (3, 3) gives no weight (a corridor's axis that a scan
+    match leaves free): a loop claims nothing there."""
+    values, vectors = np.linalg.eigh(0.5 * (information + information.T))
+    free = vectors[:, values <= 1e-9 * max(values.max(), 1e-300)]
+    return error - free @ (free.T @ error)

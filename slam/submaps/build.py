@@ -1,0 +1,92 @@
+"""The submaps step of the pipeline: local SLAM, then the constraint search (see the package docstring)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from slam.config import FrontendConfig
+from slam.recording import Scans
+from slam.submaps.config import SubmapsConfig
+from slam.submaps.graph import Constraint, GlobalResult, GlobalSlam
+from slam.submaps.local import LocalResult, run_local_slam
+from slam.submaps.scans import ScanPoints
+from validation.loops.chain import between, compose, integrate
+
+@dataclass
+class SubmapResult:
+    """What the submaps found, in keyframe indices: the constraints kept and
+    dropped, the keyframes that are submap nodes (``nodes``), the local
+    SLAM over them, the estimate of every keyframe (K, 3) in the frame of
+    the first, and the wall time (s)."""
+
+    local: LocalResult
+    nodes: np.ndarray
+    constraints: list[Constraint]
+    dropped: list[Constraint]
+    searches: int
+    estimate: np.ndarray
+    time_s: float
+
+    def of_kind(self, *kinds: str) -> list[Constraint]:
+        return [c for c in self.constraints if c.kind in kinds]
+
+    def dropped_of_kind(self, *kinds: str) -> list[Constraint]:
+        return [c for c in self.dropped if c.kind in kinds]
+
+    def submap_keyframes(self, submap: int) -> np.ndarray:
+        """The keyframes a submap's scans span (its nodes and those between)."""
+        scans = self.local.submaps[submap].scans
+        return np.arange(self.nodes[scans[0]], self.nodes[scans[-1]] + 1)
+
+
+def select_nodes(steps: np.ndarray, spacing_m: float, turn_rad: float) -> np.ndarray:
+    """Keyframe indices (sorted, from 0) that become submap nodes: the first,
+    then each one that has moved ``spacing_m`` or turned ``turn_rad`` along
+    the chain ``steps`` (K, 3) since the last node."""
+    poses = integrate(np.zeros(3), steps)
+    nodes = [0]
+    for k in range(1, len(poses)):
+        d = between(poses[nodes[-1]], poses[k])
+        if np.hypot(d[0], d[1]) >= spacing_m or abs(d[2]) >= turn_rad:
+            nodes.append(k)
+    return np.asarray(nodes)
+
+
+def build_submap_constraints(
+    scans: Scans,
+    scan_index: np.ndarray,
+    steps: np.ndarray,
+    step_cov: np.ndarray,
+    frontend: FrontendConfig,
+    config: SubmapsConfig,
+) -> SubmapResult:
+    """Scan-to-submap constraints over the keyframes whose scans are
+    ``scans[scan_index]`` (K,); ``steps`` (K, 3) and ``step_cov`` (K, 3, 3):
+    the dead-reckoning chain between them (row 0 unused). Submaps are built
+    over the keyframes :func:`select_nodes` keeps; the others keep their
+    chain steps."""
+    start = time.perf_counter()
+    nodes = select_nodes(steps, config.node_spacing_m, np.radians(config.node_turn_deg))
+    chain = integrate(np.zeros(3), steps)
+    node_steps = np.zeros((len(nodes), 3))
+    node_steps[1:] = between(chain[nodes[:-1]], chain[nodes[1:]])
+    cum = np.cumsum(step_cov, axis=0)
+    node_cov = np.zeros((len(nodes), 3, 3))
+    node_cov[1:] = cum[nodes[1:]] - cum[nodes[:-1]]
+    points = ScanPoints(scans, frontend.min_range_m, frontend.max_range_m, config.voxel_m, index=scan_index[nodes],
+                        search_voxel_m=config.resolution_m)
+    local = run_local_slam(points, node_steps, node_cov, config)
+    found: GlobalResult = GlobalSlam(points, local, config, node_steps, node_cov).run()
+    # Back to keyframes: every keyframe hangs off the node before it by the chain.
+    owner = np.searchsorted(nodes, np.arange(len(steps)), side="right") - 1
+    estimate = compose(found.poses[owner], between(chain[nodes[owner]], chain))
+
+    def to_keyframes(c: Constraint) -> Constraint:
+        return replace(c, anchor=int(nodes[c.anchor]), scan=int(nodes[c.scan]))
+
+    return SubmapResult(local, nodes, [to_keyframes(c) for c in found.constraints],
+                        [to_keyframes(c) for c in found.rejected], found.searches, estimate,
+                        time.perf_counter() - start)

@@ -1,0 +1,301 @@
+"""Global SLAM over submaps: constraints between scans and earlier submaps,
+found while the run is walked in order, and a pose graph that places them.
+
+Every scan is a node; a submap is anchored at its first scan. Two kinds of
+constraint join them (Hess et al. 2016, Sec. V):
+
+* *intra*: the pose of a scan in the submap local SLAM matched it against
+  (:mod:`slam.submaps.local`);
+* *inter*: the pose of a scan in a finished submap it did not help build,
+  found by branch and bound around the current global estimate and refined.
+  Close along the path such a match undoes the local drift; far along it,
+  it closes a loop.
+
+The global estimate is the local trajectory re-placed by the graph: the
+graph is optimised every ``optimise_every`` scans once new inter
+constraints have come, so the search windows stay small. Inter constraints
+carry a robust kernel while the run is walked; at the end, graduated
+non-convexity over the whole graph (every factor but the inter constraints
+a known inlier) decides which of them are outliers, and the graph is
+optimised again without those.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from slam.geometry import between, compose
+from slam.loops.factors import loop_noise
+from slam.submaps.config import SubmapsConfig
+from slam.submaps.local import LocalResult, Match, match_scan, refine_near
+from slam.submaps.scans import ScanPoints
+
+log = logging.getLogger(__name__)
+
+UNKNOWN_VARIANCE = 1e6
+"""A chain step with this variance was not measured (slam.loops.chain)."""
+UNMATCHED_VARIANCE = (0.25, 0.25, 0.25)
+"""Variance of a step neither measured nor matched: the local SLAM's
+predicted pose, loosely (m^2, m^2, rad^2)."""
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """Scan ``scan``'s pose ``delta`` (x, y, yaw) in the frame of keyframe
+    ``anchor`` (the first scan of submap ``submap``). ``kind``: ``intra``,
+    ``near`` or ``loop``; ``score`` of the search; ``information`` (3, 3)
+    of ``delta`` in the anchor's frame, zero along the directions the match
+    does not pin (``weak``, unit vectors (k, 3))."""
+
+    submap: int
+    anchor: int
+    scan: int
+    delta: np.ndarray
+    kind: str
+    score: float
+    information: np.ndarray
+    weak: np.ndarray
+
+
+@dataclass
+class GlobalResult:
+    poses: np.ndarray
+    constraints: list[Constraint]
+    rejected: list[Constraint] = field(default_factory=list)
+    searches: int = 0
+    time_s: float = 0.0
+
+
+def _noise(sigmas, robust=None):
+    import gtsam
+
+    noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigmas, dtype=float))
+    return gtsam.noiseModel.Robust.Create(robust, noise) if robust is not None else noise
+
+
+class GlobalSlam:
+    """See the module docstring. ``steps`` (n, 3) and ``step_cov`` (n, 3, 3):
+    the dead-reckoning chain between the scans, which the graph keeps
+    beside the scan-to-submap constraints."""
+
+    def __init__(self, points: ScanPoints, local: LocalResult, cfg: SubmapsConfig,
+                 steps: np.ndarray, step_cov: np.ndarray):
+        self.points, self.local, self.cfg = points, local, cfg
+        self.steps, self.step_cov = steps, step_cov
+        steps = np.hypot(*np.diff(local.poses[:, :2], axis=0).T)
+        self.path = np.concatenate([[0.0], np.cumsum(steps)])
+        self.constraints: list[Constraint] = []
+
+    # -- the walk ---------------------------------------------------------------
+
+    def run(self) -> GlobalResult:
+        import gtsam
+
+        cfg, local = self.cfg, self.local
+        cc = cfg.constraints
+        start = time.perf_counter()
+        n = len(local.poses)
+        est = local.poses.copy()
+        member: dict[int, set[int]] = {}
+        for sid, sm in enumerate(local.submaps):
+            for k in sm.scans:
+                member.setdefault(k, set()).add(sid)
+        last_scan = np.array([sm.scans[-1] for sm in local.submaps])
+        centres = np.array([np.mean(sm.poses, axis=0)[:2] for sm in local.submaps])  # in the anchor's frame
+        searches = 0
+        pending = 0
+        last_opt = 0
+        last_tied = np.full(len(local.submaps), -np.inf)  # path at the last inter constraint of each submap
+        self.robust = gtsam.noiseModel.mEstimator.Cauchy.Create(cc.robust_scale)
+        self.chain_robust = gtsam.noiseModel.mEstimator.Cauchy.Create(cc.robust_scale)
+        for i in range(n):
+            if i > 0:
+                est[i] = compose(est[i - 1], between(local.poses[i - 1], local.poses[i]))
+            self._add_intra(i)
+            if len(self.points.points[i]) < cfg.min_points:
+                continue
+            # Finished submaps the scan did not help build, nearest first.
+            done = np.nonzero(last_scan < i)[0]
+            done = [s for s in done if s not in member.get(i, ())]
+            if not done:
+                continue
+            anchors = est[[local.submaps[s].anchor for s in done]]
+            c, s_ = np.cos(anchors[:, 2]), np.sin(anchors[:, 2])
+            cxy = centres[done]
+            world = anchors[:, :2] + np.column_stack([c * cxy[:, 0] - s_ * cxy[:, 1], s_ * cxy[:, 0] + c * cxy[:, 1]])
+            dist = np.hypot(*(world - est[i, :2]).T)
+            order = np.argsort(dist)
+            tried = 0
+            for o in order:
+                if dist[o] > cc.max_distance_m or tried >= cc.max_per_scan:
+                    break
+                sid = done[o]
+                if self.path[i] - last_tied[sid] < cc.spacing_m:
+                    continue
+                sm = local.submaps[sid]
+                sep = self.path[i] - self.path[sm.scans[-1]]
+                loop = sep >= cc.loop_separation_m
+                grow = sep
+                lin = min(cc.linear_window_m + cc.linear_window_per_m * grow, cc.max_linear_window_m)
+                ang = np.radians(min(cc.angular_window_deg + cc.angular_window_per_m_deg * grow, cc.max_angular_window_deg))
+                min_score = cc.loop_min_score if loop else cc.near_min_score
+                guess = between(est[sm.anchor], est[i])
+                tried += 1
+                searches += 1
+                m = match_scan(sm, self.points, i, guess, cfg, lin, ang, min_score, sid, unique=cfg.ambiguity.enabled)
+                if m is None or not m.refined:
+                    continue
+                self._add_inter(m, sm.anchor, "loop" if loop else "near")
+                last_tied[sid] = self.path[i]
+                pending += 1
+            if pending and i - last_opt >= cc.optimise_every:
+                est[: i + 1] = self._optimise(est[: i + 1], i + 1)
+                last_opt, pending = i, 0
+        est = self._optimise(est, n)
+        bad = self._gnc_outliers(est, n)
+        rejected = [self.constraints[k] for k in bad]
+        if bad:
+            self.constraints = [c for k, c in enumerate(self.constraints) if k not in bad]
+            est = self._optimise(est, n)
+        return GlobalResult(est, self.constraints, rejected, searches, time.perf_counter() - start)
+
+    # -- constraints --------------------------------------------------------------
+
+    def _add_intra(self, i: int) -> None:
+        m = self.local.matches[i]
+        if m is None or not m.refined:
+            return
+        self._add(m, "intra", before=i)
+
+    def _add_inter(self, m: Match, anchor: int, kind: str) -> None:
+        self._add(m, kind)
+
+    def _add(self, m: Match, kind: str, before: int | None = None) -> None:
+        """The match as a constraint from the submap's scan nearest to it
+        (of those inserted ``before`` the matched scan, for a local match,
+        and placed by a refined match themselves): the submap is rigid, so
+        any of its scans can carry the match, and the nearest carries the
+        least of the submap's own drift."""
+        sm = self.local.submaps[m.submap]
+        k = [n for n, scan in enumerate(sm.scans) if (before is None or scan < before) and self._placed(scan)]
+        if not k:
+            return
+        where = np.array([sm.poses[n][:2] for n in k])
+        near = k[int(np.argmin(np.hypot(*(where - m.pose[:2]).T)))]
+        delta = between(sm.poses[near], m.pose)
+        if kind != "intra" and self.cfg.constraints.refine_near:
+            again = refine_near(self.points, self.local.poses, sm.scans[near], m.scan, delta, self.cfg, m.submap, m.score)
+            if again is not None:
+                m, delta = again, again.pose
+        info = self._information(m, kind != "intra")
+        self.constraints.append(Constraint(m.submap, sm.scans[near], m.scan, delta, kind, m.score, info, m.weak))
+
+    def _placed(self, scan: int) -> bool:
+        """Whether local SLAM placed ``scan`` by a refined match (or it is the first)."""
+        m = self.local.matches[scan]
+        return scan == 0 or (m is not None and m.refined)
+
+    def _information(self, m: Match, inter: bool) -> np.ndarray:
+        """The match's own uncertainty and the configured sigmas, in the
+        scan's axes, without the weak directions."""
+        sig = self.cfg.constraints if inter else self.cfg.local
+        return match_information(m.pose, m.covariance, m.weak, sig.sigma_xy_m, np.radians(sig.sigma_yaw_deg))
+
+    # -- the graph ------------------------------------------------------------------
+
+    def _gnc_outliers(self, est: np.ndarray, n: int) -> set[int]:
+        """Indices of the inter constraints that graduated non-convexity
+        (Yang et al. 2020; truncated least squares, GTSAM's GncOptimizer)
+        gives a weight below one half, every other factor a known inlier."""
+        import gtsam
+
+        from slam.factors import pose_key
+
+        g, index = self._graph(n, robust_inter=False)
+        inter = [pos for pos, k in index if self.constraints[k].kind != "intra"]
+        if not inter:
+            return set()
+        values = gtsam.Values()
+        for i in range(n):
+            values.insert(pose_key(i), gtsam.Pose2(*est[i]))
+        params = gtsam.GncLMParams()
+        params.setLossType(gtsam.GncLossType.TLS)
+        inter_set = set(inter)
+        params.setKnownInliers([f for f in range(g.size()) if f not in inter_set])
+        optimizer = gtsam.GncLMOptimizer(g, values, params)
+        optimizer.setInlierCostThresholdsAtProbability(self.cfg.constraints.inlier_probability)
+        optimizer.optimize()
+        weights = np.asarray(optimizer.getWeights())
+        by_factor = dict(index)
+        return {by_factor[f] for f in inter if weights[f] < 0.5}
+
+    def _graph(self, n: int, robust_inter: bool = True):
+        import gtsam
+
+        from slam.factors import pose_key
+
+        g = gtsam.NonlinearFactorGraph()
+        g.add(gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(*self.local.poses[0]), _noise([1e-3, 1e-3, 1e-4])))
+        for i in range(1, n):
+            cov = self.step_cov[i]
+            if cov[0, 0] >= UNKNOWN_VARIANCE:  # no measurement of this step: the local SLAM's
+                step, cov = between(self.local.poses[i - 1], self.local.poses[i]), np.diag(UNMATCHED_VARIANCE)
+            else:
+                step = self.steps[i]
+            noise = gtsam.noiseModel.Gaussian.Covariance(cov + 1e-12 * np.eye(3))
+            if self.local.matches[i] is not None and self.local.matches[i].refined:
+                # Where the scan was matched, dead reckoning is a second
+                # opinion: a robust one, as odometry and a scan matcher seeded
+                # by it can be wrong together (belgioioso: 15-18 deg at once).
+                noise = gtsam.noiseModel.Robust.Create(self.chain_robust, noise)
+            g.add(gtsam.BetweenFactorPose2(pose_key(i - 1), pose_key(i), gtsam.Pose2(*step), noise))
+        index = []  # (factor position, constraint index)
+        for k, c in enumerate(self.constraints):
+            if c.scan >= n:
+                continue
+            robust = self.robust if c.kind != "intra" and robust_inter else None
+            index.append((g.size(), k))
+            g.add(gtsam.BetweenFactorPose2(pose_key(c.anchor), pose_key(c.scan), gtsam.Pose2(*c.delta),
+                                           loop_noise(c.information, robust)))
+        return g, index
+
+    def _optimise(self, est: np.ndarray, n: int) -> np.ndarray:
+        import gtsam
+
+        from slam.factors import pose_key
+
+        g, _ = self._graph(n)
+        values = gtsam.Values()
+        for i in range(n):
+            values.insert(pose_key(i), gtsam.Pose2(*est[i]))
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(50)
+        result = gtsam.LevenbergMarquardtOptimizer(g, values, params).optimize()
+        out = est.copy()
+        for i in range(n):
+            p = result.atPose2(pose_key(i))
+            out[i] = (p.x(), p.y(), p.theta())
+        return out
+
+
+def match_information(pose: np.ndarray, covariance: np.ndarray, weak: np.ndarray, sigma_xy_m: float,
+                      sigma_yaw_rad: float) -> np.ndarray:
+    """Information (3, 3) of a match at ``pose`` in the frame of the submap,
+    in the convention of a Pose2 between factor (the error in the scan's
+    axes): the match's ``covariance`` (3, 3, submap axes) plus
+    ``sigma_xy_m`` along and across the scan's heading and
+    ``sigma_yaw_rad``, with zero information along each ``weak`` direction
+    (unit vectors (k, 3) in the submap's axes)."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    to_scan = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    cov = to_scan @ covariance @ to_scan.T + np.diag([sigma_xy_m**2, sigma_xy_m**2, sigma_yaw_rad**2])
+    info = np.linalg.inv(cov)
+    if len(weak) == 0:
+        return info
+    basis = np.linalg.qr((to_scan @ np.asarray(weak).T))[0]
+    keep = np.eye(3) - basis @ basis.T
+    return keep @ info @ keep

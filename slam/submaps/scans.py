@@ -1,0 +1,48 @@
+"""The laser points of every scan, with the normal of the wall each lies on."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from slam.loops.local_maps import voxel_first
+from slam.loops.registration import scan_normals
+from slam.recording import Scans
+
+
+class ScanPoints:
+    """Planar points (m, 2) of each scan in the laser frame, thinned to one
+    per ``voxel_m`` cell, and the unit normal of each (zero where the beams
+    around it do not lie on a line: corners, clutter, the scan's ends).
+
+    ``search``: the same points thinned to ``search_voxel_m`` (the
+    correlative search's cells; its score is a mean, which a few points per
+    cell estimate as well as many). Beams outside [``min_range``,
+    ``max_range``) are dropped. A normal is
+    fitted to the ``half_window`` beams on each side, when none of them is
+    more than ``max_gap_m`` from the next and the stretch's linearity is at
+    least ``min_linearity``.
+    """
+
+    def __init__(self, scans: Scans, min_range: float, max_range: float, voxel_m: float,
+                 half_window: int = 2, max_gap_m: float = 0.3, min_linearity: float = 0.8,
+                 index: np.ndarray | None = None, search_voxel_m: float | None = None):
+        from slam.frontend import ScanProjector
+
+        index = np.arange(len(scans)) if index is None else np.asarray(index)
+        project = ScanProjector(scans.angles, min_range, min(max_range, scans.range_max))
+        pts, row = project.planar_points(scans.ranges[index])
+        normals, linearity = scan_normals(pts, half_window, max_gap_m, row)
+        normals[linearity < min_linearity] = 0.0
+        bounds = np.searchsorted(row, np.arange(len(index) + 1))
+        self.points: list[np.ndarray] = []
+        self.normals: list[np.ndarray] = []
+        self.search: list[np.ndarray] = []
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            keep = a + voxel_first(pts[a:b], voxel_m)
+            self.points.append(pts[keep])
+            self.normals.append(normals[keep])
+            coarse = self.points[-1] if search_voxel_m is None else pts[a + voxel_first(pts[a:b], search_voxel_m)]
+            self.search.append(coarse)
+
+    def __len__(self) -> int:
+        return len(self.points)

@@ -1,0 +1,147 @@
+"""Scan-to-submap SLAM on a simulated building (slam.submaps): refinement,
+local SLAM, the constraint search and its graph, against the true poses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slam.geometry import between, compose
+from slam.recording import Scans
+from slam.sim.scenario import Region, RegionKind
+from slam.sim.world import World
+from slam.submaps.build import build_submap_constraints, select_nodes
+from slam.submaps.config import SubmapsConfig
+from slam.submaps.refine import point_map, pose_uncertainty, refine
+from slam.config import FrontendConfig
+from validation.loops.chain import integrate
+from validation.loops.gating import pinned_error
+
+BEAMS = np.radians(np.arange(-90.0, 90.0, 1.0))  # a sparse 180-beam scanner
+
+
+def world_of(lines: list[list[tuple[float, float]]]) -> World:
+    segs = []
+    for line in lines:
+        p = np.asarray(line, dtype=float)
+        segs += [p[i : i + 2] for i in range(len(p) - 1)]
+    segments = np.asarray(segs)
+    d = segments[:, 1] - segments[:, 0]
+    normals = np.column_stack([-d[:, 1], d[:, 0]]) / np.hypot(d[:, 0], d[:, 1])[:, None]
+    return World(segments, normals, [], Region(name="all", kind=RegionKind.INDOOR, polygon=[(0, 0), (1, 0), (0, 1)]))
+
+
+def building() -> World:
+    """A ring corridor around a block of rooms, with doors and alcoves that
+    make places distinguishable."""
+    outer = [(-2, -2), (22, -2), (22, 14), (-2, 14), (-2, -2)]
+    inner = [(2, 2), (18, 2), (18, 10), (2, 10), (2, 2)]
+    features = [
+        [(5, -2), (5, -1.2)], [(9, 2), (9, 1.4)], [(14, -2), (14, -0.9), (15, -0.9)],
+        [(22, 5), (21.2, 5)], [(18, 7), (18.8, 7), (18.8, 8)], [(12, 14), (12, 13.1)],
+        [(7, 10), (7, 10.7), (6, 10.7)], [(-2, 6), (-1.1, 6)], [(2, 4), (1.3, 4)], [(16, 14), (16, 12.9)],
+    ]
+    return world_of([outer, inner, *features])
+
+
+def ring_path(step_m: float, laps: float) -> np.ndarray:
+    """Poses along the corridor's centre line, counter-clockwise."""
+    corners = np.array([(0, 0), (20, 0), (20, 12), (0, 12), (0, 0)], dtype=float)
+    pts = []
+    for a, b in zip(corners[:-1], corners[1:]):
+        n = int(np.hypot(*(b - a)) / step_m)
+        pts.append(a + np.linspace(0, 1, n, endpoint=False)[:, None] * (b - a))
+    xy = np.concatenate(pts)
+    xy = np.concatenate([xy] * int(np.ceil(laps)))[: int(len(xy) * laps)]
+    d = np.diff(xy, axis=0, append=xy[:1] + (xy[1] - xy[0]))
+    yaw = np.arctan2(d[:, 1], d[:, 0])
+    return np.column_stack([xy, yaw])
+
+
+def simulate(world: World, poses: np.ndarray, rng) -> Scans:
+    ranges = np.empty((len(poses), len(BEAMS)), dtype=np.float32)
+    for k, p in enumerate(poses):
+        r, _ = world.cast(p[:2], p[2] + BEAMS, 30.0)
+        ranges[k] = np.where(np.isfinite(r), r + rng.normal(0.0, 0.01, len(r)), 81.0)
+    return Scans(t=np.arange(len(poses), dtype=float), ranges=ranges, angles=BEAMS.copy(), range_min=0.0, range_max=80.0)
+
+
+def drifting_odometry(poses: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Steps with 2 % scale error and 1.5 deg of yaw noise each, and their covariance."""
+    steps = np.zeros_like(poses)
+    steps[1:] = np.array([between(a, b) for a, b in zip(poses[:-1], poses[1:])])
+    noisy = steps.copy()
+    noisy[1:, :2] *= 1.02
+    noisy[1:, 2] += rng.normal(0.0, np.radians(1.5), len(poses) - 1)
+    cov = np.zeros((len(poses), 3, 3))
+    cov[1:] = np.diag([0.05**2, 0.05**2, np.radians(2.0) ** 2])
+    return noisy, cov
+
+
+@pytest.fixture(scope="module")
+def run():
+    rng = np.random.default_rng(7)
+    truth = ring_path(0.7, 2.0)
+    scans = simulate(building(), truth, rng)
+    steps, cov = drifting_odometry(truth, rng)
+    cfg = SubmapsConfig(enabled=True)
+    result = build_submap_constraints(scans, np.arange(len(truth)), steps, cov, FrontendConfig(max_range_m=50.0), cfg)
+    return truth, steps, result
+
+
+def rel_error(est: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    e = np.array([between(between(a, b), between(c, d)) for a, b, c, d in zip(truth[:-1], truth[1:], est[:-1], est[1:])])
+    return np.hypot(e[:, 0], e[:, 1])
+
+
+def test_refinement_recovers_an_offset_and_leaves_a_corridor_axis_free():
+    x = np.arange(-10.0, 10.0, 0.05)
+    room = np.concatenate([np.column_stack([x, np.full_like(x, 1.0)]), np.column_stack([x, np.full_like(x, -1.0)]),
+                           np.column_stack([np.full(40, 3.0), np.linspace(-1, 1, 40)])])
+    normals = np.concatenate([np.tile([0.0, 1.0], (2 * len(x), 1)), np.tile([1.0, 0.0], (40, 1))])
+    pm = point_map(room, normals)
+    rng = np.random.default_rng(3)
+    scan = room[rng.choice(len(room), 200, replace=False)]
+    ref = refine(scan, pm, np.array([0.05, -0.04, 0.01]))
+    assert ref.converged and np.allclose(ref.pose, 0.0, atol=5e-3)
+    _, free = pose_uncertainty(ref.information, 5.0, 0.1)
+    assert len(free) == 0  # the end wall pins the axis
+
+    corridor = point_map(room[: 2 * len(x)], normals[: 2 * len(x)])
+    ref = refine(scan[np.abs(scan[:, 1]) > 0.5], corridor, np.array([0.0, 0.03, 0.0]))
+    _, free = pose_uncertainty(ref.information, 5.0, 0.1)
+    assert len(free) == 1 and abs(free[0][0]) > 0.99  # free along x only
+
+
+def test_local_slam_is_more_accurate_than_its_odometry(run):
+    truth, steps, result = run
+    odometry = integrate(truth[0], steps)
+    assert rel_error(result.local.poses, truth).mean() < 0.5 * rel_error(odometry, truth).mean()
+    assert rel_error(result.local.poses, truth).mean() < 0.03
+
+
+def test_the_second_lap_closes_loops_and_every_kept_constraint_is_right(run):
+    truth, _, result = run
+    loops = result.of_kind("loop")
+    assert len(loops) >= 10
+    for c in result.constraints:
+        e = pinned_error(c.information, between(between(truth[c.anchor], truth[c.scan]), c.delta))
+        assert np.hypot(e[0], e[1]) <= 0.15 and abs(e[2]) <= np.radians(3.0), (c.kind, c.anchor, c.scan, e)
+
+
+def test_the_graph_estimate_holds_the_map_together(run):
+    truth, steps, result = run
+    start = truth[0]
+    est = np.array([compose(start, between(result.estimate[0], p)) for p in result.estimate])
+    odometry = integrate(start, steps)
+    final = np.hypot(*(est[-1, :2] - truth[-1, :2]))
+    assert final < 0.2 < np.hypot(*(odometry[-1, :2] - truth[-1, :2]))
+    assert np.sqrt(np.mean(np.sum((est[:, :2] - truth[:, :2]) ** 2, axis=1))) < 0.15
+
+
+def test_nodes_are_taken_by_motion():
+    steps = np.zeros((10, 3))
+    steps[1:, 0] = 0.1
+    steps[5, 2] = np.radians(10)
+    nodes = select_nodes(steps, 0.25, np.radians(5))
+    assert list(nodes) == [0, 3, 5, 8]
