@@ -22,11 +22,13 @@ writes files, and ends with ``os._exit``.
 
 from __future__ import annotations
 
+import gc
 import multiprocessing
 import os
 import pickle
 import signal
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from slam.errors import GslamError
@@ -62,6 +64,22 @@ class Inline:
 
     def close(self) -> None:
         self.sent.clear()
+
+
+@contextmanager
+def _frozen_heap() -> Iterator[None]:
+    """Fork inside this: the objects that exist now are moved out of the
+    garbage collector's reach (``gc.freeze``) for the fork, so the child's
+    collections never walk them. Otherwise each collection in the child
+    writes to every inherited object's header, and the kernel copies each
+    page the parent shares with it (a fifth of a second of CPU time for a
+    child that imports rosbags). The parent's objects go back to the
+    collector right after."""
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def _end_with_parent(parent: int) -> None:
@@ -108,7 +126,8 @@ class Forked:
         ctx = multiprocessing.get_context("fork")
         self.conn, child_conn = ctx.Pipe()
         self.process = ctx.Process(target=_child, args=(child_conn, fn, args, os.getpid()), name=f"gslam {what}", daemon=True)
-        self.process.start()
+        with _frozen_heap():
+            self.process.start()
         child_conn.close()
 
     def send(self, obj: Any) -> None:
@@ -157,7 +176,8 @@ class Subforked(Forked):
         self.what = what
         parent = os.getpid()
         self.conn, child_conn = multiprocessing.Pipe()
-        pid = os.fork()
+        with _frozen_heap():
+            pid = os.fork()
         if pid == 0:  # the child: no return from here
             self.conn.close()
             try:
