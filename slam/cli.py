@@ -91,8 +91,11 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
     res = calibrate(args.runs, _config_path(args.config), args.out, clean=args.clean, false_alarm=args.false_alarm,
                     force=args.force, progress=not args.quiet, overrides=args.set or [],
-                    lag_reference=args.lag_reference)
+                    lag_reference=args.lag_reference, drop_unsupported=not args.keep_unsupported)
     for name, choice in res.choices.items():
+        if name in res.dropped:
+            print(f"  {name}: dropped, the data do not support it: {res.dropped[name].reason}")
+            continue
         if choice is None:
             print(f"  {name}: kept as configured (no run has both its streams)")
             continue
@@ -110,6 +113,15 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         if not any(a.stream == lag.stream for a in res.applied):
             print(f"  time offset of {lag.stream} against {lag.reference}: {lag.offset_s:+.3f} s, RMS of the rate "
                   f"difference {-100 * lag.gain:+.0f} %: kept as configured, {lag.why_not() or 'proposed (see the file)'}")
+    if res.applied_heading is not None:
+        h = res.applied_heading
+        print(f"  compass heading against the GPS course: {math.degrees(h.offset_rad):+.1f} deg (mean resultant length "
+              f"{h.steadiness:.2f} over {h.steps} steps): added to input.compass.mounting_yaw_deg, the relations "
+              "learnt with it")
+    elif res.heading_offset is not None:
+        h = res.heading_offset
+        print(f"  compass heading against the GPS course: {math.degrees(h.offset_rad):+.1f} deg: kept as configured, "
+              f"{h.why_not()}")
     if res.compass_noise is not None:
         n = res.compass_noise
         print(f"  compass factor: sd {math.degrees(n.sd_rad):.3g} deg against the gyro, correlated over "
@@ -123,17 +135,28 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     from slam.inspection import inspect_recording
     from slam.io.outdir import check_new_file
 
+    base = _config_path(args.config) if args.config is not None else None
     if args.config_out is not None:
-        check_new_file(args.config_out, [args.input], args.force, command="inspect", flag="--config-out")
-    found = inspect_recording(args.input)
+        from slam.config import config_files
+
+        check_new_file(args.config_out, [args.input, *config_files(base)], args.force, command="inspect",
+                       flag="--config-out")
+    found = inspect_recording(args.input, starter=args.config_out is not None, base=base)
     print(found.report())
     if args.config_out is None:
-        print(f"a starter config for gslam map: gslam inspect {args.input} --config-out my_robot.yaml")
+        print(f"a starter config, with the system model proposed for these streams: "
+              f"gslam inspect {args.input} --config-out my_robot.yaml")
         return 0
     from slam.io.atomic import write_text
 
     write_text(args.config_out, found.starter)
-    print(f"wrote {args.config_out}: gslam map {args.input} --config {args.config_out} --out runs/first_map")
+    if found.proposal is not None and found.proposal.nothing_to_validate() is None:
+        print(f"wrote {args.config_out}: learn its observers with gslam calibrate {args.input} --config "
+              f"{args.config_out} --out learnt.yaml, then gslam map {args.input} --config learnt.yaml --out DIR "
+              "--gating on")
+    else:
+        print(f"wrote {args.config_out}: gslam map {args.input} --config {args.config_out} --out runs/first_map "
+              "(ungated)")
     return 0
 
 
@@ -321,18 +344,26 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the stream the yaw streams' time offsets are measured against (default gyro; none: "
                         "measure none, keep input.time_offsets_s as configured)")
     k.add_argument("--out", required=True, type=_out_path, metavar="MODEL.yaml", help="the calibrated config to write")
+    k.add_argument("--keep-unsupported", action="store_true",
+                   help="keep the relations whose streams the data show not to move together (default: drop them, "
+                        "with the reason in the file)")
     k.add_argument("--force", action="store_true",
                    help="replace --out if another gslam command wrote it (never a file of yours)")
     k.set_defaults(func=_cmd_calibrate)
 
     i = _sub(sub, "inspect", "list what a recording holds (topics, types, counts, rates, time span); "
-             "write a starter config for gslam map",
+             "write a starter config for gslam map with the system model proposed for its streams",
              "examples:\n  gslam inspect recording.bag\n  gslam inspect recording.bag --config-out my_robot.yaml\n"
-             "  gslam map recording.bag --config my_robot.yaml --out runs/first_map", common)
+             "  gslam calibrate recording.bag --config my_robot.yaml --out learnt.yaml\n"
+             "  gslam map recording.bag --config learnt.yaml --out runs/gated --gating on\n"
+             "  gslam inspect recording.bag --config mine.yaml --config-out mine_proposed.yaml", common)
     i.add_argument("input", help=INPUTS)
+    i.add_argument("--config", default=None, help="a config to build the starter on: its input and other sections "
+                   "kept, its validation model, observers and gating factors proposed for the recording's streams "
+                   "(default: topics guessed from a bag, the shipped config for the other formats)")
     i.add_argument("--config-out", default=None, type=_out_path, metavar="FILE",
-                   help="write a commented starter config for gslam map with the topics filled in (a new file, "
-                        "or an earlier one gslam inspect wrote)")
+                   help="write a commented starter config for gslam map with the topics filled in and the system "
+                        "model proposed (a new file, or an earlier one gslam inspect wrote)")
     i.add_argument("--force", action="store_true", help="replace FILE of --config-out if another gslam command wrote it")
     i.set_defaults(func=_cmd_inspect)
 

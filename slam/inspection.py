@@ -1,12 +1,18 @@
-"""``gslam inspect``: what a recording holds, and a starter config to map it.
+"""``gslam inspect``: what a recording holds, and a starter config to map
+and gate it.
 
 For a ROS 1 or ROS 2 bag (or a simulated run folder) the report lists every
-topic with its message type, count, rate and time span (bag receive times),
-without decoding a message. For the other formats (CARMEN, BROAD, libRSF) it
-reads the recording and lists its streams. :attr:`Inspection.starter` is a
-commented pipeline config for ``gslam map`` with the topics filled in from
-what the bag holds; for the other formats it is the shipped config of that
-data set.
+topic with its message type, count, rate and time span (bag receive times).
+For the other formats (CARMEN, BROAD, libRSF) it reads the recording and
+lists its streams.
+
+With ``starter`` (``--config-out``), :attr:`Inspection.starter` is a
+commented pipeline config for ``gslam map`` (:mod:`slam.starter`): for a
+bag, the topics guessed from what it holds (:mod:`slam.topic_choice`); for
+the other formats, the shipped config of that data set; with a ``base``
+config (``--config``), that config. Its validation section holds the
+system model proposed for the streams the recording holds as that config
+reads them (:mod:`validation.proposal`), which ``gslam calibrate`` learns.
 """
 
 from __future__ import annotations
@@ -14,18 +20,21 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from slam.config import InputConfig
+from slam.config import InputConfig, PipelineConfig, load_config
 from slam.errors import GslamError
-from slam.io.outdir import result_file_mark
 from slam.io.readers import SIDECAR, guess_format, is_run_folder, load_sidecar, read_recording, run_recording
 from slam.io.rosbag import open_bag
-from slam.io.rosbag_streams import IMU, LASER_SCAN, MAGNETIC_FIELD, NAV_SAT_FIX, ODOMETRY, POSE_STAMPED
 from slam.recording import Recording
-from slam.resources import configs_dir, shipped_config
+from slam.resources import shipped_config
+from slam.starter import bag_input, bag_starter, base_starter, recording_sources
+from slam.topic_choice import TopicInfo, choose_topics
+from validation.proposal import ModelProposal, propose_model
 
 _NS = 1e9
 _DATASET_CONFIGS = {"carmen": "datasets/carmen.yaml", "broad": "datasets/broad.yaml", "librsf": "datasets/librsf_corridor.yaml"}
-_GROUNDTRUTH_HINTS = ("ground_truth", "groundtruth", "gt", "vicon", "mocap", "optitrack")
+_NAMES = {"carmen": "CARMEN log", "broad": "BROAD trial (.mat)", "librsf": "libRSF data set"}
+_SHARED = {"librsf": {"gyro": "its yaw rate is the odometry's own (the odom2 lines' wz), not a sensor of its own"}}
+"""Streams a reader makes from another stream's sensor: no witness of it."""
 
 
 @dataclass(frozen=True)
@@ -56,6 +65,7 @@ class Inspection:
     topics: list[Topic]
     notes: list[str] = field(default_factory=list)
     starter: str = ""
+    proposal: ModelProposal | None = None
 
     def report(self) -> str:
         what = "topics" if "bag" in self.format or "run" in self.format else "streams"
@@ -67,23 +77,76 @@ class Inspection:
             rate = f"{t.rate_hz:8.2f}" if t.rate_hz is not None else f"{'–':>8}"
             lines.append(f"  {t.name:<{width}}  {t.msgtype:<{twidth}}  {t.count:>8}  {rate}  {t.start_s:.1f}–{t.end_s:.1f}")
         lines += [f"  {n}" for n in self.notes]
+        if self.proposal is not None:
+            lines.append(proposal_summary(self.proposal))
         return "\n".join(lines)
 
 
-def inspect_recording(path: str | Path) -> Inspection:
-    """Inspect a bag, a run folder, or a CARMEN, BROAD or libRSF recording."""
+def proposal_summary(p: ModelProposal) -> str:
+    """One line: what the proposed model holds, or why nothing can be validated."""
+    nothing = p.nothing_to_validate()
+    if nothing:
+        return f"nothing can be validated: {nothing}"
+    kinds = sorted({r.config.kind for r in p.relations})
+    return (f"proposed system model: {len(p.components)} components, {len(p.relations)} observers "
+            f"({', '.join(kinds)}) over {len({frozenset(r.config.components) for r in p.relations})} pairs of "
+            f"components, {len(p.unary_checks)} checks")
+
+
+def inspect_recording(path: str | Path, starter: bool = False, base: str | Path | None = None) -> Inspection:
+    """Inspect a bag, a run folder, or a CARMEN, BROAD or libRSF recording;
+    with ``starter``, also write the starter config (module docstring),
+    built on the config ``base`` if given."""
     path = Path(path)
     fmt = guess_format(path)
     if fmt != "rosbag":
-        return _inspect_other(path, fmt)
-    bag = run_recording(path) if is_run_folder(path) else path
-    found = _inspect_bag(path, bag)
-    if is_run_folder(path):
-        sidecar = load_sidecar(path / SIDECAR)
-        faults = ", ".join(f"{c} {len(iv)}" for c, iv in sidecar.faults.items() if iv) or "none"
-        found.format = f"run folder ({found.format} + truth.json)"
-        found.notes.append(f"scenario '{sidecar.scenario}', seed {sidecar.seed}; true fault intervals: {faults}")
+        found = _inspect_other(path, fmt)
+    else:
+        bag = run_recording(path) if is_run_folder(path) else path
+        found = _inspect_bag(path, bag)
+        if is_run_folder(path):
+            sidecar = load_sidecar(path / SIDECAR)
+            faults = ", ".join(f"{c} {len(iv)}" for c, iv in sidecar.faults.items() if iv) or "none"
+            found.format = f"run folder ({found.format} + truth.json)"
+            found.notes.append(f"scenario '{sidecar.scenario}', seed {sidecar.seed}; true fault intervals: {faults}")
+    if starter or base is not None:
+        _starter(found, fmt, Path(base) if base is not None else None)
     return found
+
+
+def _starter(found: Inspection, fmt: str, base: Path | None) -> None:
+    """The starter config and the proposal, on ``base`` or on the guess."""
+    path = found.path
+    if base is None and fmt == "rosbag":
+        bag = run_recording(path) if is_run_folder(path) else path
+        choice = choose_topics(bag, [TopicInfo(t.name, t.msgtype, t.count) for t in found.topics])
+        config = PipelineConfig.model_validate({
+            "input": bag_input(choice),
+            "frontend": {"enabled": choice.scan is not None},
+            "backend": {"factors": {"scan_matching": {"enabled": choice.scan is not None}}},
+        })
+        origins = {k: v for k, v in config.input.topics.model_dump().items() if v is not None}
+        origins.update({name: extra.topic for name, extra in config.input.extra_odometry.items()})
+        found.proposal = _propose(path, config, origins, {})
+        found.starter = bag_starter(path, choice, found.proposal)
+        return
+    why = "the config given"
+    if base is None:
+        base, why = shipped_config(_DATASET_CONFIGS[fmt]), f"the shipped config for {_NAMES[fmt]} data sets"
+    config = load_config(base)
+    text = base.read_text()
+    shared = _SHARED.get(fmt, {})
+    origins = {"odometry": f"the {_NAMES.get(fmt, 'recording')}'s odometry"} if fmt != "rosbag" else {
+        k: v for k, v in config.input.topics.model_dump().items() if v is not None}
+    found.proposal = _propose(path, config, origins, shared)
+    for stream, reason in shared.items():
+        found.notes.append(f"not a witness: {stream}: {reason}")
+    found.starter = base_starter(path, base, text, found.proposal, why)
+
+
+def _propose(path: Path, config: PipelineConfig, origins: dict[str, str], shared: dict[str, str]) -> ModelProposal:
+    rec = read_recording(path, config.input)
+    return propose_model(recording_sources(rec, config, origins, shared))
 
 
 def _inspect_bag(path: Path, bag: Path) -> Inspection:
@@ -114,23 +177,13 @@ def _inspect_bag(path: Path, bag: Path) -> Inspection:
         for name in sorted(types)
     ]
     kind = "ROS 2 bag" if ros2 else "ROS 1 bag"
-    found = Inspection(path, kind, start_ns / _NS, (end_ns - start_ns) / _NS, topics)
-    found.starter = starter_config(path, topics)
-    return found
+    return Inspection(path, kind, start_ns / _NS, (end_ns - start_ns) / _NS, topics)
 
 
 def _inspect_other(path: Path, fmt: str) -> Inspection:
     rec = read_recording(path, InputConfig(format=fmt))
-    topics = _streams(rec)
-    names = {"carmen": "CARMEN log", "broad": "BROAD trial (.mat)", "librsf": "libRSF data set"}
-    found = Inspection(path, names.get(fmt, fmt), rec.t0, rec.duration, topics)
+    found = Inspection(path, _NAMES.get(fmt, fmt), rec.t0, rec.duration, _streams(rec))
     found.notes.append("streams as the reader makes them (this format has no topics)")
-    shipped = shipped_config(_DATASET_CONFIGS[fmt])
-    # The model paths are relative to the shipped file: make them absolute.
-    text = shipped.read_text().replace("../validation/", f"{configs_dir() / 'validation'}/")
-    found.starter = (f"{result_file_mark('inspect')}: a starter config for {path.name}, the shipped config for "
-                     f"{names[fmt]} data sets\n"
-                     f"# ({shipped.name}); check the comments against your recording.\n" + text)
     return found
 
 
@@ -145,83 +198,3 @@ def _streams(rec: Recording) -> list[Topic]:
     return out
 
 
-# --- starter config ------------------------------------------------------------------
-
-
-def _pick(topics: list[Topic], types: tuple[str, ...], avoid: tuple[str, ...] = ()) -> tuple[str | None, list[str]]:
-    """The busiest topic of one of ``types`` (preferring names without the
-    ``avoid`` hints), and the other candidates."""
-    found = [t for t in topics if t.msgtype in types]
-    found.sort(key=lambda t: (any(h in t.name.lower() for h in avoid), -t.count))
-    names = [t.name for t in found]
-    return (names[0] if names else None), names[1:]
-
-
-def _commented(line: str, comment: str, column: int = 31) -> str:
-    return f"{line:<{column - 1}} # {comment}"
-
-
-def starter_config(path: Path, topics: list[Topic]) -> str:
-    """A commented pipeline config for ``gslam map`` with the bag's topics."""
-    gt, gt_other = _pick([t for t in topics if any(h in t.name.lower() for h in _GROUNDTRUTH_HINTS)],
-                         (ODOMETRY, POSE_STAMPED))
-    rest = [t for t in topics if t.name != gt]
-    scan, scan_other = _pick(rest, (LASER_SCAN,))
-    gyro, gyro_other = _pick(rest, (IMU,))
-    mag, mag_other = _pick(rest, (MAGNETIC_FIELD,))
-    odom, odom_other = _pick(rest, (ODOMETRY,))
-    gps, gps_other = _pick(rest, (NAV_SAT_FIX,))
-    compass, source = (mag, "magnetic_field") if mag else (gyro, "imu_orientation")
-
-    def topic(key: str, value: str | None, what: str, others: list[str]) -> str:
-        note = what + (f"; also in the bag: {', '.join(others)}" if others else "") if value else f"{what}: none in the bag"
-        return _commented(f"    {key}: {value or 'null'}", note)
-
-    topics_lines = "\n".join([
-        topic("scan", scan, "sensor_msgs/LaserScan", scan_other),
-        topic("gyro", gyro, "sensor_msgs/Imu: angular_velocity.z", gyro_other),
-        topic("compass", compass, "MagneticField, or an Imu's orientation (compass.source)", mag_other),
-        topic("odometry", odom, "nav_msgs/Odometry", odom_other),
-        topic("gps", gps, "sensor_msgs/NavSatFix", gps_other),
-        topic("groundtruth", gt, "Odometry or PoseStamped, for evaluation only", gt_other),
-    ])
-    sm = "true" if scan else "false"
-    initial = "groundtruth" if gt else "origin"
-    return f"""\
-{result_file_mark('inspect')}: a starter config for {path.name}, written by `gslam inspect`.
-# Every key is optional and has a default (README, "Configuration");
-# configs/telemax.yaml is a fully commented example. Check the sigmas
-# against your sensors before trusting a result.
-#   gslam map {path} --config THIS.yaml --out runs/first_map
-
-input:
-  format: auto
-  topics:                      # null = stream not used
-{topics_lines}
-  gyro:
-    axis: z                    # world_z for an IMU mounted tilted or rolled
-  compass:
-{_commented(f"    source: {source}", "magnetic_field | imu_orientation")}
-    declination_deg: 0.0       # local magnetic declination, east positive
-    mounting_yaw_deg: 0.0      # yaw of the sensor on the robot
-
-frontend:                      # KISS-ICP on the 2D scans
-  enabled: {sm}
-  max_range_m: 30.0            # at most the laser's range_max
-
-keyframes:
-  period_s: 0.5                # a keyframe every 0.5 s (or set distance_m / yaw_deg)
-
-backend:
-  optimizer: batch             # batch | isam2 (long runs) | gnc_tls | gnc_gm
-{_commented(f"  initial_pose: {initial}", "groundtruth | origin")}
-  factors:                     # sigmas: the defaults; measure yours
-    odometry: {{enabled: {"true" if odom else "false"}}}
-    gyro: {{enabled: {"true" if gyro else "false"}}}
-    compass: {{enabled: {"true" if compass else "false"}}}
-    scan_matching: {{enabled: {sm}}}
-    gps: {{enabled: {"true" if gps else "false"}}}
-
-validation:
-  mode: "off"                  # on needs a system model: see configs/validation/telemax_model.yaml
-"""

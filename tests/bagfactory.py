@@ -112,10 +112,12 @@ class BagBuilder:
         yaw: float = 0.0,
         has_orientation: bool = True,
         log_t: float | None = None,
+        gravity: Sequence[float] = (0.0, 0.0, 9.81),
     ) -> None:
         """sensor_msgs/Imu with yaw rate ``rate_z`` (rad/s) and orientation
         yaw ``yaw`` (rad); ``has_orientation=False`` marks the orientation
-        as absent (covariance[0] = -1, REP-145)."""
+        as absent (covariance[0] = -1, REP-145); ``gravity``: what the
+        accelerometer reads at rest (m/s^2, +9.81 on the axis pointing up)."""
         cov = np.zeros(9)
         ocov = cov.copy()
         if not has_orientation:
@@ -126,7 +128,7 @@ class BagBuilder:
             orientation_covariance=ocov,
             angular_velocity=self._vec(0.0, 0.0, rate_z),
             angular_velocity_covariance=cov.copy(),
-            linear_acceleration=self._vec(0.0, 0.0, 9.81),
+            linear_acceleration=self._vec(*gravity),
             linear_acceleration_covariance=cov.copy(),
         )
         self.add(topic, IMU, msg, t if log_t is None else log_t)
@@ -336,6 +338,7 @@ def sensor_bag(
     ros: int = 1,
     t0: float = 1_700_000_000.0,
     datum: tuple[float, float] = (48.0, 11.0),
+    heading_offset: float = 0.0,
 ) -> BagBuilder:
     """A robot driving 1 m/s with left and right turns and changes of speed,
     recorded by the ``sensors`` of :data:`SENSOR_TOPICS`:
@@ -343,6 +346,8 @@ def sensor_bag(
     * ``imu``: sensor_msgs/Imu at 50 Hz, yaw rate with 0.2 deg/s noise and a
       0.05 deg/s bias, its orientation a heading with 1 deg noise;
       ``imu_no_orientation``: the same without an orientation (REP-145);
+      ``imu_down``: that one mounted upside down (z down: the yaw rate and
+      gravity read negative);
     * ``mag``: sensor_msgs/MagneticField at 20 Hz, a level field of 20 uT
       north and 40 uT down with 0.3 uT noise;
     * ``odom``: wheel odometry at 20 Hz with 2 % errors of distance and turn;
@@ -357,7 +362,9 @@ def sensor_bag(
     heading drifts 0.15 rad/s off (a visual odometry losing track), the
     gyro gains a 2 deg/s bias, the magnetometer's field is bent by 40 deg.
     ``unrelated``: sensors whose streams come from another robot's path
-    (the same speeds, other turns). ``t`` starts at ``t0``."""
+    (the same speeds, other turns). ``heading_offset`` (rad) turns the
+    IMU's orientation heading and the magnetometer's (a sensor mounted
+    turned). ``t`` starts at ``t0``."""
     from slam.geometry import geodetic_from_enu
 
     rng = np.random.default_rng(seed)
@@ -400,18 +407,21 @@ def sensor_bag(
 
     bag = BagBuilder(ros)
     for sensor in sensors:
-        every = {"imu": 2, "imu_no_orientation": 2, "mag": 5, "odom": 5, "vo": 7, "odom2": 10, "gps": 50,
+        every = {"imu": 2, "imu_no_orientation": 2, "imu_down": 2, "mag": 5, "odom": 5, "vo": 7, "odom2": 10, "gps": 50,
                  "filtered": 5}[sensor]
         idx = np.arange(0, len(t), every)
         rate, _, yaw, x, y = truth(sensor)
-        if sensor in ("imu", "imu_no_orientation"):
+        if sensor in ("imu", "imu_no_orientation", "imu_down"):
             bias = np.radians(0.05) + np.where(inside("imu"), np.radians(2.0), 0.0)
-            heading = yaw + np.radians(1.0) * rng.standard_normal(len(t))
+            heading = yaw + heading_offset + np.radians(1.0) * rng.standard_normal(len(t))
+            # Mounted upside down: z points down, the yaw rate reads negative, gravity on -z.
+            sign = -1.0 if sensor == "imu_down" else 1.0
             for k in idx:
-                bag.imu(SENSOR_TOPICS["imu"], t0 + t[k], rate_z=rate[k] + bias[k] + np.radians(0.2) * rng.standard_normal(),
-                        yaw=heading[k], has_orientation=sensor == "imu")
+                w = rate[k] + bias[k] + np.radians(0.2) * rng.standard_normal()
+                bag.imu(SENSOR_TOPICS["imu"], t0 + t[k], rate_z=sign * w, yaw=heading[k],
+                        has_orientation=sensor == "imu", gravity=(0.0, 0.0, sign * 9.81))
         elif sensor == "mag":
-            bent = yaw + np.where(inside("mag"), np.radians(40.0), 0.0)
+            bent = yaw + heading_offset + np.where(inside("mag"), np.radians(40.0), 0.0)
             for k in idx:
                 north = np.pi / 2 - bent[k]
                 noise = 0.3e-6 * rng.standard_normal(3)

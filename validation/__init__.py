@@ -19,6 +19,8 @@ Section 4, the model SD               :class:`validation.diagnosis.model.SystemM
   fault propagation, CORR masking     ``fault_propagation``, ``failure_masking`` of the model
 Section 4, Reiter's diagnoses         :class:`validation.diagnosis.reiter.Diagnoser`
 Section 2, suppress unreliable data   :mod:`validation.gating` (the gating decision per component)
+Section 6, "how models of sensor      :func:`validation.proposal.propose_model`: the components,
+relations can be obtained"            relations and checks a set of streams gives, from physics
 ====================================  ============================================================
 
 Beyond the listings (each says how and why it departs, and the listing's
@@ -41,6 +43,7 @@ Layout:
 - :mod:`validation.validator`: one run, step by step: streams, observers,
   diagnosis, gating, weights (:func:`~validation.validator.run_validation`).
 - :mod:`validation.metrics`: how well validation did against true faults.
+- :mod:`validation.proposal`: the system model a recording's streams suggest.
 - :mod:`validation.config`: the ``validation`` and ``gating`` config sections.
 """
 

@@ -29,16 +29,19 @@ from recorded runs instead of typed in by hand.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from slam.calibrate.heading import HeadingOffset, learn_heading_offset
 from slam.calibrate.lags import LagEstimate, learn_lags
 from slam.calibrate.noise import CompassNoise, learn_compass_noise
 from slam.calibrate.propose import Proposal, propose
 from slam.calibrate.runs import CalibrationRun, load_run, parse_clean
 from slam.calibrate.select import (CheckChoice, Choice, FieldGyroChoice, calibrate_field_gyro, calibrate_magnetometer,
                                    calibrate_relation)
+from slam.calibrate.support import Support, judge
 from slam.calibrate.write import calibrated_config
 from slam.config import PipelineConfig, config_files, load_config, validation_sections
 from slam.errors import GslamError
@@ -69,6 +72,12 @@ class CalibrationResult:
     """The first pass's estimates when their clear offsets were added to the config and the runs learnt again."""
     compass_noise: CompassNoise | None = None
     """The compass factor's noise written to the config (None: kept as configured)."""
+    heading_offset: HeadingOffset | None = None
+    """The compass heading against the GPS course (None: no GPS course)."""
+    applied_heading: HeadingOffset | None = None
+    """The first pass's heading offset when it was added to the compass's mounting yaw and the runs learnt again."""
+    dropped: dict[str, Support] = field(default_factory=dict)
+    """The relations the data do not support, left out of the config (:mod:`slam.calibrate.support`)."""
 
 
 def calibrate(
@@ -81,13 +90,15 @@ def calibrate(
     progress: bool = False,
     overrides: Sequence[str] = (),
     lag_reference: str = "gyro",
+    drop_unsupported: bool = True,
 ) -> CalibrationResult:
     """Learn the observers of ``config_path`` from ``runs`` (module
     docstring) and write the calibrated config to ``out`` (a new file, an
     earlier calibrate result, or any file with ``force``). ``clean``:
     ``START:END`` seconds of every run declared clean; None learns from
     whole runs with robust statistics. ``lag_reference``: the stream the
-    others' time offsets are measured against."""
+    others' time offsets are measured against. ``drop_unsupported``: leave
+    out the relations the data do not support (:mod:`slam.calibrate.support`)."""
     if not runs:
         raise GslamError("gslam calibrate: no run given")
     if not 0.0 < false_alarm < 1.0:
@@ -97,44 +108,69 @@ def calibrate(
     config = load_config(config_path, list(overrides))
     vcfg, _ = validation_sections(config)
     if vcfg.model is None:
-        raise GslamError(f"{config_path}: validation.model: calibration needs the system model the observers belong to")
+        raise GslamError(f"{config_path}: validation.model: calibration needs the system model the observers belong to; "
+                         f"gslam inspect RUN --config {config_path} --config-out NEW.yaml proposes one")
     loaded: list[CalibrationRun] = [load_run(r, config, vcfg, stretch, progress) for r in runs]
     header = [f"Learnt from {len(runs)} run{'s' if len(runs) > 1 else ''} ({', '.join(Path(r).name for r in runs)}) "
               f"{_learnt_from(stretch)}, starting from {Path(config_path).name}."]
-    res = learn(loaded, config, false_alarm, header, lag_reference)
+    res = learn(loaded, config, false_alarm, header, lag_reference, drop_unsupported)
     moved = {lag.stream: round(getattr(config.input.time_offsets_s, lag.stream) + lag.offset_s, 3)
              for lag in res.lags if lag.proposed}
-    if moved:
+    heading = res.heading_offset if res.heading_offset is not None and res.heading_offset.proposed else None
+    if moved or heading is not None:
         first = res.lags
         overrides = [*overrides, *(f"input.time_offsets_s.{name}={value}" for name, value in moved.items())]
+        if moved:
+            header.append("Time offsets found in a first pass and added to input.time_offsets_s, the relations "
+                          "learnt with them: " + "; ".join(
+                              f"{lag.stream} {lag.offset_s:+.3f} s (RMS of its yaw rate's difference to the "
+                              f"{lag.reference}'s {-100 * lag.gain:+.0f} %)" for lag in first if lag.proposed) + ".")
+        if heading is not None:
+            mounting = round(config.input.compass.mounting_yaw_deg + math.degrees(heading.offset_rad), 2)
+            overrides.append(f"input.compass.mounting_yaw_deg={mounting}")
+            header.append(f"The compass heading stood {math.degrees(heading.offset_rad):+.1f} deg off the GPS course "
+                          f"(circular mean over {heading.steps} steps, mean resultant length {heading.steadiness:.2f}): "
+                          f"input.compass.mounting_yaw_deg set to {mounting:g}, the relations learnt with it.")
         config = load_config(config_path, overrides)
         loaded = [load_run(r, config, vcfg, stretch, progress) for r in runs]
-        header.append("Time offsets found in a first pass and added to input.time_offsets_s, the relations "
-                      "learnt with them: " + "; ".join(
-                          f"{lag.stream} {lag.offset_s:+.3f} s (RMS of its yaw rate's difference to the {lag.reference}'s "
-                          f"{-100 * lag.gain:+.0f} %)" for lag in first if lag.proposed) + ".")
-        res = learn(loaded, config, false_alarm, header, lag_reference)
+        res = learn(loaded, config, false_alarm, header, lag_reference, drop_unsupported)
         res.applied = [lag for lag in first if lag.proposed]
+        res.applied_heading = heading
     write_text(out, res.text)
     res.out = Path(out)
     return res
 
 
 def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm: float = DEFAULT_FALSE_ALARM,
-          header: Sequence[str] = (), lag_reference: str = "gyro") -> CalibrationResult:
+          header: Sequence[str] = (), lag_reference: str = "gyro", drop_unsupported: bool = True) -> CalibrationResult:
     """Steps 2-4 of the module docstring on runs already loaded
     (:func:`slam.calibrate.runs.load_run`); the text is not written
-    (``out`` is None)."""
+    (``out`` is None). ``drop_unsupported``: leave out the relations the
+    data do not support (else they are kept, with a warning)."""
     vcfg, _ = validation_sections(config)
     relations = vcfg.observers.relations
     has_mag = vcfg.observers.magnetometer.enabled and any("mag_strength" in r.streams for r in loaded)
     has_field = vcfg.observers.field_gyro.enabled and any("mag_field_change" in r.streams for r in loaded)
     observers = len(relations) + int(has_mag) + int(has_field)
     if observers == 0:
-        raise GslamError("validation.observers: no relation or check to calibrate")
+        raise GslamError("nothing can be validated: validation.observers has no relation between two streams and no "
+                         "check to learn (gslam inspect RUN --config-out FILE proposes the relations its streams allow, "
+                         "or says why there are none)")
     target = false_alarm / observers
     choices = {rel.name: calibrate_relation(loaded, rel, vcfg, target) for rel in relations}
+    # A relation no learning step observes is neither supported nor refuted: kept as configured.
+    support = {name: judge(loaded, choice, vcfg) for name, choice in choices.items() if choice is not None}
+    dropped = {name: s for name, s in support.items() if not s.kept} if drop_unsupported else {}
+    for name, verdict in support.items():
+        if not verdict.kept:
+            log.info("relation %s: %s; %s", name, verdict.reason,
+                        "dropped" if name in dropped else "kept (--keep-unsupported)")
+    if dropped and len(dropped) == len(relations) and not (has_mag or has_field):
+        raise GslamError("nothing can be validated: the data support none of the relations ("
+                         + "; ".join(f"{name}: {s.reason}" for name, s in dropped.items()) + ")")
     for name, choice in choices.items():
+        if name in dropped:
+            continue
         if choice is None:
             log.warning("relation %s: no run has both its streams; kept as configured", name)
         elif not choice.met:
@@ -147,6 +183,7 @@ def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm:
     field = calibrate_field_gyro(loaded, vcfg.observers.field_gyro, target) if has_field else None
     proposals = propose(loaded, relations, vcfg.model, vcfg, target)
     lags = learn_lags(loaded, lag_reference)
+    heading = learn_heading_offset(loaded) if "compass_yaw" in {n for r in loaded for n in r.streams} else None
     for lag in lags:
         log.info("time offset of %s against %s: %+.3f s (RMS of the rate difference %.3g -> %.3g rad/s, "
                  "correlation %.2f, halves %+.3f / %+.3f s)%s", lag.stream, lag.reference, lag.offset_s,
@@ -154,8 +191,10 @@ def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm:
                  ": proposed" if lag.proposed else f": not proposed, {lag.why_not()}")
     noise = learn_compass_noise(loaded, vcfg.rate_hz) if config.backend.factors.compass.enabled else None
     header = [*header, *_header(false_alarm, target, observers, vcfg.offline)]
-    text = calibrated_config(config, choices, mag, field, proposals, header, target, len(loaded), lags, noise)
-    return CalibrationResult(None, choices, mag, field, proposals, target, text, lags, compass_noise=noise)
+    text = calibrated_config(config, choices, mag, field, proposals, header, target, len(loaded), lags, noise,
+                             dropped)
+    return CalibrationResult(None, choices, mag, field, proposals, target, text, lags, compass_noise=noise,
+                             heading_offset=heading, dropped=dropped)
 
 
 def _learnt_from(stretch) -> str:

@@ -16,9 +16,10 @@ that does not skid) the gain cannot be told from noise: it stays at the
 relation's configured one and only the offset is learnt.
 
 Learnt over a declared clean stretch, every step counts. Learnt over a
-whole run, the steps whose residual lies beyond ``OUTLIER_SIGMAS`` robust
-standard deviations, and half a window either side of them, are taken for
-faults and left out of everything that follows (:attr:`RateFit.inliers`).
+whole run, the steps whose residual lies beyond ``OUTLIER_SIGMAS`` times
+the band (the noise floor, growing by ``sigma_rel`` of the motion), and
+half a window either side of them, are taken for faults and left out of
+everything that follows (:attr:`RateFit.inliers`).
 """
 
 from __future__ import annotations
@@ -107,6 +108,22 @@ def _line(x: np.ndarray, y: np.ndarray, prior_gain: float) -> tuple[float, float
     return gain, intercept
 
 
+def _noise_model(r: np.ndarray, da: np.ndarray, keep: np.ndarray) -> tuple[float, float, float]:
+    """``(noise, sigma_rel, spread)`` of the residuals ``r`` on the ``keep``
+    windows: the robust sd over the windows with the smaller half of the
+    motion, the share of the motion by which it grows (from the windows
+    with the largest quarter), and the robust sd over all of them."""
+    spread = max(robust_sd(r[keep]), 1e-12)
+    small = keep & (np.abs(da) <= np.median(np.abs(da[keep])))
+    large = keep & (np.abs(da) >= np.percentile(np.abs(da[keep]), 75))
+    noise = max(robust_sd(r[small]) if small.sum() > 10 else spread, 1e-9)
+    sigma_rel = 0.0
+    big = float(np.median(np.abs(da[large]))) if large.any() else 0.0
+    if big > 0.0 and large.sum() > 10:
+        sigma_rel = float(np.sqrt(max(robust_sd(r[large]) ** 2 - noise**2, 0.0)) / big)
+    return noise, sigma_rel, spread
+
+
 def fit_rates(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, window: Window,
               rate_hz: float, prior_gain: float = 1.0) -> RateFit | None:
     """The fit of the module docstring over every run holding both streams;
@@ -129,19 +146,15 @@ def fit_rates(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, w
     for _ in range(1 if declared else 3):
         gain, intercept = _line(da[keep], db[keep], prior_gain)
         r = db - gain * da - intercept
-        spread = max(robust_sd(r[keep]), 1e-12)
         if not declared:
-            keep = np.abs(r - np.median(r[keep])) <= OUTLIER_SIGMAS * spread
+            # The band grows with the motion: a sensor whose error is a
+            # share of the turn (tracks slipping) is not faulty in every turn.
+            noise, sigma_rel, spread = _noise_model(r, da, keep)
+            band = np.maximum(spread, np.sqrt(noise**2 + (sigma_rel * da) ** 2))
+            keep = np.abs(r - np.median(r[keep])) <= OUTLIER_SIGMAS * band
     gain, intercept = _line(da[keep], db[keep], prior_gain)
     r = db - gain * da - intercept
-    spread = max(robust_sd(r[keep]), 1e-12)
-    small = keep & (np.abs(da) <= np.median(np.abs(da[keep])))
-    large = keep & (np.abs(da) >= np.percentile(np.abs(da[keep]), 75))
-    noise = max(robust_sd(r[small]) if small.sum() > 10 else spread, 1e-9)
-    sigma_rel = 0.0
-    big = float(np.median(np.abs(da[large]))) if large.any() else 0.0
-    if big > 0.0 and large.sum() > 10:
-        sigma_rel = float(np.sqrt(max(robust_sd(r[large]) ** 2 - noise**2, 0.0)) / big)
+    noise, sigma_rel, spread = _noise_model(r, da, keep)
     corr = float(np.corrcoef(da[keep], db[keep])[0, 1]) if keep.sum() > 2 and np.std(da[keep]) > 0 and np.std(db[keep]) > 0 else 0.0
     inliers = []
     for run, p in zip(runs, per_run):
@@ -191,24 +204,49 @@ def fit_offset(runs: Sequence[CalibrationRun], a: str, b: str, gain: float, leve
     return max(robust_sd(res), 1e-9), float(np.median(res)), len(res)
 
 
+def _slopes(run: CalibrationRun, name: str, window_s: float, window: Window) -> np.ndarray:
+    s = run.steps
+    v = s.valid[name]
+    out = np.zeros(len(s.t))
+    out[v] = derive_stream(s.t[v], s.values[name][v], window_s, window)
+    return out
+
+
 def fit_slopes(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, window: Window,
-               inliers: Sequence[np.ndarray]) -> float:
-    """Robust sd of stream b's regression slope (Algorithm 2, over
-    ``window_s``) minus stream a's, on the inlier steps: how much the two
-    slopes disagree, which a trend boundary must stand above (the symbols
-    compare directions, whatever the gain)."""
+               inliers: Sequence[np.ndarray]) -> tuple[float, float]:
+    """``(sd, median)``: robust sd and median of stream b's regression slope
+    (Algorithm 2, over ``window_s``) minus stream a's, on the inlier steps:
+    how much the two slopes disagree, and by how much one stands off the
+    other (a gyro's bias), which a trend boundary must stand above (the
+    symbols compare directions, whatever the gain); ``(0, 0)`` without a step."""
     res = []
     for run, good in zip(runs, inliers):
         if a not in run.streams or b not in run.streams:
             continue
         s = run.steps
-        both = s.valid[a] & s.valid[b]
-        slope = {}
-        for name in (a, b):
-            v = s.valid[name]
-            out = np.zeros(len(s.t))
-            out[v] = derive_stream(s.t[v], s.values[name][v], window_s, window)
-            slope[name] = out
-        keep = both & good
-        res.append((slope[b] - slope[a])[keep])
-    return max(robust_sd(np.concatenate(res)), 1e-9) if res and sum(len(r) for r in res) else 0.0
+        keep = s.valid[a] & s.valid[b] & good
+        res.append((_slopes(run, b, window_s, window) - _slopes(run, a, window_s, window))[keep])
+    d = np.concatenate(res) if res else np.zeros(0)
+    return (max(robust_sd(d), 1e-9), float(np.median(d))) if len(d) else (0.0, 0.0)
+
+
+MOTION_QUANTILE = 90.0
+
+
+def motion_scale(runs: Sequence[CalibrationRun], name: str, window_s: float, window: Window,
+                 inliers: Sequence[np.ndarray], slope: bool = False) -> float:
+    """How much stream ``name`` moves when it moves: the ``MOTION_QUANTILE``
+    percentile of its absolute change over ``window_s`` (its regression
+    slope with ``slope``) on the inlier steps; 0 without a step."""
+    out = []
+    for run, good in zip(runs, inliers):
+        if name not in run.streams:
+            continue
+        if slope:
+            ok = run.steps.valid[name]
+            out.append(np.abs(_slopes(run, name, window_s, window))[ok & good])
+        else:
+            d, ok = changes(run, name, window_s, window)
+            out.append(np.abs(d)[ok & good])
+    moved = np.concatenate(out) if out else np.zeros(0)
+    return float(np.percentile(moved, MOTION_QUANTILE)) if len(moved) else 0.0

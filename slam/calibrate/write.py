@@ -8,7 +8,7 @@ one."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import yaml
@@ -16,7 +16,8 @@ import yaml
 from slam.calibrate.lags import RATE_WINDOW_S, LagEstimate
 from slam.calibrate.noise import CompassNoise
 from slam.calibrate.propose import Proposal
-from slam.calibrate.select import CheckChoice, Choice, FieldGyroChoice
+from slam.calibrate.select import RESOLUTION, CheckChoice, Choice, FieldGyroChoice
+from slam.calibrate.support import Support
 from slam.config import PipelineConfig
 from slam.io.outdir import result_file_mark
 from validation.observers.config import RelationConfig
@@ -49,13 +50,16 @@ def _relation_comment(c: Choice, target: float, runs: int) -> list[str]:
             f"gain {fit.gain:.4f}, offset {fit.rate_offset:.3g} {unit}/s, residual noise {fit.noise:.3g} {unit} "
             f"(robust sd over {fit.steps} steps of {of_runs}, correlation {fit.corr:.3f})",
         ]
+    floored = f" (raised to {100 * RESOLUTION:g} % of its motion)" if c.resolution else ""
     if rel.kind == "trend":
-        lines.append(f"slopes differ by {c.noise:.3g} {unit}/s (robust sd): b = {c.multiple:g} x that; "
-                     f"smallest visible change {c.visible:.3g} {unit} over the window")
+        lines.append(f"slopes differ by {c.noise:.3g} {unit}/s (robust sd{floored}) about {c.slope_offset:.3g} "
+                     f"{unit}/s: b = |that offset| + {c.multiple:g} x that sd; smallest visible change "
+                     f"{c.visible:.3g} {unit} over the window")
         if rel.mismatch_margin is not None:
             lines.append(f"a mismatch counts where the slopes part by more than {rel.mismatch_margin:g} b")
     elif rel.kind == "residual":
-        lines.append(f"band k_sigma = {c.multiple:g} sds, growing by sigma_rel {rel.sigma_rel:.3g} of the motion")
+        lines.append(f"band k_sigma = {c.multiple:g} sds{floored}, growing by sigma_rel {rel.sigma_rel:.3g} of the "
+                     "motion")
     elif rel.kind == "cusum":
         lines.append(f"CUSUM of the residual in sds, forgetting {rel.cusum_drift:g} a step: limit k_sigma = {c.multiple:g}; "
                      f"sds grow by sigma_rel {rel.sigma_rel:.3g} of the motion")
@@ -82,12 +86,20 @@ def calibrated_config(
     runs: int,
     lags: Sequence[LagEstimate] = (),
     compass_noise: CompassNoise | None = None,
+    dropped: Mapping[str, Support] | None = None,
 ) -> str:
     """The YAML text of the module docstring. ``choices`` maps every
     configured relation to its calibration (None: no run had its streams,
-    kept as it was)."""
+    kept as it was); ``dropped`` the relations the data do not support,
+    left out of the observers and the model with the reason as a comment."""
+    dropped = dropped or {}
     validation = dict(config.validation)
     validation["mode"] = "off"
+    if dropped and isinstance(validation.get("model"), dict):
+        model = dict(validation["model"])
+        model["relations"] = {k: v for k, v in model["relations"].items() if k not in dropped}
+        model["failure_masking"] = [m for m in model.get("failure_masking", []) if m["relation"] not in dropped]
+        validation["model"] = model
     observers = dict(validation["observers"])
     if magnetometer is not None:
         observers["magnetometer"] = magnetometer.config.model_dump(mode="json")
@@ -110,6 +122,10 @@ def calibrated_config(
     for rel_data in config.validation["observers"]["relations"]:
         name = rel_data["name"]
         choice = choices.get(name)
+        if name in dropped:
+            block.append(f"{_INDENT}# {name} ({rel_data.get('kind', 'trend')}, {rel_data['stream_a']} against "
+                         f"{rel_data['stream_b']}): dropped, the data do not support it: {dropped[name].reason}")
+            continue
         if choice is None:
             block.append(f"{_INDENT}# {name}: not calibrated, no run has both its streams; kept as configured")
             block.append(_INDENT + _flow(RelationConfig.model_validate(rel_data)))
@@ -128,6 +144,9 @@ def calibrated_config(
         mag_note = [f"{_INDENT}# magnetometer check: field strength within {magnetometer.strength_T * 1e6:.3g} uT and dip within "
                     f"{np.degrees(magnetometer.dip_rad):.3g} deg of the reference on all but {_pct(0.5 * target)} "
                     f"each of {magnetometer.steps} learning steps (worst run)"]
+        if magnetometer.learnt_reference:
+            mag_note.append(f"{_INDENT}# the reference (strength_T, dip_deg): the medians over the learning steps, "
+                            "the recording giving none")
     field_note = []
     if field_gyro is not None:
         fg = field_gyro.config
