@@ -32,6 +32,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from slam.errors import GslamError
+from slam.signals import blocked, child_defaults
 
 Inbox = Callable[[], Any]
 
@@ -99,13 +100,10 @@ def _end_with_parent(parent: int) -> None:
 
 def _child(conn, fn: Callable[..., Any], args: tuple, parent: int) -> None:
     _end_with_parent(parent)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it ends the child
     # The parent ends a child with SIGTERM; a handler it had when it forked
     # (one that holds signals back while a result is renamed into place)
-    # must not keep the child alive.
-    for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
-        if sig is not None:
-            signal.signal(sig, signal.SIG_DFL)
+    # must not keep the child alive: see slam.signals.
+    child_defaults()
     try:
         value = ("ok", fn(conn.recv, *args))
     except BaseException as e:  # noqa: BLE001 - every failure goes back to the parent
@@ -126,7 +124,7 @@ class Forked:
         ctx = multiprocessing.get_context("fork")
         self.conn, child_conn = ctx.Pipe()
         self.process = ctx.Process(target=_child, args=(child_conn, fn, args, os.getpid()), name=f"gslam {what}", daemon=True)
-        with _frozen_heap():
+        with _frozen_heap(), blocked():  # blocked: see slam.signals
             self.process.start()
         child_conn.close()
 
@@ -176,14 +174,17 @@ class Subforked(Forked):
         self.what = what
         parent = os.getpid()
         self.conn, child_conn = multiprocessing.Pipe()
+        stops = blocked()  # see slam.signals; the child unblocks them in _child
+        stops.__enter__()
         with _frozen_heap():
             pid = os.fork()
-        if pid == 0:  # the child: no return from here
-            self.conn.close()
+        if pid == 0:  # the child: no return from here (and its signals unblocked in _child)
             try:
+                self.conn.close()
                 _child(child_conn, fn, args, parent)
             finally:
                 os._exit(0)
+        stops.__exit__(None, None, None)
         self.pid: int | None = pid
         child_conn.close()
 

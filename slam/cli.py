@@ -9,11 +9,13 @@ import logging
 import math
 import os
 import platform
+import signal
 import sys
 from pathlib import Path
 
 from slam import __version__
-from slam.errors import GslamError
+from slam.errors import GslamError, Terminated
+from slam.signals import STOPS, as_interrupt
 from validation.errors import ValidationError
 
 log = logging.getLogger("gslam")
@@ -211,7 +213,7 @@ def _cmd_ablate(args: argparse.Namespace) -> int:
     from slam.ablate import load_spec, run_ablation
 
     spec_path = _config_path(args.spec)
-    spec = load_spec(spec_path, max_seeds=args.seeds)
+    spec = load_spec(spec_path, max_seeds=args.seeds, max_jobs=args.max_jobs)
     res = run_ablation(spec, args.out, workers=args.workers, backend=args.backend, address=args.address,
                        progress=not args.quiet, source=str(spec_path), force=args.force)
     print(res.summary.md_path.read_text())
@@ -408,6 +410,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="local: process pool; ray: one Ray task per job (pip install \".[ray]\")")
     a.add_argument("--address", default=None, help="Ray cluster address (e.g. auto); default: a local Ray instance")
     a.add_argument("--seeds", type=_positive, default=None, help="only the first N seeds of each scenario (a quick look)")
+    a.add_argument("--max-jobs", type=_positive, default=None, metavar="N",
+                   help="run a spec of more than 10,000 jobs (a larger count is refused before anything runs)")
     a.set_defaults(func=_cmd_ablate)
     return p
 
@@ -418,8 +422,13 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
+    received: list[int] = []
     try:
-        return args.func(args)
+        with as_interrupt(received):
+            code = args.func(args)
+        # A signal whose exception was swallowed where Python cannot raise
+        # (a destructor, a callback) stopped nothing: the command finished.
+        return _stopped(received[0]) if received else code
     except (GslamError, ValidationError) as e:
         print(f"gslam: error: {_one_line(str(e))}", file=sys.stderr)
         return 1
@@ -433,13 +442,30 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError as e:
         print(f"gslam: error: not enough memory ({_one_line(str(e)) or 'MemoryError'})", file=sys.stderr)
         return 1
+    except Terminated as e:
+        return _stopped(e.signum)
     except KeyboardInterrupt:
+        return _stopped(signal.SIGINT)
+    except Exception:
+        if received:  # the signal's exception turned into another on its way (an import it interrupted)
+            return _stopped(received[0])
+        raise
+
+
+def _stopped(signum: int) -> int:
+    """The line and exit code of a command stopped by a signal."""
+    if signum == signal.SIGINT:
         print("gslam: interrupted", file=sys.stderr)
-        return 130
+    else:
+        print(f"gslam: terminated ({signal.Signals(signum).name})", file=sys.stderr)
+    return 128 + signum
 
 
 def _one_line(text: str) -> str:
     return " ".join(text.split("\n"))
+
+
+INTERRUPTED = tuple(128 + s for s in STOPS)
 
 
 def run() -> None:
@@ -447,8 +473,12 @@ def run() -> None:
     command has written, closed and renamed its results and reaped its
     processes; what a normal exit adds is tearing down every module and
     object (a tenth of a second after ``gslam map``), which ending the
-    process does at once."""
+    process does at once. An interrupted command ends normally instead:
+    what it stopped (a sweep's process pool) is torn down by the exit
+    handlers."""
     code = main()
+    if code in INTERRUPTED:
+        sys.exit(code)
     logging.shutdown()
     for stream in (sys.stdout, sys.stderr):
         try:

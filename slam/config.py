@@ -210,6 +210,13 @@ class FrontendConfig(Strict):
     max_iterations: int = Field(500, ge=1)
     threads: int = Field(1, ge=0)
 
+    @model_validator(mode="after")
+    def _range_window(self) -> "FrontendConfig":
+        if self.min_range_m >= self.max_range_m:
+            raise ValueError(f"min_range_m {self.min_range_m:g} is not below max_range_m {self.max_range_m:g}: "
+                             "no beam would be kept")
+        return self
+
 
 # --- keyframes and back-end ----------------------------------------------
 
@@ -536,6 +543,11 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
     # checks them as mappings).
     config.validation = vcfg.model_dump(mode="json", by_alias=True)
     config.gating = gcfg.model_dump(mode="json", by_alias=True)
+    if not enabled_factors(config):
+        why = ("scan_matching is the only one enabled and frontend.enabled is false"
+               if config.backend.factors.scan_matching.enabled else "every one is disabled")
+        raise GslamError(f"{_blame(source, applied, 'backend.factors')}: backend.factors: no factor left ({why}); "
+                         "the graph needs at least one of odometry, gyro, compass, scan_matching, gps")
     return config
 
 
@@ -553,6 +565,16 @@ def _check_sources(vcfg, inputs: InputConfig, blame) -> None:
             where = f"validation.observers.relations.{i}.{key}"
             raise GslamError(f"{blame(where)}: {where}: stream {stream!r} is odometry source {split[0]!r}, which "
                              f"input.extra_odometry does not declare (declared: {declared})")
+
+
+def enabled_factors(config: PipelineConfig) -> list[str]:
+    """The factor types the config puts in the graph (scan matching only
+    with the front-end on)."""
+    factors = config.backend.factors
+    names = [name for name in ("odometry", "gyro", "compass", "scan_matching", "gps") if getattr(factors, name).enabled]
+    if not config.frontend.enabled and "scan_matching" in names:
+        names.remove("scan_matching")
+    return names
 
 
 def _section_error_key(message: str) -> str:

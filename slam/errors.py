@@ -11,6 +11,20 @@ class GslamError(Exception):
     """A user-facing error: bad input, bad config, missing data."""
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised where Ctrl-C raises KeyboardInterrupt so
+    that a terminated command cleans up as an interrupted one does."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def raise_terminated(signum: int, frame) -> None:
+    """A signal handler: raise :class:`Terminated`."""
+    raise Terminated(signum)
+
+
 def run_script(name: str, main) -> None:
     """Run a script's ``main()`` and exit with its code; bad input (a
     :class:`GslamError` or a validation config error) ends it with one line

@@ -184,6 +184,19 @@ class MappingPipeline:
         self.timings.read_s = time.perf_counter() - t
         rec = self.recording
         log.info("read %s: %.1f s of data", rec.name, rec.duration)
+        self.check_fit()
+
+    def check_fit(self) -> None:
+        """Whether the config fits the recording (:mod:`slam.config_fit`),
+        before any work on it; a laser that returns nothing within the
+        front-end's limits is left out, and its scan matching with it."""
+        from slam.config_fit import check_fit
+
+        had_scans = self.recording.scans is not None
+        check_fit(self.recording, self.config, self.input_path)
+        if had_scans and self.recording.scans is None and self.scan_matching is not None:
+            self.scan_matching.close()
+            self.scan_matching = None
 
     def prepare(self, folder: Path) -> None:
         """What needs no estimate, done while the scans are matched: the

@@ -98,8 +98,13 @@ def _quiet_worker() -> None:
 def _pool_worker() -> None:
     """Initializer of a local worker: quiet, and gone when the sweep is
     (a pool worker outlives a parent killed with -9; its half-written
-    folder is removed by the next run)."""
+    folder is removed by the next run). tqdm's lock is a thread lock
+    here: its default, a named semaphore, would be reported leaked when an
+    interrupted sweep ends its workers (their bars are never shown)."""
+    from tqdm import tqdm
+
     _quiet_worker()
+    tqdm.set_lock(threading.RLock())
     threading.Thread(target=_exit_with_parent, args=(os.getppid(),), daemon=True).start()
 
 
@@ -138,7 +143,8 @@ def _local(groups: list[list[Job]], out_dir: Path, workers: int) -> Iterator[Job
     # spawn: forking a parent that has loaded gtsam/open3d threads is unsafe.
     ctx = multiprocessing.get_context("spawn")
     threads = max(1, (os.cpu_count() or 1) // workers)
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_pool_worker) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_pool_worker)
+    try:
         with _threads_per_worker(threads):  # workers start on the first submits
             pending = {pool.submit(run_jobs, group, str(out_dir)): group for group in groups}
         while pending:
@@ -150,6 +156,23 @@ def _local(groups: list[list[Job]], out_dir: Path, workers: int) -> Iterator[Job
                 except Exception as e:  # noqa: BLE001 - e.g. a worker killed by a crash
                     error = f"{type(e).__name__}: {e}".splitlines()[0]
                     yield from (JobOutcome(job.id, error, 0.0) for job in group)
+    except BaseException:
+        _interrupt_workers(pool)
+        raise
+    pool.shutdown(wait=True)
+
+
+def _interrupt_workers(pool: ProcessPoolExecutor) -> None:
+    """Stop a pool whose sweep was interrupted without waiting for its
+    jobs: Ctrl-C reaches the workers from the terminal, SIGTERM and SIGHUP
+    only this process. The next run removes what a job leaves and runs the
+    unfinished jobs again."""
+    workers = list(getattr(pool, "_processes", {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in workers:
+        process.terminate()
+    for process in workers:
+        process.join()
 
 
 def _ray(groups: list[list[Job]], out_dir: Path, workers: int, address: str | None) -> Iterator[JobOutcome]:

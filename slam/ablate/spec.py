@@ -13,10 +13,11 @@ path segment that meets a list selects elements by index (``0``), by their
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Any
 
-from pydantic import Field, ValidationError, model_validator
+from pydantic import Discriminator, Field, Tag, ValidationError, model_validator
 
 from slam.config import describe_validation_error, load_yaml
 from slam.errors import GslamError
@@ -88,17 +89,40 @@ class SeedRange(StrictFrozen):
         return list(range(self.first, self.first + self.count))
 
 
+def _seeds_form(value: Any) -> str:
+    return "[range]" if isinstance(value, (dict, SeedRange)) else "[list]"
+
+
+# A list of seeds or a range, told apart by their form, so that an error
+# names the key of the form given (seeds.count), not both forms' failures.
+# The tags hold brackets: describe_validation_error leaves them out of keys.
+Seeds = Annotated[
+    Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=1), Tag("[list]")]
+    | Annotated[SeedRange, Tag("[range]")],
+    Discriminator(_seeds_form),
+]
+
+
 class ScenarioInput(StrictFrozen):
     """A scenario YAML simulated once per seed (``seeds``: a list or a
     range). ``sweep``, if given, replaces the spec's sweep for this input
     (e.g. a scenario parameter only this scenario has)."""
 
     path: Path
-    seeds: Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=1)] | SeedRange
+    seeds: Seeds
     sweep: SweepSpec | None = None
 
     def seed_list(self) -> list[int]:
         return list(self.seeds) if isinstance(self.seeds, list) else self.seeds.seeds()
+
+    def seed_count(self) -> int:
+        return len(self.seeds) if isinstance(self.seeds, list) else self.seeds.count
+
+    def first_seeds(self, n: int) -> "ScenarioInput":
+        """This input with only its first ``n`` seeds."""
+        seeds = self.seeds[:n] if isinstance(self.seeds, list) else self.seeds.model_copy(
+            update={"count": min(n, self.seeds.count)})
+        return self.model_copy(update={"seeds": seeds})
 
 
 class RecordedInput(StrictFrozen):
@@ -206,21 +230,69 @@ def _expand_recorded(spec: AblationSpec, source: Path) -> AblationSpec:
     return spec.model_copy(update={"inputs": spec.inputs.model_copy(update={"recorded": recorded})})
 
 
-def load_spec(path: str | Path, max_seeds: int | None = None) -> AblationSpec:
+DEFAULT_MAX_JOBS = 10_000
+"""Most jobs a spec may expand to unless ``--max-jobs`` says more (the
+shipped specs have at most a few hundred)."""
+
+
+def sweep_size(sweep: SweepSpec) -> int:
+    """Points of a sweep (at most: repeated grid points count once each
+    time), computed without listing them."""
+    grid = sum(math.prod(len(v) for v in g.values()) for g in sweep.grids()) or 1
+    return grid * (sweep.random.samples if sweep.random is not None else 1)
+
+
+def job_counts(spec: AblationSpec) -> list[tuple[str, int, str]]:
+    """Per input: where it is in the spec, its number of jobs and how that
+    number comes about, without expanding anything."""
+    variants = len(spec.variants)
+    out = []
+    for kind, inputs in (("scenarios", spec.inputs.scenarios), ("recorded", spec.inputs.recorded)):
+        for i, inp in enumerate(inputs):
+            points = sweep_size(inp.sweep if inp.sweep is not None else spec.sweep)
+            seeds = inp.seed_count() if isinstance(inp, ScenarioInput) else 1
+            where = f"inputs.{kind}.{i}"
+            how = (f"{seeds:,} seeds x " if isinstance(inp, ScenarioInput) else "") + \
+                f"{variants:,} variants x {points:,} sweep points"
+            if inp.sweep is None and spec.sweep.random is not None and points >= sweep_size(spec.sweep):
+                how += f" (sweep.random.samples {spec.sweep.random.samples:,})"
+            out.append((where, seeds * variants * points, how))
+    return out
+
+
+def check_job_count(spec: AblationSpec, source: str | Path, max_jobs: int | None) -> int:
+    """The number of jobs of ``spec``; a one-line error naming the input
+    that makes the most if they are more than ``max_jobs`` (default
+    :data:`DEFAULT_MAX_JOBS`), before anything is allocated for them."""
+    limit = DEFAULT_MAX_JOBS if max_jobs is None else max_jobs
+    counts = job_counts(spec)
+    total = sum(n for _, n, _ in counts)
+    if total > limit:
+        where, n, how = max(counts, key=lambda c: c[1])
+        raise GslamError(f"{source}: {total:,} jobs, more than {limit:,}; {where} alone makes {n:,} ({how}); "
+                         "give fewer, or --max-jobs to allow more")
+    return total
+
+
+def load_spec(path: str | Path, max_seeds: int | None = None, max_jobs: int | None = None) -> AblationSpec:
     """Read and validate an ablation spec; ``max_seeds`` keeps only the first
-    seeds of each scenario input (a quick look at a long spec). Bad input
-    raises :class:`GslamError` naming the file and the key."""
+    seeds of each scenario input (a quick look at a long spec); more jobs
+    than ``max_jobs`` (default :data:`DEFAULT_MAX_JOBS`) are refused before
+    any is listed. Bad input raises :class:`GslamError` naming the file and
+    the key."""
     path = Path(path)
     tree = load_yaml(path)
     try:
         spec = AblationSpec.model_validate(tree)
     except ValidationError as e:
         raise GslamError(describe_validation_error(str(path), e, "spec")) from None
-    spec = _expand_recorded(spec, path)
-    spec = spec.resolved(path.resolve().parent)
     if max_seeds is not None:
-        scenarios = [s.model_copy(update={"seeds": s.seed_list()[:max_seeds]}) for s in spec.inputs.scenarios]
+        scenarios = [s.first_seeds(max_seeds) for s in spec.inputs.scenarios]
         spec = spec.model_copy(update={"inputs": spec.inputs.model_copy(update={"scenarios": scenarios})})
+    check_job_count(spec, path, max_jobs)
+    spec = _expand_recorded(spec, path)
+    check_job_count(spec, path, max_jobs)  # globs may have made more inputs
+    spec = spec.resolved(path.resolve().parent)
     for p in [spec.config] + [s.path for s in spec.inputs.scenarios] + [r.path for r in spec.inputs.recorded]:
         if not p.exists():
             raise GslamError(f"{path}: {p} not found")

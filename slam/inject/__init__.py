@@ -103,10 +103,11 @@ def inject(
     # labels are moved by them, to the times the faulty samples were taken.
     offsets = config.time_offsets_s.model_dump()
     config = config.model_copy(update={"time_offsets_s": TimeOffsetsConfig()})
-    with result_folder(out, "inject", [input_path, *inputs], force, (f"{RUN_BAG}/", SIDECAR)) as tmp:
+    source = run_recording(input_path) if is_run_folder(input_path) else input_path
+    need = _size(source)  # the recording is written again, faults added
+    with result_folder(out, "inject", [input_path, *inputs], force, (f"{RUN_BAG}/", SIDECAR), need) as tmp:
         rec = read_recording(input_path, config)
         _check_intervals(parsed, rec)
-        source = run_recording(input_path) if is_run_folder(input_path) else input_path
         dest = tmp / RUN_BAG
         labels: Labels
         if fmt == "rosbag":
@@ -121,6 +122,13 @@ def inject(
     for comp, spans in sorted(injected.items()):
         log.info("injected %s: %s", comp, ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in spans) or "nothing labelled")
     return InjectResult(Path(out), truth, injected, rec.duration)
+
+
+def _size(path: Path) -> int:
+    """Bytes of a file, or of the files in a folder."""
+    if path.is_file():
+        return path.stat().st_size
+    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file() and not p.is_symlink())
 
 
 def _moved(spans: list[Interval], offset_s: float) -> list[Interval]:

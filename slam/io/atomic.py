@@ -27,6 +27,10 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     try:
         yield tmp_path
         os.replace(tmp_path, path)
+    except OSError as e:  # named as the file being written, not its temporary name
+        if e.filename is not None and str(tmp_path) not in str(e.filename):
+            raise
+        raise OSError(e.errno, e.strerror, str(path)) from None
     finally:
         if tmp_path.exists():
             tmp_path.unlink()

@@ -247,8 +247,8 @@ def read_broad(
     path = Path(path)
     d = _load(path)
     fs = float(np.asarray(d["sampling_rate"]).ravel()[0])
-    if not np.isfinite(fs) or fs <= 0:
-        raise GslamError(f"{path}: sampling_rate: expected a positive rate in Hz, got {fs}")
+    if not np.isfinite(fs) or not 1.0 <= fs <= 100_000.0:
+        raise GslamError(f"{path}: sampling_rate: expected an IMU's rate in Hz (1 to 100000; BROAD's is 285.7), got {fs:g}")
     gyr, acc, mag, quat = d["imu_gyr"], d["imu_acc"], d["imu_mag"], d["opt_quat"]
     n = len(gyr)
     # 0: the magnetometer's sample stamped t + mag_lag_s was measured at t.
@@ -260,6 +260,11 @@ def read_broad(
     tracked = np.isfinite(quat).all(axis=1)
     if not tracked.any():
         raise GslamError(f"{path}: opt_quat: no tracked sample (all NaN)")
+    norm = np.linalg.norm(np.where(tracked[:, None], quat, 1.0 / 2.0), axis=1)
+    if np.any(np.abs(norm - 1.0) > 0.1):
+        i = int(np.argmax(np.abs(norm - 1.0) > 0.1))
+        raise GslamError(f"{path}: opt_quat at sample {i} is not a rotation (quaternion of norm {norm[i]:.3g}, "
+                         "expected 1)")
     max_pitch = np.radians(max_pitch_deg)
 
     # 1-2: tilt and the rate about the vertical.

@@ -64,6 +64,7 @@ import numpy as np
 from slam.config import InputConfig
 from slam.errors import GslamError
 from slam.geometry import wrap_angle
+from slam.io.yamlfile import check_regular, decode_log
 from slam.measurements import relative_poses
 from slam.recording import Recording, Scans, Trajectory
 
@@ -73,6 +74,10 @@ NOMINAL_SCAN_PERIOD_S = 1.0
 MAX_BAD_STEP_FRACTION = 0.1
 MAX_MISSING_ODOMETRY_FRACTION = 0.5
 MIN_STAMP_STEP_S = 1e-3
+MAX_ANGLE_RAD = 1e5
+"""Largest pose angle read (unwrapped odometry turns many times, not 16,000 times)."""
+MAX_STEP_BACK_S = 10.0
+"""A scan stamp stepping back further is not jitter (intel's reach 0.9 s)."""
 DEFAULT_FOV_DEG = 180.0
 SUFFIXES = (".log", ".log.gz", ".clf", ".clf.gz")
 
@@ -96,17 +101,20 @@ class _Log:
     stamps: list[float] = field(default_factory=list)
     last_odom: list[tuple[float, float, float] | None] = field(default_factory=list)
     raw_readings: list[int] = field(default_factory=list)
+    lines: list[int] = field(default_factory=list)  # of each scan
     params: dict[str, str] = field(default_factory=dict)
     angles: np.ndarray | None = None
     range_max: float | None = None
 
 
 def _open_lines(path: Path) -> list[str]:
+    check_regular(path, "CARMEN log")
     try:
         if path.name.lower().endswith(".gz"):
-            with gzip.open(path, "rt", encoding="ascii", errors="strict") as f:
-                return f.read().splitlines()
-        return path.read_text(encoding="ascii").splitlines()
+            with gzip.open(path, "rb") as f:
+                data = f.read()
+        else:
+            data = path.read_bytes()
     except FileNotFoundError:
         raise GslamError(f"{path}: no such file") from None
     except EOFError:
@@ -114,10 +122,9 @@ def _open_lines(path: Path) -> list[str]:
                          "(an incomplete download or copy?)") from None
     except (gzip.BadGzipFile, zlib.error) as e:
         raise GslamError(f"{path}: not a valid gzip file ({e})") from None
-    except UnicodeDecodeError:
-        raise GslamError(f"{path}: cannot read: not a CARMEN text log (binary content)") from None
     except OSError as e:
         raise GslamError(f"{path}: cannot read ({e.strerror or e})") from None
+    return decode_log(data, path, "CARMEN text log").splitlines()
 
 
 def _floats(parts: list[str], where: str, expected: str) -> np.ndarray:
@@ -159,9 +166,11 @@ def _add_scan(d: _Log, where: str, ranges: np.ndarray, angles: np.ndarray, pose,
         d.angles, d.range_max = angles, range_max
     elif len(angles) != len(d.angles) or not np.allclose(angles, d.angles):
         raise GslamError(f"{where}: expected {len(d.angles)} beams at the same angles as the first scan")
-    d.ranges.append(ranges.astype(np.float32))
+    with np.errstate(over="ignore"):  # a range beyond float32 is no return (inf), checked later
+        d.ranges.append(ranges.astype(np.float32))
     d.poses.append(pose)
     d.stamps.append(stamp)
+    d.lines.append(int(where.rsplit(":", 1)[1]))
     d.last_odom.append(None)
     d.raw_readings.append(-1)  # the next ODOM line repeats this pose
 
@@ -175,6 +184,9 @@ def _parse_flaser(d: _Log, parts: list[str], where: str) -> None:
         fov = float(d.params.get("laser_front_laser_fov", DEFAULT_FOV_DEG))
     except ValueError:
         raise GslamError(f"{where}: expected a number in PARAM laser_front_laser_fov") from None
+    if not 0.0 < fov <= 360.0:
+        raise GslamError(f"{where}: PARAM laser_front_laser_fov {fov:g}: expected the laser's field of view, "
+                         "more than 0 and at most 360 degrees")
     pose = (values[n], values[n + 1], values[n + 2])
     _add_scan(d, where, values[:n], _flaser_angles(n, fov), pose, values[n + 6], None)
 
@@ -268,13 +280,17 @@ def _odometry(path: Path, d: _Log, t: np.ndarray) -> Trajectory | None:
     return Trajectory(t=t[keep], x=poses[keep, 0], y=poses[keep, 1], yaw=poses[keep, 2])
 
 
-def scan_times(path: Path, stamps: np.ndarray) -> tuple[float, np.ndarray]:
+def scan_times(path: Path, stamps: np.ndarray, lines: list[int] | None = None) -> tuple[float, np.ndarray]:
     """``(t0, t)``: scan times relative to the first scan, repaired or
-    synthesised as described in the module docstring."""
+    synthesised as described in the module docstring. A stamp that steps
+    back by more than :data:`MAX_STEP_BACK_S` among increasing ones is a
+    second log after the first (or a clock reset): an error naming its line
+    (``lines``: each scan's)."""
     n = len(stamps)
     if n < 2:
         return float(stamps[0]), np.zeros(n)
-    bad = int(np.sum(np.diff(stamps) <= 0.0))
+    steps = np.diff(stamps)
+    bad = int(np.sum(steps <= 0.0))
     if bad > MAX_BAD_STEP_FRACTION * (n - 1):
         log.warning(
             "%s: %d of %d scan stamps do not increase (zero or low-resolution stamps); "
@@ -282,12 +298,29 @@ def scan_times(path: Path, stamps: np.ndarray) -> tuple[float, np.ndarray]:
             path, bad, n - 1, NOMINAL_SCAN_PERIOD_S,
         )
         return 0.0, NOMINAL_SCAN_PERIOD_S * np.arange(n)
+    back = int(np.argmin(steps))
+    if -steps[back] > MAX_STEP_BACK_S:
+        where = f"{path}:{lines[back + 1]}" if lines is not None else f"{path}: scan {back + 1}"
+        raise GslamError(f"{where}: time goes back by {-steps[back]:.6g} s (from {stamps[back]:.6f} to "
+                         f"{stamps[back + 1]:.6f}): two logs in one file, or a clock reset? Expected one run per file")
     t = stamps.astype(np.float64).copy()
     if bad:
-        log.warning("%s: %d scan stamps step back; moved %g s after their predecessor", path, bad, MIN_STAMP_STEP_S)
         for k in range(1, n):
             t[k] = max(t[k], t[k - 1] + MIN_STAMP_STEP_S)
+        moved = int(np.sum(t != stamps))
+        log.warning("%s: %d scan stamps step back; %d stamps moved to %g s after their predecessor",
+                    path, bad, moved, MIN_STAMP_STEP_S)
     return float(t[0]), t - t[0]
+
+
+def _check_angles(path: Path, d: _Log) -> None:
+    """Pose angles are radians, wrapped when read; they may be unwrapped
+    (csail's reach 10.9), but beyond :data:`MAX_ANGLE_RAD` they are no
+    angle in any unit."""
+    theta = np.abs(np.array([p[2] for p in d.poses] + [o[2] for o in d.last_odom if o is not None]))
+    worst = float(theta.max()) if theta.size else 0.0
+    if worst > MAX_ANGLE_RAD:
+        raise GslamError(f"{path}: pose angles reach {worst:.6g}; expected radians (CARMEN's theta)")
 
 
 def _range_max(d: _Log, ranges: np.ndarray) -> float:
@@ -320,7 +353,8 @@ def read_carmen(path: str | Path, config: InputConfig | None = None) -> Recordin
     if not d.poses:
         raise GslamError(f"{path}: no FLASER or ROBOTLASER1 scans; expected a CARMEN laser log")
     ranges = np.vstack(d.ranges)
-    t0, t = scan_times(path, np.asarray(d.stamps))
+    _check_angles(path, d)
+    t0, t = scan_times(path, np.asarray(d.stamps), d.lines)
     corrected = np.asarray(d.poses, dtype=np.float64)
     scans = Scans(t=t, ranges=ranges, angles=d.angles, range_min=0.0, range_max=_range_max(d, ranges))
     groundtruth = Trajectory(t=t.copy(), x=corrected[:, 0], y=corrected[:, 1], yaw=wrap_angle(corrected[:, 2]))

@@ -39,6 +39,7 @@ from slam.config import InputConfig
 from slam.errors import GslamError
 from slam.geometry import wrap_angle
 from slam.io.carmen import chain_steps
+from slam.io.yamlfile import check_regular, decode_log
 from slam.recording import Gyro, PlaceMatches, Recording, Trajectory
 
 log = logging.getLogger(__name__)
@@ -90,10 +91,9 @@ def _read_rows(path: Path, wanted: dict[str, tuple[int, str]]) -> dict[str, np.n
     """Rows of the wanted types as float arrays: ``wanted`` maps a type to
     (number of numeric fields used, description for errors)."""
     rows: dict[str, list[list[float]]] = {kind: [] for kind in wanted}
+    check_regular(path, "libRSF file")
     try:
-        text = path.read_text(encoding="ascii")
-    except UnicodeDecodeError:
-        raise GslamError(f"{path}: cannot read: not a libRSF text file (binary content)") from None
+        text = decode_log(path.read_bytes(), path, "libRSF text file")
     except OSError as e:
         raise GslamError(f"{path}: cannot read ({e.strerror or e})") from None
     for lineno, line in enumerate(text.splitlines(), start=1):

@@ -30,7 +30,8 @@ from typing import Callable, Mapping, Protocol
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from slam.config import GpsInputConfig, InputConfig
-from slam.io.yamlfile import read_text_file
+from slam.io.data_checks import check_recording, check_time_offsets
+from slam.io.yamlfile import check_regular, read_text_file
 from slam.errors import GslamError
 from slam.io import broad, carmen, librsf
 from slam.io.rosbag import BAG_SUFFIXES, RosbagReader, ScansHook, is_rosbag
@@ -76,8 +77,9 @@ _GUESSERS: tuple[tuple[str, Callable[[Path], bool]], ...] = (
 
 
 def is_run_folder(path: Path) -> bool:
-    """A run folder: a directory with ``truth.json`` and ``bag/``."""
-    return path.is_dir() and (path / SIDECAR).is_file() and (path / RUN_BAG).exists()
+    """A run folder: a directory with ``truth.json`` and ``bag/`` (a
+    ``truth.json`` that is not a file is then reported by its reader)."""
+    return path.is_dir() and (path / SIDECAR).exists() and (path / RUN_BAG).exists()
 
 
 def run_recording(path: Path) -> Path:
@@ -97,6 +99,8 @@ def guess_format(path: str | Path) -> str:
     path = Path(path)
     if not path.exists():
         raise GslamError(f"{path}: no such file or directory")
+    if not path.is_dir():
+        check_regular(path, "recording")
     if is_run_folder(path):
         path = run_recording(path)
         if path.is_dir() and not is_rosbag(path):
@@ -216,6 +220,8 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
     relative to the first scan), by the others with the recording's scans
     at the end; not at all without scans."""
     path = Path(path)
+    if path.exists() and not path.is_dir():
+        check_regular(path, "recording")
     fmt = guess_format(path) if config.format == "auto" else config.format
     if fmt not in READERS:
         raise GslamError(f"unknown input format '{fmt}'; known: {', '.join(READERS)}")
@@ -225,7 +231,7 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
         raise GslamError(f"input.extra_odometry: a {fmt} recording has no topics; further odometry sources are "
                          "read from ROS bags")
     if not is_run_folder(path):
-        return shift_streams(_read(fmt, path, config, on_scans), config)
+        return _checked(_read(fmt, path, config, on_scans), fmt, path, config, on_scans)
 
     sidecar = load_sidecar(path / SIDECAR)
     unset = config.gps.datum_lat_deg is None and config.gps.datum_lon_deg is None
@@ -233,7 +239,7 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
         lat, lon = sidecar.gps_datum.lat_deg, sidecar.gps_datum.lon_deg
         datum = GpsInputConfig(datum_lat_deg=lat, datum_lon_deg=lon)
         config = config.model_copy(update={"gps": datum})
-    rec = shift_streams(_read(fmt, run_recording(path), config, on_scans), config)
+    rec = _checked(_read(fmt, run_recording(path), config, on_scans), fmt, path, config, on_scans)
     rec.name = path.name
     attach_sidecar(rec, sidecar)
     log.info("%s: run '%s' with faults in %s", path, sidecar.scenario, ", ".join(rec.faults) or "none")
@@ -241,11 +247,23 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
 
 
 def _read(fmt: str, path: Path, config: InputConfig, on_scans: ScansHook | None) -> Recording:
+    """The reader's recording; the ROS bag reader hands its scans to
+    ``on_scans`` while it reads (the others' go after the checks)."""
     reader = READERS[fmt]
     if isinstance(reader, RosbagReader):
         return reader.read(path, config, on_scans)
-    rec = reader.read(path, config)
-    if on_scans is not None and rec.scans is not None:
+    return reader.read(path, config)
+
+
+def _checked(rec: Recording, fmt: str, path: Path, config: InputConfig, on_scans: ScansHook | None) -> Recording:
+    """The time offsets applied and the physics checks made
+    (:mod:`slam.io.data_checks`), then the scans to ``on_scans`` if the
+    reader has not given them yet."""
+    offsets = config.time_offsets_s.shifted()
+    offsets.update({f"extra_odometry.{n}": e.time_offset_s for n, e in config.extra_odometry.items() if e.time_offset_s})
+    check_time_offsets(rec, offsets, path)
+    rec = check_recording(shift_streams(rec, config), path, offsets)
+    if on_scans is not None and rec.scans is not None and fmt != "rosbag":
         on_scans(rec.scans)
     return rec
 

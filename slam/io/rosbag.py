@@ -45,6 +45,7 @@ from slam.io.rosbag_imu import _CompassImuStream, _CompassMagStream, _GyroStream
 from slam.io.rosbag_poses import _GpsStream, _PoseStream
 from slam.io.rosbag_scans import _ScanStream
 from slam.io.rosbag_streams import _NS, IMU, LASER_SCAN, MAGNETIC_FIELD, NAV_SAT_FIX, ODOMETRY, POSE_STAMPED, _Stream
+from slam.io.yamlfile import check_regular
 from slam.recording import Recording, Scans
 
 # The reader's public names, with the message types and world_yaw_rate of the
@@ -86,7 +87,13 @@ def resolve_bag_path(path: Path) -> Path:
     may be)."""
     if not path.exists():
         raise GslamError(f"{path}: no such file or directory")
-    if not path.is_dir() or (path / "metadata.yaml").is_file():
+    if not path.is_dir():
+        check_regular(path, "ROS bag")
+        return path
+    if (path / "metadata.yaml").is_file():
+        for member in path.iterdir():  # a named pipe among them would block the reader forever
+            if not member.is_dir():
+                check_regular(member, "file of a ROS 2 bag")
         return path
     inside = sorted(p for p in path.iterdir() if p.suffix in BAG_SUFFIXES)
     if len(inside) != 1:
@@ -94,6 +101,7 @@ def resolve_bag_path(path: Path) -> Path:
             f"{path}: expected a rosbag2 directory (metadata.yaml) or exactly one "
             f".bag/.db3/.mcap file, found {len(inside)}"
         )
+    check_regular(inside[0], "ROS bag")
     return inside[0]
 
 

@@ -26,7 +26,7 @@ from pathlib import Path
 import yaml
 
 from slam.errors import GslamError
-from slam.io.yamlfile import SAFE_LOADER
+from validation.yamlio import SAFE_LOADER
 
 # RIHS01 hashes of the standard definitions (ROS 2 Iron, Jazzy and later;
 # tests/test_rosbag2_sqlite.py checks them against rosbags' type stores).

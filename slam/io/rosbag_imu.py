@@ -77,6 +77,7 @@ class _GyroStream(_Stream):
         self.blocks = []
         if self.world:
             self._finite("angular_velocity/orientation", rows)
+            self._rotations("orientation", rows[:, 3:])
             self.rate = world_yaw_rate(rows[:, :3], rows[:, 3:])
         else:
             self.rate = rows[:, 0] if rows.size else np.zeros(0)
@@ -201,6 +202,7 @@ class _CompassImuStream(_Stream):
         self.quat = np.asarray(self.quats if cols is None else cols["orientation"], dtype=np.float64).reshape(-1, 4)
         self.blocks = []
         self._finite("orientation", self.quat)
+        self._rotations("orientation", self.quat)
 
     def build(self, t0_ns: int) -> Compass:
         q = self.quat

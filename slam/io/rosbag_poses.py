@@ -62,6 +62,7 @@ class _PoseStream(_Stream):
         self.blocks = []
         self._finite("pose.position", self.pose[:, :2])
         self._finite("pose.orientation", self.pose[:, 2:])
+        self._rotations("pose.orientation", self.pose[:, 2:])
 
     def build(self, t0_ns: int) -> Trajectory:
         p = self.pose

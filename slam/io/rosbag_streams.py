@@ -101,6 +101,18 @@ class _Stream:
             i = int(np.flatnonzero(~ok)[0])
             raise GslamError(f"{self.where}: non-finite {field} at message {i}")
 
+    def _rotations(self, field: str, quats: np.ndarray) -> None:
+        """Quaternions (n, 4) must be rotations: of norm 1 (within 10 %; an
+        all-zero orientation is a publisher that sets none)."""
+        if quats.size == 0:
+            return
+        norm = np.linalg.norm(quats, axis=1)
+        bad = np.abs(norm - 1.0) > 0.1
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise GslamError(f"{self.where}: {field} at message {i} is not a rotation (quaternion of norm {norm[i]:.3g}, "
+                             f"expected 1; {int(bad.sum())} of {len(norm)} messages): a publisher that sets no orientation?")
+
     def first_ns(self) -> int | None:
         return int(self.ns[0]) if len(self.ns) else None
 

@@ -2,9 +2,14 @@
 anything that is not what was expected, and the checks every YAML tree
 gets before it is used.
 
-* a missing, unreadable, binary or non-UTF-8 file;
-* invalid YAML (with the line), nesting too deep, a top level that is not
-  a mapping, or aliases that expand beyond :data:`MAX_YAML_VALUES`;
+* a missing, unreadable, binary or non-UTF-8 file, or one that is not a
+  regular file (a named pipe would block the read forever);
+* invalid YAML (with the line), a key given twice (both lines), nesting
+  too deep, a top level that is not a mapping, or aliases that expand
+  beyond :data:`MAX_YAML_VALUES`;
+
+The reading itself is :mod:`validation.yamlio`'s, which the validation
+package's own files (models) get too.
 * NaN and infinite numbers (:func:`non_finite`), named by their dotted key.
 """
 
@@ -14,69 +19,41 @@ import math
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from slam.errors import GslamError
+from validation import yamlio
+from validation.errors import ValidationError
 
-# libyaml's parser where PyYAML was built with it (ten times faster), the same safe constructor.
-SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+SAFE_LOADER = yamlio.UniqueKeyLoader
+"""The safe loader (libyaml's parser where PyYAML has it), refusing keys given twice."""
+MAX_YAML_VALUES = yamlio.MAX_YAML_VALUES
 
 
 def read_text_file(path: str | Path, what: str = "config", kind: str = "YAML") -> str:
     """The text of a UTF-8 file, with a one-line error for a missing,
-    unreadable or binary file; ``what`` and ``kind`` name what was expected
-    (a YAML config, a JSON sidecar)."""
-    path = Path(path)
+    unreadable, special (a named pipe), huge, binary or non-UTF-8 file;
+    ``what`` and ``kind`` name what was expected (a YAML config, a JSON
+    sidecar)."""
     try:
-        data = path.read_bytes()
-    except OSError as e:
-        raise GslamError(f"{path}: cannot read {what} ({e.strerror})") from None
-    if b"\0" in data:
-        raise GslamError(f"{path}: binary content; expected a {kind} {what} (text)")
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise GslamError(f"{path}: byte {e.start} is not UTF-8 text; expected a {kind} {what}") from None
+        return yamlio.read_text(path, what, kind)
+    except ValidationError as e:
+        raise GslamError(str(e)) from None
 
 
 def load_yaml(path: str | Path, what: str = "config") -> dict[str, Any]:
-    """Read a YAML mapping, with a one-line error for anything else. An
-    empty file is an empty mapping."""
-    path = Path(path)
-    text = read_text_file(path, what)
+    """Read a YAML mapping, with a one-line error for anything else (a key
+    given twice names both lines). An empty file is an empty mapping."""
     try:
-        data = yaml.load(text, Loader=SAFE_LOADER)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f" line {mark.line + 1}:" if mark else ""
-        problem = getattr(e, "problem", None) or "not YAML"
-        raise GslamError(f"{path}:{where} invalid YAML ({problem})") from None
-    except RecursionError:
-        raise GslamError(f"{path}: YAML nested too deeply") from None
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise GslamError(f"{path}: expected a YAML mapping of keys at the top level, found a {type(data).__name__}")
-    if _expanded_size(data, {}) > MAX_YAML_VALUES:
-        raise GslamError(f"{path}: expands to more than {MAX_YAML_VALUES:,} values (YAML aliases); expected a config")
-    return data
+        return yamlio.load_yaml(path, what)
+    except ValidationError as e:
+        raise GslamError(str(e)) from None
 
 
-MAX_YAML_VALUES = 1_000_000
-"""Most values a YAML file may expand to: aliases can make a few lines
-expand to billions (a "billion laughs" file), which no config needs."""
-
-
-def _expanded_size(node: Any, memo: dict[int, int]) -> int:
-    """Values in ``node`` with every alias expanded, counted once per
-    distinct container (linear time, however often a container is shared)."""
-    if not isinstance(node, (dict, list)):
-        return 1
-    if id(node) not in memo:
-        memo[id(node)] = 0  # a cycle counts as small; PyYAML's safe loader makes none
-        children = node.values() if isinstance(node, dict) else node
-        memo[id(node)] = 1 + sum(_expanded_size(c, memo) for c in children)
-    return memo[id(node)]
+def parse_yaml(text: str, source: str, what: str = "value") -> Any:
+    """A YAML document from ``text`` (a ``--set`` value), the same checks."""
+    try:
+        return yamlio.parse_yaml(text, source, what)
+    except ValidationError as e:
+        raise GslamError(str(e)) from None
 
 
 def non_finite(tree: Any, prefix: str = "", seen: set[int] | None = None) -> tuple[str, float] | None:
@@ -111,3 +88,26 @@ def check_finite(tree: Any, source: str) -> None:
 
 def yaml_number(value: float) -> str:
     return ".nan" if math.isnan(value) else (".inf" if value > 0 else "-.inf")
+
+
+def decode_log(data: bytes, source: str | Path, what: str) -> str:
+    """The text of a log whose fields are ASCII numbers and words (CARMEN,
+    libRSF): a byte-order mark dropped, a stray byte that is not UTF-8 (a
+    Latin-1 host name or comment) kept as U+FFFD, so that only a field that
+    is read can fail, at its line. NUL bytes, or mostly undecodable bytes,
+    are binary content."""
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    text = data.decode("utf-8", errors="replace")
+    if "\0" in text or text.count("\ufffd") > 0.1 * max(len(text), 1):
+        raise GslamError(f"{source}: cannot read: not a {what} (binary content)")
+    return text
+
+
+def check_regular(path: str | Path, what: str) -> None:
+    """A one-line error unless ``path`` is a regular file (a named pipe
+    would block the read forever, a device never end)."""
+    try:
+        yamlio.check_regular_file(path, what)
+    except ValidationError as e:
+        raise GslamError(str(e)) from None

@@ -18,6 +18,7 @@ import numpy as np
 
 from slam.errors import GslamError
 from slam.geometry import wrap_angle
+from slam.sim.route import check_route
 from slam.sim.scenario import RobotConfig, Scenario
 
 MAX_DURATION_S = 4 * 3600.0
@@ -82,6 +83,23 @@ def _estimate(robot: RobotConfig, path: list) -> tuple[float, float]:
     return float(seconds), path_m
 
 
+def _longest_part(robot: RobotConfig, duration: float, path_m: float) -> str:
+    """What takes most of a mission's ``duration``: driving, a pause
+    (naming its waypoint) or turning, in the words of the scenario's keys."""
+    laps = robot.laps
+    parts = {f"{path_m:.1f} m of path at robot.max_speed_m_s {robot.max_speed_m_s:g}": path_m / robot.max_speed_m_s}
+    for i, w in enumerate(robot.waypoints):
+        if len(w) > 2 and w[2] > 0:
+            times = laps if i > 0 else 1
+            parts[f"the pause of {w[2]:g} s at robot.waypoints.{i}" + (f" (x {laps} laps)" if times > 1 else "")] = w[2] * times
+    parts[f"robot.start_pause_s {robot.start_pause_s:g}"] = robot.start_pause_s
+    parts[f"robot.end_pause_s {robot.end_pause_s:g}"] = robot.end_pause_s
+    turning = duration - sum(parts.values())
+    parts[f"turning and accelerating (robot.max_turn_rate_deg_s {robot.max_turn_rate_deg_s:g}, "
+          f"robot.max_turn_accel_deg_s2 {robot.max_turn_accel_deg_s2:g}, robot.max_accel_m_s2 {robot.max_accel_m_s2:g})"] = turning
+    return max(parts, key=parts.get)
+
+
 def check_bounded(scenario: Scenario, source: str) -> MissionEstimate:
     """The mission estimate, or a one-line :class:`GslamError` naming
     ``source`` if the mission would exceed a bound."""
@@ -93,9 +111,8 @@ def check_bounded(scenario: Scenario, source: str) -> MissionEstimate:
                          "can be simulated (robot.waypoints, robot.laps)")
     if duration > MAX_DURATION_S:
         raise GslamError(
-            f"{source}: the mission would take about {duration / 3600:.1f} h ({path_m:.1f} m of path, "
-            f"robot.max_speed_m_s {scenario.robot.max_speed_m_s:g}, robot.max_turn_rate_deg_s "
-            f"{scenario.robot.max_turn_rate_deg_s:g}); at most {MAX_DURATION_S / 3600:.0f} h can be simulated"
+            f"{source}: the mission would take about {duration / 3600:.1f} h, most of it {_longest_part(scenario.robot, duration, path_m)}; "
+            f"at most {MAX_DURATION_S / 3600:.0f} h can be simulated"
         )
     rates = {
         "robot.truth_rate_hz": scenario.robot.truth_rate_hz,
@@ -112,4 +129,21 @@ def check_bounded(scenario: Scenario, source: str) -> MissionEstimate:
     if scans * sensors.laser.beams > MAX_LASER_VALUES:
         raise GslamError(f"{source}: {scans} scans of {sensors.laser.beams} beams (sensors.laser) over about "
                          f"{duration:.0f} s; at most {MAX_LASER_VALUES:.0e} ranges in all")
+    check_route(scenario, source)
     return MissionEstimate(duration, path_m, scans)
+
+
+# Bytes of one message of each stream as the simulator writes it (CDR), measured on its bags.
+_MESSAGE_BYTES = {"truth": 716, "gyro": 324, "magnetometer": 124, "odometry": 724, "gps": 125}
+_SCAN_BYTES_PER_BEAM, _SCAN_BYTES = 4, 60
+
+
+def bag_bytes(scenario: Scenario, estimate: MissionEstimate) -> int:
+    """At least the size of the simulated bag: the messages themselves
+    (the SQLite file adds about a fifth), checked against the free space
+    before anything is simulated."""
+    s = scenario.sensors
+    rates = {"truth": scenario.robot.truth_rate_hz, "gyro": s.gyro.rate_hz, "magnetometer": s.magnetometer.rate_hz,
+             "odometry": s.odometry.rate_hz, "gps": s.gps.rate_hz}
+    per_s = sum(rates[k] * _MESSAGE_BYTES[k] for k in rates)
+    return int(estimate.duration_s * per_s + estimate.scans * (_SCAN_BYTES + _SCAN_BYTES_PER_BEAM * s.laser.beams))

@@ -28,7 +28,7 @@ from tqdm import tqdm
 
 from slam.io.outdir import result_folder
 from slam.recording import Interval
-from slam.sim.budget import check_bounded
+from slam.sim.budget import bag_bytes, check_bounded
 from slam.sim.bagwriter import Streams, write_bag
 from slam.sim.faults import true_faults
 from slam.sim.magnetics import reference
@@ -112,7 +112,8 @@ def _run(
 ) -> SimulationResult:
     estimate = check_bounded(scenario, source or f"scenario '{scenario.name}'")
     log.info("%s: about %.0f s of mission, %.0f m", scenario.name, estimate.duration_s, estimate.path_m)
-    with result_folder(out, "simulate", [source] if source else [], force, RESULT_NAMES) as tmp:
+    need = bag_bytes(scenario, estimate)
+    with result_folder(out, "simulate", [source] if source else [], force, RESULT_NAMES, need) as tmp:
         result = _simulate_into(scenario, tmp, progress)
     result.run_dir = out
     result.wall_time_s = time.perf_counter() - started

@@ -1,0 +1,95 @@
+"""How gslam stops: Ctrl-C, SIGTERM and SIGHUP end a command the same way.
+
+While a command runs (:func:`as_interrupt`), SIGTERM and SIGHUP raise
+:class:`~slam.errors.Terminated`, a KeyboardInterrupt, so every ``finally``
+that removes a half-written result runs for them as for Ctrl-C. Two places
+must not be cut in the middle: putting a result in place (and making its
+temporary folder), where the signals are held back until it is done
+(:func:`held`), and forking a child, where they are blocked (:func:`blocked`;
+an exception raised inside the fork's hooks would be swallowed, and the
+signal lost). A forked child takes the default actions back
+(:func:`child_defaults`).
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from slam.errors import raise_terminated
+
+STOPS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
+def _main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+@contextmanager
+def as_interrupt(received: list[int]) -> Iterator[None]:
+    """SIGINT raises KeyboardInterrupt, SIGTERM and SIGHUP
+    :class:`~slam.errors.Terminated`; each signal that came is appended to
+    ``received`` (one that lands inside a module's import surfaces as that
+    import's error, and the caller can still tell). Signals ignored when the
+    process started (a background job of a shell) stay ignored."""
+    if not _main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame) -> None:
+        received.append(signum)
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        raise_terminated(signum, frame)
+
+    old = {s: signal.signal(s, interrupt) for s in STOPS if signal.getsignal(s) is not signal.SIG_IGN}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+
+
+@contextmanager
+def held() -> Iterator[None]:
+    """Hold SIGINT, SIGTERM and SIGHUP back until the block is done, then
+    deliver the first that came (on the main thread; elsewhere no-op)."""
+    if not _main_thread():
+        yield
+        return
+    caught: list[int] = []
+    old = {s: signal.signal(s, lambda n, f: caught.append(n)) for s in STOPS}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+        if caught:
+            signal.raise_signal(caught[0])
+
+
+@contextmanager
+def blocked() -> Iterator[None]:
+    """Block SIGINT, SIGTERM and SIGHUP in this thread (delivered after)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, STOPS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def child_defaults() -> None:
+    """In a forked child: Ctrl-C ignored (the parent handles it and ends the
+    child), SIGTERM and SIGHUP end it, and the signals blocked around the
+    fork unblocked."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for s in STOPS:
+        if s != signal.SIGINT:
+            signal.signal(s, signal.SIG_DFL)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOPS)

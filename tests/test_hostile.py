@@ -1,0 +1,696 @@
+"""The second corpus of hostile input: the classes a hostile but realistic
+user finds after the first (tests/test_fuzz.py), built for the classes:
+
+* the output rule: paths inside an input (files of a run folder, the
+  config's model, hard links), devices, pipes and sockets, empty paths,
+  files of the user's that a result would replace, a variant named like a
+  comparison's own file;
+* inputs that are not regular files (a named pipe would hang the reader);
+* physics on what is read: laser ranges, field of view, beam angles,
+  stamps that go back, jump or sit on another clock, time offsets, voxel
+  and window sizes the data do not allow, a laser that returns nothing;
+* configs: a key given twice, no factor left; scenarios whose route runs
+  into an obstacle; ablation specs of more jobs than can run, or whose
+  seeds are wrong;
+* messages that must name the real culprit (a pause, a Latin-1 byte, the
+  stamps a repair moved).
+
+Error cases run as tests/test_fuzz.py's do (exit 1 or 2, one error line
+saying what the case expects, nothing of the user's changed, no traceback,
+no hang). Warning cases must map or simulate with one warning line saying
+what the case expects, write the result, and change nothing else. No case
+may let a Python warning (numpy's overflow) through. Signals and full
+disks are at the end, as real processes.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import logging
+import math
+import os
+import resource
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from slam.cli import main
+from tests.bagfactory import driving_bag
+from tests.conftest import CONFIGS, REPO, TELEMAX_CONFIG
+from tests.test_fuzz import (  # noqa: F401 - world is a fixture
+    Case, World, both, broad_mat, check_error_output, copy_run, data, expand, scenario, set_in, spec, text, time_limit,
+    world,
+)
+
+TIME_LIMIT_S = 60
+MAP = ("map", "{run}", "--config", "{cfg}")
+QUICK = ("--set", "output.plots=false")
+
+
+# --- input builders ----------------------------------------------------------------
+
+
+def checksums(*roots: Path) -> dict[str, str]:
+    """Every file, folder, link, pipe and socket under ``roots`` with its
+    content's hash or its kind (a pipe is never opened: that would block)."""
+    import hashlib
+    import stat
+
+    out = {}
+    for root in roots:
+        for p in sorted(root.rglob("*")):
+            mode = p.lstat().st_mode
+            if stat.S_ISLNK(mode):
+                out[str(p)] = "->" + os.readlink(p)
+            elif stat.S_ISREG(mode):
+                out[str(p)] = hashlib.sha1(p.read_bytes()).hexdigest()
+            else:
+                out[str(p)] = f"mode {stat.S_IFMT(mode):o} inode {p.lstat().st_ino}"
+    return out
+
+
+def _room_ranges(x: float, angles: np.ndarray) -> np.ndarray:
+    """Ranges from (x, 0), heading east, to the walls of a room x -2..12, y -3..3."""
+    c, s = np.cos(angles), np.sin(angles)
+    with np.errstate(divide="ignore"):
+        tx = np.where(c > 0, (12 - x) / c, np.where(c < 0, (-2 - x) / c, np.inf))
+        ty = np.where(s > 0, 3 / s, np.where(s < 0, -3 / s, np.inf))
+    return np.minimum(tx, ty)
+
+
+def carmen(n: int = 40, ranges: Callable[[np.ndarray, int], np.ndarray] | None = None,
+           stamp: Callable[[int], float] | None = None, theta: float = 0.0, head: str = "",
+           name: str = "c.log", robotlaser: tuple[float, float, float] | None = None,
+           encoding: Callable[[str], bytes] = str.encode) -> Callable[[Path, World], None]:
+    """A CARMEN log of a robot driving 0.1 m per scan along a room: FLASER
+    (or ROBOTLASER1 with ``robotlaser`` = start, fov, resolution in rad)
+    lines with the corrected pose, each followed by ODOM lines (the repeat,
+    then the next pose); ``ranges(r, k)`` and ``stamp(k)`` change scan k."""
+
+    def make(d: Path, world: World) -> None:
+        beams = 181
+        angles = np.radians(np.linspace(-90, 90, beams))
+        lines = [head] if head else []
+        for k in range(n):
+            x, t = 0.1 * k, stamp(k) if stamp is not None else 1000.0 + 0.5 * k
+            r = _room_ranges(x, angles)
+            r = ranges(r, k) if ranges is not None else r
+            values = " ".join(f"{v:.6g}" for v in r)
+            pose = f"{x:.3f} 0 {theta:g}"
+            if robotlaser is None:
+                lines.append(f"FLASER {beams} {values} {pose} {pose} {t:.6f} host {t:.6f}")
+            else:
+                start, fov, res = robotlaser
+                lines.append(f"ROBOTLASER1 0 {start:g} {fov:g} {res:g} 50 0.01 0 {beams} {values} 0 "
+                             f"0 0 0 {pose} 0 0 0 0 0 {t:.6f} host {t:.6f}")
+            lines.append(f"ODOM {pose} 0 0 0 {t:.6f} host {t:.6f}")
+            lines.append(f"ODOM {0.1 * (k + 1):.3f} 0 {theta:g} 0 0 0 {t + 0.25:.6f} host {t + 0.25:.6f}")
+        (d / name).write_bytes(encoding("\n".join(lines) + "\n"))
+
+    return make
+
+
+CARMEN = ("map", "{d}/c.log", "--config", str(CONFIGS / "datasets" / "carmen.yaml"), *QUICK, "--out", "{d}/o")
+
+
+def bag(change: Callable | None = None, name: str = "b") -> Callable[[Path, World], None]:
+    """The driving bag of tests/bagfactory.py (2 s, every default topic) as
+    a ROS 2 bag at ``{d}/b``, its messages changed by ``change(bag)``."""
+
+    def make(d: Path, world: World) -> None:
+        b = driving_bag(ros=2, duration_s=4.0)
+        if change is not None:
+            change(b)
+        b.write(d / name)
+
+    return make
+
+
+def each(topic: str, fn: Callable[[float, object], None]) -> Callable:
+    """A bag change: ``fn(t, msg)`` on every message of ``topic``."""
+
+    def change(b) -> None:
+        for i, (log_ns, order, t, msgtype, msg) in enumerate(b._messages):
+            if t == topic:
+                fn(log_ns / 1e9, msg)
+
+    return change
+
+
+def restamp(topic: str, shift: Callable[[int], float]) -> Callable:
+    """A bag change: header stamp of message k of ``topic`` moved by ``shift(k)`` s."""
+
+    def change(b) -> None:
+        k = 0
+        for i, (log_ns, order, t, msgtype, msg) in enumerate(b._messages):
+            if t == topic:
+                ns = log_ns + int(round(shift(k) * 1e9))
+                msg.header.stamp.sec, msg.header.stamp.nanosec = ns // 10**9, ns % 10**9
+                k += 1
+
+    return change
+
+
+BAG = ("map", "{d}/b", "--config", "{cfg}", *QUICK, "--out", "{d}/o")
+
+
+def config(change: Callable[[dict], None], name: str = "c.yaml") -> Callable[[Path, World], None]:
+    """configs/telemax.yaml with ``change`` applied (its model made absolute) at ``{d}/c.yaml``."""
+
+    def make(d: Path, world: World) -> None:
+        tree = yaml.safe_load(TELEMAX_CONFIG.read_text())
+        tree["validation"]["model"] = str(CONFIGS / "validation" / "telemax_model.yaml")
+        change(tree)
+        (d / name).write_text(yaml.safe_dump(tree, sort_keys=False))
+
+    return make
+
+
+def relation(index: int, **values) -> Callable[[dict], None]:
+    def change(tree: dict) -> None:
+        tree["validation"]["observers"]["relations"][index].update(values)
+
+    return change
+
+
+def every_factor(enabled: bool, **but) -> Callable[[dict], None]:
+    def change(tree: dict) -> None:
+        for name, f in tree["backend"]["factors"].items():
+            f["enabled"] = but.get(name, enabled)
+
+    return change
+
+
+def fifo(name: str) -> Callable[[Path, World], None]:
+    def make(d: Path, world: World) -> None:
+        (d / name).parent.mkdir(parents=True, exist_ok=True)
+        os.mkfifo(d / name)
+
+    return make
+
+
+def unix_socket(name: str) -> Callable[[Path, World], None]:
+    def make(d: Path, world: World) -> None:
+        sock = socket.socket(socket.AF_UNIX)
+        sock.bind(str(d / name))
+        sock.close()  # the socket file stays
+
+    return make
+
+
+def hard_link(name: str, to: str) -> Callable[[Path, World], None]:
+    def make(d: Path, world: World) -> None:
+        os.link(d / to, d / name)
+
+    return make
+
+
+def result_with(command: str, name: str, files: dict[str, str | None]) -> Callable[[Path, World], None]:
+    """A folder marked as ``command``'s result listing ``files``; a None
+    content makes a folder of the user's where that file goes."""
+
+    def make(d: Path, world: World) -> None:
+        folder = d / name
+        folder.mkdir()
+        (folder / ".gslam-result.json").write_text(json.dumps({"command": command, "files": []}))
+        for f, content in files.items():
+            if content is None:
+                (folder / f).mkdir(parents=True)
+            else:
+                (folder / f).write_text(content)
+
+    return make
+
+
+def raw(name: str, content: bytes) -> Callable[[Path, World], None]:
+    return data(name, content)
+
+
+def spec_in(d: Path, world: World, **changes) -> None:
+    spec(**changes)(d, world)
+
+
+def scenario_waypoints(points) -> Callable[[Path, World], None]:
+    return scenario(set_in("robot", "waypoints", points))
+
+
+# --- the error corpus -------------------------------------------------------------
+
+
+RUN = ("{d}/run",)
+CAL = ("calibrate", "{d}/run", "--config", "{cfg}", "--clean", "0:10")
+
+ERRORS: list[Case] = [
+    # -- the output rule: inside an input, with or without --force --
+    Case("calibrate-out-truth-json-force", (*CAL, "--out", "{d}/run/truth.json", "--force"),
+         "is inside the input folder", copy_run()),
+    Case("calibrate-out-new-file-in-run", (*CAL, "--out", "{d}/run/model.yaml"), "is inside the input folder", copy_run()),
+    Case("inspect-config-out-bag-metadata-force", ("inspect", "{d}/run", "--config-out", "{d}/run/bag/metadata.yaml", "--force"),
+         "is inside the input folder", copy_run()),
+    Case("inspect-config-out-scenario-yaml", ("inspect", "{d}/run", "--config-out", "{d}/run/scenario.yaml"),
+         "is inside the input folder", copy_run()),
+    Case("map-out-inside-the-bag-force", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/run/bag/m", "--force"),
+         "is inside the input folder", copy_run()),
+    Case("inject-out-inside-the-run-force", ("inject", "{d}/run", "--fault", "gyro_bias@2:4", "--out", "{d}/run/x", "--force"),
+         "is inside the input folder", copy_run()),
+    Case("compare-out-holds-the-run-force", ("compare", "{d}/run", "--config", "{cfg}", "--out", "{d}", "--force"),
+         "holds the input", copy_run()),
+    Case("simulate-out-holds-the-scenario-force", ("simulate", "{d}/s/s.yaml", "--out", "{d}/s", "--force"),
+         "holds the input", lambda d, w: (d / "s").mkdir() or shutil.copy(w.scenario, d / "s" / "s.yaml")),
+    Case("calibrate-out-is-the-model-force", ("calibrate", "{run}", "--config", "{d}/c.yaml", "--out", "{d}/m.yaml", "--force"),
+         "is the input", both(text("m.yaml", (CONFIGS / "validation" / "telemax_model.yaml").read_text()),
+                              config(lambda t: t["validation"].update(model="m.yaml")))),
+    Case("calibrate-out-hard-link-of-the-config", ("calibrate", "{run}", "--config", "{d}/c.yaml", "--out", "{d}/l.yaml",
+                                                   "--force"), "is the input", both(config(lambda t: None), hard_link("l.yaml", "c.yaml"))),
+    Case("map-out-is-the-model-folder", ("map", "{run}", "--config", "{d}/c.yaml", "--out", "{d}/mdl"),
+         "holds the input", both(text("mdl/m.yaml", (CONFIGS / "validation" / "telemax_model.yaml").read_text()),
+                                 config(lambda t: t["validation"].update(model="mdl/m.yaml")))),
+    # -- devices, pipes, sockets, empty paths --
+    Case("inspect-config-out-dev-null-force", ("inspect", "{run}", "--config-out", "/dev/null", "--force"), "is a device"),
+    Case("calibrate-out-dev-null-force", (*CAL[:2], "--config", "{cfg}", "--out", "/dev/null", "--force"), "is a device"),
+    Case("map-out-fifo-force", (*MAP, "--out", "{d}/p", "--force"), "is a named pipe", fifo("p")),
+    Case("simulate-out-fifo", ("simulate", "{scen}", "--out", "{d}/p"), "is a named pipe", fifo("p")),
+    Case("calibrate-out-socket-force", ("calibrate", "{run}", "--config", "{cfg}", "--out", "{d}/s", "--force"),
+         "is a socket", unix_socket("s")),
+    Case("map-out-empty", (*MAP, "--out", ""), "argument --out: is empty", code=2),
+    Case("simulate-out-blank", ("simulate", "{scen}", "--out", "  "), "argument --out: is empty", code=2),
+    Case("calibrate-out-empty", ("calibrate", "{run}", "--config", "{cfg}", "--out", ""), "argument --out: is empty", code=2),
+    Case("inspect-config-out-empty", ("inspect", "{run}", "--config-out", ""), "argument --config-out: is empty", code=2),
+    # -- files of the user's: never replaced, even with --force --
+    Case("inspect-config-out-users-file-force", ("inspect", "{run}", "--config-out", "{d}/mine.yaml", "--force"),
+         "exists and is not a gslam inspect result", text("mine.yaml", "# mine\n")),
+    Case("calibrate-out-users-file-force", ("calibrate", "{run}", "--config", "{cfg}", "--out", "{d}/mine.yaml", "--force"),
+         "exists and is not a gslam calibrate result", text("mine.yaml", "# gslam said nothing\n")),
+    Case("map-force-users-trajectory", (*MAP, *QUICK, "--out", "{d}/mine", "--force"), "holds trajectory.tum",
+         both(text("mine/trajectory.tum", "mine\n"), text("mine/notes.txt", "mine\n"))),
+    Case("map-force-link-where-metrics-go", (*MAP, *QUICK, "--out", "{d}/mine", "--force"), "holds metrics.json",
+         both(text("elsewhere.json", "{}\n"), text("mine/notes.txt", "mine\n"),
+              lambda d, w: (d / "mine" / "metrics.json").symlink_to(d / "elsewhere.json"))),
+    Case("map-rerun-users-folder-where-a-file-goes", (*MAP, *QUICK, "--out", "{d}/m"), "holds config.yaml",
+         result_with("map", "m", {"config.yaml": None})),
+    Case("map-rerun-users-file-not-in-the-list", (*MAP, *QUICK, "--out", "{d}/m"), "holds metrics.json",
+         result_with("map", "m", {"metrics.json": "the user's own\n"})),
+    Case("compare-force-users-comparison", ("compare", "{run}", "--config", "{cfg}", "--only", "ungated", *QUICK,
+                                            "--out", "{d}/mine", "--force"), "holds comparison.md",
+         text("mine/comparison.md", "mine\n")),
+    Case("simulate-force-users-truth", ("simulate", "{scen}", "--out", "{d}/mine", "--force"), "holds truth.json",
+         text("mine/truth.json", "{}\n")),
+    Case("ablate-force-users-summary", ("ablate", "{spec}", "--out", "{d}/mine", "--force"), "holds summary.md",
+         text("mine/summary.md", "mine\n")),
+    Case("inject-force-users-file-named-bag", ("inject", "{run}", "--fault", "gyro_bias@2:4", "--out", "{d}/mine", "--force"),
+         "holds bag", text("mine/bag", "mine\n")),
+    # -- a variant named like the comparison's own files or a path --
+    Case("compare-variant-named-comparison-md", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml",
+                                                 "--out", "{d}/o"), "variant 'comparison.md'",
+         text("v.yaml", "comparison.md: {validation.mode: \"off\"}\n")),
+    Case("compare-variant-named-a-path", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml",
+                                          "--out", "{d}/o"), "variant '../up'", text("v.yaml", "../up: {}\n")),
+    Case("compare-variant-hidden", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+         "variant '.gslam-result.json'", text("v.yaml", ".gslam-result.json: {}\n")),
+    # -- inputs that are not regular files: refused, never read (no hang) --
+    Case("config-is-a-named-pipe", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "it is a named pipe", fifo("c.yaml")),
+    Case("config-is-dev-zero", (*MAP[:2], "--config", "/dev/zero", "--out", "{d}/o"), "it is a device"),
+    Case("scenario-is-a-named-pipe", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "it is a named pipe", fifo("s.yaml")),
+    Case("spec-is-a-named-pipe", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "it is a named pipe", fifo("spec.yaml")),
+    Case("variants-is-a-named-pipe", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+         "it is a named pipe", fifo("v.yaml")),
+    Case("model-is-a-named-pipe", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "it is a named pipe",
+         both(fifo("m.yaml"), config(lambda t: t["validation"].update(model="m.yaml")))),
+    Case("recording-bag-is-a-named-pipe", ("map", "{d}/r.bag", "--config", "{cfg}", "--out", "{d}/o"), "it is a named pipe",
+         fifo("r.bag")),
+    Case("recording-log-is-a-named-pipe", ("inspect", "{d}/c.log"), "it is a named pipe", fifo("c.log")),
+    Case("run-truth-json-is-a-named-pipe", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), "it is a named pipe",
+         copy_run(lambda r: (r / "truth.json").unlink() or os.mkfifo(r / "truth.json"))),
+    Case("run-db3-is-a-named-pipe", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), "it is a named pipe",
+         copy_run(lambda r: (r / "bag" / "bag.db3").unlink() or os.mkfifo(r / "bag" / "bag.db3"))),
+    # -- configs: a key given twice, no factor left --
+    Case("config-duplicate-section", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "line 3: key 'backend' given twice (first on line 1)",
+         text("c.yaml", "backend: {optimizer: isam2}\nkeyframes: {period_s: 0.5}\nbackend: {optimizer: batch}\n")),
+    Case("config-duplicate-nested-key", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "line 4: key 'sigma_yaw_deg' given twice (first on line 3)",
+         text("c.yaml", "backend:\n  factors:\n    compass: {sigma_yaw_deg: 3,\n      sigma_yaw_deg: 30}\n")),
+    Case("scenario-duplicate-key", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "key 'seed' given twice",
+         lambda d, w: (d / "s.yaml").write_text(w.scenario.read_text() + "seed: 5\n")),
+    Case("spec-duplicate-key", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "key 'name' given twice",
+         lambda d, w: (d / "spec.yaml").write_text(w.spec.read_text() + "name: twice\n")),
+    Case("variants-duplicate-key", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+         "line 2: key 'gated' given twice", text("v.yaml", "gated: {validation.mode: on}\ngated: {validation.mode: off}\n")),
+    Case("model-duplicate-key", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "key 'components' given twice",
+         both(text("m.yaml", (CONFIGS / "validation" / "telemax_model.yaml").read_text() + "components: []\n"),
+              config(lambda t: t["validation"].update(model="m.yaml")))),
+    Case("config-every-factor-disabled", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "backend.factors: no factor left (every one is disabled)", config(every_factor(False))),
+    Case("set-every-factor-disabled", (*MAP, "--out", "{d}/o", *(a for f in ("odometry", "gyro", "compass", "scan_matching", "gps")
+                                                                 for a in ("--set", f"backend.factors.{f}.enabled=false"))),
+         "no factor left"),
+    Case("config-scan-matching-without-frontend", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "scan_matching is the only one enabled and frontend.enabled is false",
+         config(lambda t: every_factor(False, scan_matching=True)(t) or t["frontend"].update(enabled=False))),
+    Case("config-only-gps-run-without-fixes", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "no factor left: the config enables gps, whose streams the recording lacks", config(every_factor(False, gps=True))),
+    # -- time offsets, voxels and windows the data do not allow --
+    Case("time-offset-1e9", (*MAP, "--out", "{d}/o", "--set", "input.time_offsets_s.gyro=1e9"),
+         "input.time_offsets_s.gyro +1e+09 s is as long as the recording"),
+    Case("time-offset-minus-a-day", (*MAP, "--out", "{d}/o", "--set", "input.time_offsets_s.odometry=-86400"),
+         "input.time_offsets_s.odometry -86400 s"),
+    Case("voxel-1e-9", (*MAP, "--out", "{d}/o", "--set", "frontend.voxel_size_m=1e-9"),
+         "frontend.voxel_size_m 1e-09 is 1/"),
+    Case("voxel-1000", (*MAP, "--out", "{d}/o", "--set", "frontend.voxel_size_m=1000"), "frontend.voxel_size_m 1000 is"),
+    Case("frontend-min-above-max-range", (*MAP, "--out", "{d}/o", "--set", "frontend.min_range_m=50"),
+         "min_range_m 50 is not below max_range_m 30"),
+    Case("validation-rate-1e-6", (*MAP, "--out", "{d}/o", "--gating", "on", "--set", "validation.rate_hz=1e-6"),
+         "validation.rate_hz 1e-06 gives fewer than 2 validation steps"),
+    Case("relation-window-longer-than-the-run", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o", "--gating", "on"),
+         "validation.observers.relations.yaw_compass_gyro.window_s 1e+06 s is longer than the run",
+         config(relation(0, window_s=1e6))),
+    Case("relation-window-under-two-steps", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o", "--gating", "on"),
+         "window_s 0.001 s holds fewer than 2 validation steps", config(relation(2, window_s=0.001))),
+    # -- scenarios --
+    Case("scenario-waypoint-inside-an-obstacle", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "robot.waypoints.1 (3, 3) lies inside world.obstacles.0",
+         scenario(lambda t: t["world"].update(obstacles=[[[2, 2], [4, 2], [4, 4], [2, 4]]])
+                  or t["robot"]["waypoints"].__setitem__(1, [3.0, 3.0]))),
+    Case("scenario-start-inside-an-obstacle", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "robot.waypoints.0", scenario(lambda t: t["world"]["obstacles"].append(
+             [[t["robot"]["waypoints"][0][0] - 0.2, t["robot"]["waypoints"][0][1] - 0.2],
+              [t["robot"]["waypoints"][0][0] + 0.2, t["robot"]["waypoints"][0][1] - 0.2],
+              [t["robot"]["waypoints"][0][0] + 0.2, t["robot"]["waypoints"][0][1] + 0.2],
+              [t["robot"]["waypoints"][0][0] - 0.2, t["robot"]["waypoints"][0][1] + 0.2]]))),
+    Case("scenario-pause-of-1e6-s", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "most of it the pause of 1e+06 s at robot.waypoints.1",
+         scenario(lambda t: t["robot"]["waypoints"].__setitem__(1, [*t["robot"]["waypoints"][1][:2], 1e6]))),
+    Case("scenario-utf16", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "UTF-16 text",
+         lambda d, w: (d / "s.yaml").write_bytes(w.scenario.read_text().encode("utf-16"))),
+    Case("config-latin1-byte-named", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "line 2: byte 0xE9 is not UTF-8 text (a Latin-1 character?)",
+         raw("c.yaml", b"keyframes: {period_s: 0.5}\n# r\xe9glages\n")),
+    # -- ablation specs: job counts and seeds --
+    Case("ablate-seed-count-1e12", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "1,000,000,000,000 jobs, more than 10,000; inputs.scenarios.0 alone",
+         lambda d, w: spec_in(d, w, inputs={"scenarios": [{"path": str(w.scenario), "seeds": {"count": 10**12}}]})),
+    Case("ablate-random-samples-1e9", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "sweep.random.samples 1,000,000,000",
+         spec(sweep={"random": {"samples": 10**9, "params": {"gating.inflation": {"uniform": [1, 5]}}}})),
+    Case("ablate-grid-product", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "100,000 sweep points",
+         spec(sweep={"grid": {f"backend.factors.{f}.sigma_yaw_deg": list(range(1, 11))
+                              for f in ("odometry", "gyro", "compass", "scan_matching")} | {
+             "gating.inflation": list(range(1, 11))}})),
+    Case("ablate-max-jobs", ("ablate", "{d}/spec.yaml", "--out", "{d}/o", "--max-jobs", "3"), "5 jobs, more than 3",
+         lambda d, w: spec_in(d, w, inputs={"scenarios": [{"path": str(w.scenario), "seeds": {"count": 5}}]})),
+    Case("ablate-seed-count-0", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "inputs.scenarios.0.seeds.count: Input should be greater than or equal to 1",
+         lambda d, w: spec_in(d, w, inputs={"scenarios": [{"path": str(w.scenario), "seeds": {"count": 0}}]})),
+    Case("ablate-seed-first-negative", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "seeds.first",
+         lambda d, w: spec_in(d, w, inputs={"scenarios": [{"path": str(w.scenario), "seeds": {"first": -3, "count": 2}}]})),
+    Case("ablate-max-jobs-zero", ("ablate", "{spec}", "--out", "{d}/o", "--max-jobs", "0"), "expected 1 or more", code=2),
+    # -- CARMEN logs: time, angles, field of view --
+    Case("carmen-two-logs-concatenated", CARMEN, "time goes back by",
+         carmen(n=60, stamp=lambda k: 1000.0 + 0.5 * (k % 30))),
+    Case("carmen-clock-reset", CARMEN, "c.log:", carmen(n=40, stamp=lambda k: 1000.0 + 0.5 * k - (500 if k >= 20 else 0))),
+    Case("carmen-stamps-jump-a-day", CARMEN, "stamps jump forward by 86400",
+         carmen(n=40, stamp=lambda k: 1000.0 + 0.5 * k + (86400 if k >= 20 else 0))),
+    Case("carmen-fov-720", CARMEN, "PARAM laser_front_laser_fov 720", carmen(head="PARAM laser_front_laser_fov 720")),
+    Case("carmen-fov-0", CARMEN, "PARAM laser_front_laser_fov 0", carmen(head="PARAM laser_front_laser_fov 0")),
+    Case("carmen-theta-1e6", CARMEN, "pose angles reach 1e+06", carmen(theta=1e6)),
+    Case("carmen-robotlaser-no-turn", CARMEN, "two at the same angle", carmen(robotlaser=(-1.57, 3.14, 0.0))),
+    Case("carmen-robotlaser-fov-in-degrees", CARMEN, "span 1800 deg", carmen(robotlaser=(-90, 180, 10.0 * math.pi / 180))),
+    # -- ROS bags: beam angles, rotations, clocks, jumps --
+    Case("bag-angle-increment-0", BAG, "two at the same angle", bag(each("/scan", lambda t, m: setattr(m, "angle_increment", 0.0)))),
+    Case("bag-angle-increment-in-degrees", BAG, "a 2D laser sees at most 360 deg",
+         bag(each("/scan", lambda t, m: setattr(m, "angle_increment", 100.0)))),
+    Case("bag-angle-min-1e6", BAG, "beam angles reach 1e+06 rad", bag(each("/scan", lambda t, m: setattr(m, "angle_min", 1e6)))),
+    Case("bag-odometry-zero-quaternion", BAG, "pose.orientation at message 0 is not a rotation",
+         bag(each("/odom", lambda t, m: setattr(m.pose.pose.orientation, "w", 0.0)))),
+    Case("bag-imu-orientation-zero", ("map", "{d}/b", "--config", "{cfg}", "--set", "input.compass.source=imu_orientation",
+                                      "--set", "input.topics.compass=/imu/data", *QUICK, "--out", "{d}/o"),
+         "orientation at message 0 is not a rotation",
+         bag(each("/imu/data", lambda t, m: [setattr(m.orientation, k, 0.0) for k in "xyzw"]))),
+    Case("bag-gyro-on-another-clock", BAG, "gyro stamps", bag(restamp("/imu/data", lambda k: -1e9))),
+    Case("bag-odometry-jumps-a-day", BAG, "odometry stamps jump forward by 86400",
+         bag(restamp("/odom", lambda k: 86400.0 if k >= 40 else 0.0))),
+    # -- other formats --
+    Case("librsf-stamps-jump", ("map", "{d}/X_Input.txt", "--config", str(CONFIGS / "datasets" / "librsf_corridor.yaml"),
+                                *QUICK, "--out", "{d}/o"), "stamps jump forward by",
+         text("X_Input.txt", "".join(f"odom2 {t} 0.5 0 0.01 0.01 0.01 0.01\n"
+                                     for t in [0.1 * k for k in range(50)] + [1e7 + 0.1 * k for k in range(50)]))),
+    Case("broad-sampling-rate-1e9", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"), "sampling_rate",
+         broad_mat(sampling_rate=[[1e9]])),
+    Case("broad-sampling-rate-1e-3", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"), "sampling_rate",
+         broad_mat(sampling_rate=[[1e-3]])),
+    Case("broad-quaternion-not-a-rotation", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"),
+         "opt_quat at sample 0 is not a rotation", broad_mat(opt_quat=np.tile([2.0, 0, 0, 0], (50, 1)))),
+]
+
+
+# --- the warning corpus: usable data, mapped with one line that says what is odd ---
+
+
+@dataclass(frozen=True)
+class Warned:
+    """``argv`` as for :class:`Case`, writing ``{d}/o``; ``says``: a part of
+    a warning line; the run must succeed and write its result."""
+
+    id: str
+    argv: tuple[str, ...]
+    says: str
+    make: Callable[[Path, World], None] | None = None
+    also: str | None = None  # a part of the result's metrics.json
+
+
+def _some(fraction: float, value: float) -> Callable[[np.ndarray, int], np.ndarray]:
+    def change(r: np.ndarray, k: int) -> np.ndarray:
+        r = r.copy()
+        r[: int(len(r) * fraction)] = value
+        return r
+
+    return change
+
+
+WARNINGS: list[Warned] = [
+    Warned("carmen-every-range-zero", CARMEN, "the laser returns nothing (every range is 0 or negative)",
+           carmen(ranges=lambda r, k: 0 * r), '"scan_matching": 0'),
+    Warned("carmen-every-range-negative", CARMEN, "are negative, up to -", carmen(ranges=lambda r, k: -r), '"scan_matching": 0'),
+    Warned("carmen-every-range-1e308", CARMEN, "the laser returns nothing (no range is a finite distance)",
+           carmen(ranges=lambda r, k: 0 * r + 1e308), '"scan_matching": 0'),
+    Warned("carmen-a-tenth-negative", CARMEN, "ranges (9.94 %) are negative", carmen(ranges=_some(0.1, -1.0))),
+    Warned("carmen-ranges-of-a-light-year", CARMEN, "beyond 10000 m (no laser measures that far)",
+           carmen(ranges=_some(0.2, 9.46e15))),
+    Warned("carmen-theta-unwrapped", CARMEN, "", carmen(theta=4 * math.pi)),
+    Warned("carmen-stamps-moved-counted", CARMEN, "1 scan stamps step back; 6 stamps moved",
+           carmen(stamp=lambda k: 1000.0 + 0.5 * k - (3.0 if 20 <= k < 26 else 0.0))),
+    Warned("carmen-latin1-host", CARMEN, "", carmen(encoding=lambda s: s.replace("host", "h\xf4st").encode("latin-1"))),
+    Warned("carmen-utf8-bom", CARMEN, "", carmen(encoding=lambda s: b"\xef\xbb\xbf" + s.encode())),
+    Warned("config-utf8-bom", (*MAP[:2], "--config", "{d}/c.yaml", *QUICK, "--out", "{d}/o"), "",
+           raw("c.yaml", b"\xef\xbb\xbfkeyframes: {period_s: 0.5}\n")),
+    Warned("bag-every-range-nan", BAG, "the laser returns nothing (no range is a finite distance)",
+           bag(each("/scan", lambda t, m: m.ranges.fill(np.nan))), '"scan_matching": 0'),
+    Warned("bag-range-max-zero", BAG, "the laser returns nothing (its range limits are [0.1, 0] m)",
+           bag(each("/scan", lambda t, m: setattr(m, "range_max", 0.0)))),
+    Warned("laser-beyond-the-frontend-limits", (*MAP, *QUICK, "--set", "frontend.min_range_m=25", "--out", "{d}/o"),
+           "the laser returns nothing within frontend.min_range_m 25", None, '"scan_matching": 0'),
+    Warned("voxel-small", (*MAP, *QUICK, "--set", "frontend.voxel_size_m=0.01", "--out", "{d}/o"),
+           "frontend.voxel_size_m 0.01 is 1/"),
+    Warned("voxel-large", (*MAP, *QUICK, "--set", "frontend.voxel_size_m=1.5", "--out", "{d}/o"),
+           "frontend.voxel_size_m 1.5 is 1/"),
+    Warned("time-offset-a-third-of-the-run", (*MAP, *QUICK, "--set", "input.time_offsets_s.compass=8", "--out", "{d}/o"),
+           "input.time_offsets_s.compass +8 s moves the compass stream by"),
+    Warned("scenario-leg-through-an-obstacle", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+           "the leg from robot.waypoints.1 to robot.waypoints.2 crosses world.obstacles.",
+           scenario(lambda t: t["world"]["obstacles"].append([[4, 1.0], [4.4, 1.0], [4.4, 1.4], [4, 1.4]]))),
+    Warned("scenario-leg-through-a-wall", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "crosses world.walls.",
+           scenario(lambda t: t["world"]["walls"].append([[5, 0.5], [5, 2.0]]))),
+]
+
+
+def _run(argv: list[str], capsys) -> tuple[int, str, list]:
+    with warnings.catch_warnings(record=True) as caught, time_limit(TIME_LIMIT_S):
+        warnings.simplefilter("always")
+        try:
+            code = main(["-q", *argv])
+        except SystemExit as e:  # argparse
+            code = e.code
+    _, err = capsys.readouterr()
+    leaked = [w for w in caught if issubclass(w.category, (RuntimeWarning, UserWarning))]
+    return code, err, leaked
+
+
+@pytest.mark.parametrize("case", ERRORS, ids=[c.id for c in ERRORS])
+def test_hostile_input_gives_one_clean_error(case: Case, world: World, tmp_path: Path, capsys):
+    d = tmp_path / "case"
+    d.mkdir()
+    if case.make is not None:
+        case.make(d, world)
+    watched = (d, world.run, world.scenario.parent, CONFIGS)
+    before = checksums(*watched)
+    capsys.readouterr()
+    code, err, leaked = _run(expand(case.argv, d, world), capsys)
+    assert code == case.code, f"exit {code}: {err[-800:]}"
+    check_error_output(code, err, case)
+    assert not leaked, [str(w.message) for w in leaked]
+    assert checksums(*watched) == before, "an input changed, or something was left behind"
+
+
+@pytest.mark.parametrize("case", WARNINGS, ids=[c.id for c in WARNINGS])
+def test_odd_but_usable_input_is_used_with_one_warning(case: Warned, world: World, tmp_path: Path, capsys, caplog):
+    d = tmp_path / "case"
+    d.mkdir()
+    if case.make is not None:
+        case.make(d, world)
+    before = checksums(d, world.run, world.scenario.parent, CONFIGS)
+    capsys.readouterr()
+    with caplog.at_level(logging.WARNING):
+        code, err, leaked = _run(expand(case.argv, d, world), capsys)
+    assert code == 0, err[-800:]
+    assert "Traceback" not in err and not leaked, (err, [str(w.message) for w in leaked])
+    said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert all("\n" not in s for s in said), said
+    if case.says:
+        assert sum(case.says in s for s in said) == 1, f"expected {case.says!r} once in: {said}"
+    out = d / "o"
+    assert json.loads((out / ".gslam-result.json").read_text())["command"] in ("map", "simulate")
+    if case.also is not None:
+        assert case.also in (out / "metrics.json").read_text()
+    after = checksums(d, world.run, world.scenario.parent, CONFIGS)
+    assert {k: v for k, v in after.items() if not k.startswith(str(out))} == before
+    assert not [p for p in d.rglob("*") if ".gslam-tmp-" in p.name]
+
+
+def test_corpus_counts():
+    """At least 60 new cases; tests/test_fuzz.py's stay beside them."""
+    from tests.test_fuzz import CASES
+
+    assert len(ERRORS) + len(WARNINGS) + len(PROCESS) >= 60
+    assert len({c.id for c in [*CASES, *ERRORS, *WARNINGS]}) == len(CASES) + len(ERRORS) + len(WARNINGS)
+    commands = {c.argv[0] for c in [*ERRORS, *WARNINGS]}
+    assert {"simulate", "map", "compare", "ablate", "inspect", "inject", "calibrate"} <= commands
+
+
+# --- as real processes: signals, killed runs, full disks ----------------------------
+
+
+def _gslam(argv: list, cwd: Path, limit_bytes: int | None = None) -> subprocess.Popen:
+    def limit() -> None:
+        if limit_bytes is not None:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    return subprocess.Popen([sys.executable, "-m", "slam.cli", "-q", *map(str, argv)], cwd=cwd,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": str(REPO)}, preexec_fn=limit)
+
+
+def _wait_for(predicate: Callable[[], bool], proc: subprocess.Popen, seconds: float = 60.0) -> None:
+    deadline = time.monotonic() + seconds
+    while not predicate() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
+def _said(err: str) -> str:
+    """stderr without its warnings (the short run has no GPS fix, and says so)."""
+    return "".join(line for line in err.splitlines(keepends=True) if not line.startswith("WARNING "))
+
+
+def _temps(root: Path) -> list[Path]:
+    return [p for p in root.rglob("*") if ".gslam-tmp-" in p.name]
+
+
+SIGNALLED = {
+    "compare-SIGTERM": (["compare", "{run}", "--config", TELEMAX_CONFIG, "--only", "ungated,gated"], signal.SIGTERM),
+    "map-SIGHUP": (["map", "{run}", "--config", TELEMAX_CONFIG, "--gating", "on"], signal.SIGHUP),
+    "simulate-SIGTERM": (["simulate", "{scen}"], signal.SIGTERM),
+    "inject-SIGTERM": (["inject", "{run}", "--fault", "gyro_bias@2:4"], signal.SIGTERM),
+    "compare-SIGINT": (["compare", "{run}", "--config", TELEMAX_CONFIG, "--only", "ungated"], signal.SIGINT),
+}
+FULL_DISK = {
+    "simulate": (["simulate", "{scen}", "--out", "{d}/o"], 1_000_000, "the simulate result's bag ("),
+    "map": (["map", "{run}", "--config", TELEMAX_CONFIG, "--out", "{d}/o"], 20_000, "no space left to write the map result"),
+    "inject": (["inject", "{run}", "--fault", "gyro_bias@2:4", "--out", "{d}/o"], 1_000_000, "the inject result's bag ("),
+    "calibrate": (["calibrate", "{run}", "--config", TELEMAX_CONFIG, "--clean", "0:10", "--out", "{d}/c.yaml"], 2_000,
+                  "c.yaml: File too large"),
+}
+PROCESS = [*SIGNALLED, *(f"full-{k}" for k in FULL_DISK), "killed-compare-left-for-the-next-run", "space-estimated"]
+
+
+def _argv(argv: list, d: Path, world: World) -> list[str]:
+    names = {"d": d, "run": world.run, "scen": world.scenario}
+    return [str(a).format(**names) for a in argv]
+
+
+@pytest.mark.parametrize("name", SIGNALLED)
+def test_a_signal_ends_a_command_as_ctrl_c_does(name: str, world: World, tmp_path: Path):
+    argv, sig = SIGNALLED[name]
+    out = tmp_path / "out"
+    before = checksums(world.run, world.scenario.parent)
+    proc = _gslam([*_argv(argv, tmp_path, world), "--out", out], tmp_path)
+    _wait_for(lambda: bool(_temps(tmp_path)), proc)  # the work (and the imports it needs) from here
+    assert proc.poll() is None, proc.communicate()[1]
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=30)
+    what = "interrupted" if sig == signal.SIGINT else f"terminated ({signal.Signals(sig).name})"
+    assert proc.returncode == 128 + sig and _said(err) == f"gslam: {what}\n", (proc.returncode, err)
+    # Nothing, or (a signal Python could not raise where it came) the whole result.
+    assert not _temps(tmp_path) and (not out.exists() or (out / ".gslam-result.json").is_file())
+    assert checksums(world.run, world.scenario.parent) == before
+
+
+def test_a_terminated_sweep_stops_its_workers_at_once(world: World, tmp_path: Path):
+    proc = _gslam(["ablate", world.spec, "--workers", "2", "--out", tmp_path / "sweep"], tmp_path)
+    _wait_for(lambda: (tmp_path / "sweep" / "inputs").is_dir(), proc)
+    proc.send_signal(signal.SIGTERM)
+    start = time.monotonic()
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143 and _said(err) == "gslam: terminated (SIGTERM)\n", err
+    assert time.monotonic() - start < 10
+
+
+def test_a_killed_runs_temporary_folder_goes_with_the_next_run_into_its_folder(world: World, tmp_path: Path, capsys):
+    proc = _gslam(["compare", world.run, "--config", TELEMAX_CONFIG, "--only", "ungated", "--out", tmp_path / "a"], tmp_path)
+    _wait_for(lambda: bool(_temps(tmp_path)), proc)
+    time.sleep(0.3)
+    proc.kill()
+    proc.communicate()
+    assert _temps(tmp_path)
+    assert main(["-q", "map", str(world.run), "--config", str(TELEMAX_CONFIG), *QUICK, "--out", str(tmp_path / "b")]) == 0
+    capsys.readouterr()
+    assert not _temps(tmp_path) and {p.name for p in tmp_path.iterdir()} == {"b"}
+
+
+@pytest.mark.parametrize("name", FULL_DISK)
+def test_a_full_disk_is_one_line_naming_the_result(name: str, world: World, tmp_path: Path):
+    """The file size limit makes every write past it fail as a full disk
+    does (EFBIG instead of ENOSPC): the same paths, without filling a disk."""
+    argv, limit, says = FULL_DISK[name]
+    d = tmp_path / "case"
+    d.mkdir()
+    proc = _gslam(_argv(argv, d, world), d, limit_bytes=limit)
+    _, err = proc.communicate(timeout=120)
+    err = _said(err)
+    assert proc.returncode == 1 and err.count("\n") == 1 and says in err and str(d) in err, err
+    assert ".gslam-tmp-" not in err
+    assert list(d.iterdir()) == []
+
+
+def test_the_space_a_simulation_needs_is_checked_first(world: World, tmp_path: Path, capsys, monkeypatch):
+    real = os.statvfs
+
+    def small(path):
+        st = real(path)
+        return os.statvfs_result((st.f_bsize, st.f_frsize, st.f_blocks, 10, 10, st.f_files, st.f_ffree, st.f_favail,
+                                  st.f_flag, st.f_namemax))
+
+    monkeypatch.setattr(os, "statvfs", small)
+    code = main(["-q", "simulate", str(world.scenario), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 1 and "--out needs about" in err and "free some space" in err, err
+    assert list(tmp_path.iterdir()) == []
