@@ -59,15 +59,15 @@ class CompassInputConfig(Strict):
     """
 
     source: Literal["magnetic_field", "imu_orientation"] = "magnetic_field"
-    declination_deg: float = 0.0
-    mounting_yaw_deg: float = 0.0
+    declination_deg: float = Field(0.0, ge=-180.0, le=180.0)
+    mounting_yaw_deg: float = Field(0.0, ge=-360.0, le=360.0)
 
 
 class GpsInputConfig(Strict):
     """Datum of the local frame; null takes the first fix."""
 
-    datum_lat_deg: float | None = None
-    datum_lon_deg: float | None = None
+    datum_lat_deg: float | None = Field(None, ge=-90.0, le=90.0)
+    datum_lon_deg: float | None = Field(None, ge=-180.0, le=180.0)
 
 
 class GyroInputConfig(Strict):

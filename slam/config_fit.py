@@ -37,6 +37,8 @@ VOXEL_WARN = (1 / 100, 1 / 3)
 """Voxel size per median return beyond which registration degrades (a warning)."""
 VOXEL_ERROR = (1 / 1000, 2.0)
 """Voxel size per median return beyond which it fails (an error)."""
+MAX_STEPS = 10_000_000
+"""Most validation steps of a run (a day at 100 Hz)."""
 SAMPLE_SCANS = 400
 """Scans looked at for the median return (evenly spread)."""
 
@@ -105,6 +107,9 @@ def _check_windows(rec: Recording, config: PipelineConfig, source: object) -> No
         return
     duration = rec.duration
     step = 1.0 / vcfg.rate_hz
+    if duration * vcfg.rate_hz > MAX_STEPS:
+        raise GslamError(f"{source}: validation.rate_hz {vcfg.rate_hz:g} makes {duration * vcfg.rate_hz:.3g} validation "
+                         f"steps over the run's {duration:.3g} s, more than {MAX_STEPS:.0e}; expected a rate of a few Hz")
     if duration < 2 * step:
         raise GslamError(f"{source}: validation.rate_hz {vcfg.rate_hz:g} gives fewer than 2 validation steps over "
                          f"the run's {duration:.3g} s; expected a rate of a few Hz")

@@ -17,8 +17,9 @@ says. The thresholds leave every shipped and real recording under
   circle, or are not angles in radians: errors. Negative ranges and ranges
   no laser measures (beyond :data:`MAX_RANGE_M`): a warning, taken as no
   return. A laser whose every beam is out of its own limits returns
-  nothing: a warning, and the scans are left out (no scan-matching factor
-  from an empty scan).
+  nothing, or has fewer than :data:`MIN_BEAMS` beams: a warning, and the
+  scans are left out (no scan-matching factor from an empty scan).
+* **Yaw rates** beyond :data:`MAX_YAW_RATE`: an error.
 """
 
 from __future__ import annotations
@@ -35,6 +36,10 @@ log = logging.getLogger(__name__)
 
 MAX_RANGE_M = 10_000.0
 """Ranges beyond this are no measurement (the longest 2D lidars reach a few km)."""
+MIN_BEAMS = 3
+"""Fewer beams than this per scan cannot be matched."""
+MAX_YAW_RATE = 1000.0
+"""rad/s (57,000 deg/s); gyroscopes saturate at a few thousand deg/s."""
 MIN_JUMP_S = 60.0
 """A forward jump shorter than this is a gap, never an error."""
 STREAMS = ("scans", "gyro", "compass", "odometry", "gps", "groundtruth")
@@ -89,7 +94,21 @@ def check_recording(rec: Recording, source: object, offsets: dict[str, float] | 
     out (in place). ``offsets``: the time offsets applied, to name them."""
     check_stamps(rec, source, offsets or {})
     check_scans(rec, source)
+    check_rates(rec, source)
     return rec
+
+
+def check_rates(rec: Recording, source: object) -> None:
+    """A yaw rate no gyroscope measures is no measurement."""
+    if rec.gyro is None or not len(rec.gyro.rate):
+        return
+    rate = np.abs(np.asarray(rec.gyro.rate, dtype=np.float64))
+    if not np.all(np.isfinite(rate)):
+        raise GslamError(f"{source}: gyro rate {int(np.argmin(np.isfinite(rate)))} is not a finite number")
+    if rate.max() > MAX_YAW_RATE:
+        i = int(np.argmax(rate))
+        raise GslamError(f"{source}: gyro rate {i} is {rec.gyro.rate[i]:.6g} rad/s; no gyroscope measures more than "
+                         f"{MAX_YAW_RATE:g} rad/s (the unit wrong?)")
 
 
 # --- stamps ------------------------------------------------------------------------
@@ -139,6 +158,11 @@ def check_scans(rec: Recording, source: object) -> None:
     n_beams = scans.ranges.shape[1] if scans.ranges.ndim == 2 else 0
     if n_beams == 0:
         raise GslamError(f"{where} have no beams")
+    if n_beams < MIN_BEAMS:
+        log.warning("%s: %d beam%s per scan, too few to match scans (at least %d); the scans are left out, so no "
+                    "scan-matching factor", where, n_beams, "s" if n_beams > 1 else "", MIN_BEAMS)
+        rec.scans = None
+        return
     angles = np.asarray(scans.angles, dtype=np.float64)
     if not np.all(np.isfinite(angles)):
         raise GslamError(f"{where}: beam angles are not finite")

@@ -122,6 +122,11 @@ class _GpsStream(_Stream):
             self.dropped = int(cols["dropped"].sum())
         self.blocks = []
         self._finite("latitude/longitude", rows[:, :2])
+        outside = (np.abs(rows[:, 0]) > 90.0) | (np.abs(rows[:, 1]) > 180.0)
+        if outside.any():
+            i = int(np.flatnonzero(outside)[0])
+            raise GslamError(f"{self.where}: fix {i} at latitude {rows[i, 0]:.9g}, longitude {rows[i, 1]:.9g}: "
+                             "expected degrees within +-90 and +-180")
         known = rows[:, 4] != 0
         with np.errstate(invalid="ignore"):
             sigma = np.sqrt(0.5 * (rows[:, 2] + rows[:, 3]))
