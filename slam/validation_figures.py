@@ -6,6 +6,8 @@
   implausible over time, the sensors the diagnosis blamed, and the true
   fault intervals: shaded grey across the figure, and a row per sensor in
   its colour (one legend entry each).
+* :func:`plot_system_model` (its Section 4): the components and the
+  relations between them, as a graph.
 
 Shading is drawn under everything else, so lines and bars keep the colours
 the titles name.
@@ -140,4 +142,53 @@ def plot_observer_alarms(path: str | Path, recording: Recording, validation) -> 
     ax.grid(True, axis="x", linewidth=0.5, alpha=0.5)
     if truth:
         ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
+    save_figure(fig, path)
+
+
+_KIND_LETTER = {"trend": "T", "residual": "R", "cusum": "C", "offset": "O"}
+
+
+def plot_system_model(path: str | Path, components, relations, checks=None, dropped=None, title: str = "") -> None:
+    """The system model as a graph (the paper's Section 4 structure): one
+    node per modality component (whole-sensor components and LOOP aside),
+    grouped by sensor around a circle; one edge per related pair, labelled
+    with its observers' kinds (T trend, R residual, C cusum, O offset), and
+    the pairs ``dropped`` (name -> pair) by calibration dashed in grey.
+    ``relations``: name -> (kind, pair); ``checks``: component -> names of
+    its unary checks, written under it."""
+    checks, dropped = checks or {}, dropped or {}
+    sensors = {c for _, pair in relations.values() for c in pair} | {c for pair in dropped.values() for c in pair}
+    nodes = [c for c in components if c in sensors or c in checks]
+    angle = np.linspace(0.5 * np.pi, 2.5 * np.pi, len(nodes), endpoint=False)
+    where = {c: (np.cos(a), np.sin(a)) for c, a in zip(nodes, angle)}
+    fig = Figure(figsize=(7.5, 7.0))
+    ax = fig.add_subplot()
+    kinds: dict[frozenset, list[str]] = {}
+    for kind, pair in relations.values():
+        kinds.setdefault(frozenset(pair), []).append(_KIND_LETTER.get(kind, "?"))
+    lost = {frozenset(pair) for pair in dropped.values()} - set(kinds)
+    for pair in lost:
+        (x0, y0), (x1, y1) = (where[c] for c in pair)
+        ax.plot([x0, x1], [y0, y1], color="0.65", ls="--", lw=1.2, zorder=1)
+    for pair, letters in kinds.items():
+        (x0, y0), (x1, y1) = (where[c] for c in pair)
+        ax.plot([x0, x1], [y0, y1], color="tab:blue", lw=1.0 + 0.6 * len(letters), alpha=0.8, zorder=2)
+        ax.text(0.5 * (x0 + x1), 0.5 * (y0 + y1), "".join(sorted(letters, key="TRCO".index)), fontsize="small",
+                ha="center",
+                va="center", zorder=4, bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none"})
+    for c, (x, y) in where.items():
+        ax.scatter([x], [y], s=2200, color=fault_color(c), edgecolor="0.2", zorder=3)
+        ax.text(x, y, c, ha="center", va="center", fontsize="x-small", zorder=5)
+        if c in checks:
+            ax.text(1.32 * x, 1.32 * y, "\n".join(checks[c]), ha="center", va="center", fontsize="x-small",
+                    color="0.3")
+    ax.plot([], [], color="tab:blue", label="related: T trend, R residual, C cusum, O offset")
+    if lost:
+        ax.plot([], [], color="0.65", ls="--", label="dropped by calibrate")
+    ax.legend(loc="lower center", bbox_to_anchor=(0.5, -0.08), fontsize="small", frameon=False)
+    ax.set_xlim(-1.6, 1.6)
+    ax.set_ylim(-1.6, 1.6)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    ax.set_title(title or "system model: components and the relations between them", fontsize="medium")
     save_figure(fig, path)

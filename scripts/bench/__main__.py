@@ -24,6 +24,8 @@ RESULTS = {  # name: what it measures (each writes docs/results/NAME.md)
     "husky": "the Husky bag ungated and gated, against GPS",
     "husky_dipole": "the Husky bag with injected compass dipoles: found, and quiet elsewhere?",
     "husky_faults": "the Husky bag with one injected fault of each kind: found and blamed right?",
+    "proposal": "the system model gslam inspect proposes, calibrated, against the shipped ones, held out",
+    "walkthrough": "inspect, calibrate and map --gating on the Husky bag: docs/three_commands.md (not a results page)",
 }
 TUNING = {
     "tune_baselines": "tune the robust-kernel baselines on the scenarios' tuning seeds",
@@ -40,6 +42,8 @@ QUICK = {  # the arguments of each bench under `all --quick`: every page in unde
     "husky": [],
     "husky_dipole": ["--sets", "trend", "shipped", "--passes", "offline", "--no-folds"],
     "husky_faults": [],
+    "proposal": ["--seeds", "11-12"],
+    "walkthrough": [],
 }
 
 
