@@ -119,3 +119,20 @@ def test_held_out_folds():
     folds = held_out(three)
     assert [judged for _, judged, _ in folds] == [0, 1, 2]
     assert all(len(learning) == 2 and all(r is not three[i] for r in learning) for i, (learning, _, _) in enumerate(folds))
+
+
+def test_a_simulated_run_with_a_laser_no_base_config(short_run, tmp_path, capsys):
+    """The three commands on a run folder (ROS 2 bag: laser, IMU, magnetometer,
+    odometry, and a GPS topic without a fix indoors), topics guessed, every
+    stream with data validated."""
+    run = str(short_run.run_dir)
+    starter, learnt = tmp_path / "s.yaml", tmp_path / "l.yaml"
+    assert main(["-q", "inspect", run, "--config-out", str(starter)]) == 0
+    assert "proposed system model: 10 components" in capsys.readouterr().out
+    assert main(["-q", "calibrate", run, "--config", str(starter), "--out", str(learnt)]) == 0
+    assert main(["-q", "map", run, "--config", str(learnt), "--out", str(tmp_path / "m"), "--gating", "on"]) == 0
+    vcfg, gating = validation_sections(load_config(learnt))
+    assert {"SM_DIST", "SM_LAT", "SM_YAW", "IMU_GYRO", "IMU_YAW", "ODO_DIST"} <= set(vcfg.model.components)
+    assert "GPS" not in vcfg.model.components
+    assert vcfg.observers.scan.enabled and vcfg.observers.magnetometer.enabled
+    assert (tmp_path / "m" / "validation.csv").exists()
