@@ -104,7 +104,7 @@ def _model_lines(p: ModelProposal, indent: str) -> list[str]:
     origin = {s.name: s.origin for s in p.sources}
     lines = [
         f"{indent}# The logical model SD (validation/diagnosis/model.py), proposed from the streams found",
-        f"{indent}# (validation/proposal.py):  not AB(S) -> ok(S);  relation(Si, Sj) and ok(Si) and ok(Sj) ->",
+        f"{indent}# (validation/proposal/): not AB(S) -> ok(S);  relation(Si, Sj) and ok(Si) and ok(Sj) ->",
         f"{indent}# match(Si, Sj);  ok(S) -> plausible(S) for a unary check.",
         f"{indent}model:",
         f"{i2}# One component per modality, as in the paper's Table 1.",

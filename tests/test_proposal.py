@@ -1,4 +1,4 @@
-"""The system model proposed from physics (validation/proposal.py) and the
+"""The system model proposed from physics (validation/proposal/) and the
 starter config gslam inspect writes with it (slam/starter.py,
 slam/topic_choice.py), on sensor sets of their own and on the shipped ones."""
 

@@ -144,7 +144,7 @@ def page(bag, steps, pv, lv, kept, dropped, metrics, ate, config, seconds, argv)
     out.write(_shown(inspect_cmd, inspect_out))
     out.write(f"\nIt took {t1:.1f} s. The starter config names a topic for each stream, reads from the IMU's own "
               "messages how it is mounted (here rolled by 90 degrees: the yaw rate is the world-vertical part of its "
-              "rates), and proposes the system model for the streams it found (`validation/proposal.py`): one "
+              "rates), and proposes the system model for the streams it found (`validation/proposal/`): one "
               "component per modality as in the paper's Table 1, every pair of streams that physics relates, with "
               "the observers that fit each pair, and the checks the streams allow. "
               f"Here: {len(pv.model.components)} components, {len(pv.observers.relations)} observers, "
