@@ -403,6 +403,13 @@ class PipelineConfig(Strict):
     validation: dict[str, Any] = Field(default_factory=lambda: _section_defaults()[0])
     gating: dict[str, Any] = Field(default_factory=lambda: _section_defaults()[1])
 
+    @model_validator(mode="after")
+    def _loops_from_submaps(self) -> "PipelineConfig":
+        if self.loops.enabled and self.loops.source == "submaps" and not self.submaps.enabled:
+            raise ValueError("loops.source is submaps, but submaps.enabled is false: enable the submaps "
+                             "or choose another loops.source (auto, scans, file)")
+        return self
+
 
 def _section_defaults() -> tuple[dict[str, Any], dict[str, Any]]:
     """The ``validation`` and ``gating`` sections with every default."""

@@ -456,14 +456,15 @@ class MappingPipeline:
         t = self.measurements.t
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
-        w.writerow(["id", "i", "j", "t_i", "t_j", "source", "dx_m", "dy_m", "dyaw_deg", "quality", "chain_chi2", "decision", "reason"])
+        w.writerow(["id", "i", "j", "t_i", "t_j", "source", "dx_m", "dy_m", "dyaw_deg", "quality", "chain_chi2", "decision",
+                    "reason", "free"])
         for v in self.loop_observation.verdicts:
             lp = v.loop
             quality = " ".join(f"{k}={val}" for k, val in lp.quality.items())
             w.writerow([
                 lp.id, lp.i, lp.j, round(float(t[lp.i]), 4), round(float(t[lp.j]), 4), lp.source,
                 round(float(lp.delta[0]), 4), round(float(lp.delta[1]), 4), round(float(np.degrees(lp.delta[2])), 3),
-                quality, v.chain_chi2, "accepted" if v.accepted else "rejected", v.reason,
+                quality, v.chain_chi2, "accepted" if v.accepted else "rejected", v.reason, _free_directions(lp.information),
             ])
         return buf.getvalue()
 
@@ -711,6 +712,15 @@ class MappingPipeline:
         front-end's, and the scanner's own maximum."""
         fe = self.config.frontend
         return fe.min_range_m, min(fe.max_range_m, self.recording.scans.range_max)
+
+
+def _free_directions(information: np.ndarray) -> str:
+    """The directions (x y yaw, unit vectors in the frame of the loop's later
+    keyframe, ``;``-separated) a loop's information leaves free; empty when
+    it pins all three."""
+    values, vectors = np.linalg.eigh(0.5 * (information + information.T))
+    free = vectors[:, values <= 1e-9 * max(values.max(), 1e-300)]
+    return ";".join(" ".join(f"{c:.4f}" for c in v) for v in free.T)
 
 
 def run_map(

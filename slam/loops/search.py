@@ -60,10 +60,9 @@ def find_loops(
         source = "file" if recording.place_matches is not None else "submaps" if submaps is not None else "scans"
     if source == "submaps":
         if submaps is None:
-            raise GslamError(
-                f"loops.source is submaps, but {recording.name} has no submaps "
-                "(submaps.enabled is false, or the run has no laser scans or no scan matching)"
-            )
+            log.warning("%s: no laser scans to build submaps from (or scan matching is off): no loop closing",
+                        recording.name)
+            return LoopSearch(chain, [], None, "none", time.perf_counter() - start)
         kept, dropped = submap_loops(submaps.of_kind("loop")), submap_loops(submaps.dropped_of_kind("loop"))
         for k, lp in enumerate(dropped, start=len(kept)):
             lp.id = k

@@ -34,7 +34,8 @@ class LocalMatchConfig(_Strict):
 
 
 class RefineConfig(_Strict):
-    """Point-to-line ICP after the search (:mod:`slam.submaps.refine`).
+    """Point-to-line ICP after the search (:mod:`slam.submaps.refine`), of at
+    most ``max_points`` of the scan's points (evenly along its beams).
 
     Correspondences within ``max_distance_m``, shrinking to
     ``inlier_distance_m``; Cauchy scale ``kernel_m``. A refinement that moves
@@ -49,6 +50,7 @@ class RefineConfig(_Strict):
 
     max_distance_m: float = Field(0.15, gt=0.0)
     inlier_distance_m: float = Field(0.1, gt=0.0)
+    max_points: int = Field(400, ge=10)
     kernel_m: float = Field(0.05, gt=0.0)
     max_shift_m: float = Field(0.2, gt=0.0)
     max_turn_deg: float = Field(3.0, gt=0.0)

@@ -29,6 +29,7 @@ import numpy as np
 from slam.submaps.config import SubmapsConfig
 from slam.submaps.grid import ScorePyramid, score_pyramid
 from slam.submaps.refine import PointMap, point_map, pose_uncertainty, refine
+from slam.loops.local_maps import voxel_first
 from slam.submaps.scans import ScanPoints
 from slam.submaps.search import CorrelativeSearch
 from slam.geometry import between, compose, transform_points, wrap_angle
@@ -59,17 +60,13 @@ class Submap:
         self._pyramid = None
         self._pmap = None
 
-    def gather(self, points: ScanPoints, exclude: int = -1) -> tuple[np.ndarray, np.ndarray]:
-        """The submap's points (m, 2) and normals (m, 2) in its frame
-        (without scan ``exclude``)."""
+    def gather(self, points: ScanPoints) -> tuple[np.ndarray, np.ndarray]:
+        """The submap's points (m, 2) and normals (m, 2) in its frame."""
         pts, nrm = [], []
         for k, pose in zip(self.scans, self.poses):
-            if k == exclude:
-                continue
-            p, n = points.points[k], points.normals[k]
-            pts.append(transform_points(pose, p))
+            pts.append(transform_points(pose, points.points[k]))
             c, s = np.cos(pose[2]), np.sin(pose[2])
-            nrm.append(n @ np.array([[c, -s], [s, c]]).T)
+            nrm.append(points.normals[k] @ np.array([[c, s], [-s, c]]))
         return np.concatenate(pts), np.concatenate(nrm)
 
     def pyramid(self, points: ScanPoints, cfg: SubmapsConfig) -> ScorePyramid:
@@ -81,16 +78,14 @@ class Submap:
                                           3 * cfg.resolution_m, pad)
         return self._pyramid
 
-    def point_map(self, points: ScanPoints, exclude: int = -1) -> PointMap:
-        """Its points on a line, with their normals (without scan ``exclude``)."""
-        if exclude in self.scans:
-            pts, nrm = self.gather(points, exclude)
-            keep = np.linalg.norm(nrm, axis=1) > 0.5
-            return point_map(pts[keep], nrm[keep])
+    def point_map(self, points: ScanPoints, voxel_m: float) -> PointMap:
+        """Its points on a line, one per ``voxel_m`` cell, with their normals."""
         if self._pmap is None:
             pts, nrm = self.gather(points)
             keep = np.linalg.norm(nrm, axis=1) > 0.5  # points on a line
-            self._pmap = point_map(pts[keep], nrm[keep])
+            pts, nrm = pts[keep], nrm[keep]
+            first = voxel_first(pts, voxel_m)
+            self._pmap = point_map(pts[first], nrm[first])
         return self._pmap
 
 
@@ -134,7 +129,8 @@ def match_scan(
     if found is None:
         return None
     rc = cfg.refine
-    ref = refine(q, submap.point_map(points), found.pose, rc.max_distance_m, rc.inlier_distance_m, rc.kernel_m)
+    ref = refine(q, submap.point_map(points, cfg.voxel_m), found.pose, rc.max_distance_m, rc.inlier_distance_m,
+                 rc.kernel_m, max_points=rc.max_points)
     # The search put the scan within a cell and a yaw step of the optimum;
     # a refinement that wanders further has slid along a corridor or onto
     # another wall: keep the search's pose.
@@ -194,7 +190,7 @@ def refine_near(
     keep = np.linalg.norm(nrm, axis=1) > 0.5
     rc = cfg.refine
     ref = refine(points.points[scan], point_map(pts[keep], nrm[keep]), guess, rc.max_distance_m,
-                 rc.inlier_distance_m, rc.kernel_m)
+                 rc.inlier_distance_m, rc.kernel_m, max_points=rc.max_points)
     d = ref.pose - guess
     d[2] = wrap_angle(d[2])
     if not (ref.converged and ref.inliers >= rc.min_inliers and np.hypot(d[0], d[1]) <= rc.max_shift_m

@@ -87,11 +87,15 @@ def refine(
     kernel_m: float = 0.05,
     max_iterations: int = 20,
     tolerance: float = 1e-3,
+    max_points: int | None = None,
 ) -> Refinement:
     """Point-to-line ICP of ``points`` (n, 2) against ``pmap`` from
-    ``guess``; see the module docstring."""
+    ``guess``; see the module docstring. With ``max_points``, a dense scan
+    is thinned to that many points, evenly along its beams."""
     pose = np.asarray(guess, dtype=np.float64).copy()
     q = np.asarray(points, dtype=np.float64)
+    if max_points is not None and len(q) > max_points:
+        q = q[np.linspace(0, len(q) - 1, max_points).astype(int)]
     failed = Refinement(pose, np.zeros((3, 3)), np.inf, 0.0, False)
     if len(q) < 3 or len(pmap) < 3:
         return failed

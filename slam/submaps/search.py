@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slam.submaps.grid import ScorePyramid
+from slam.submaps.grid import LEVELS, ScorePyramid
 
 
 @dataclass(frozen=True)
@@ -57,8 +57,8 @@ def _scores(pyr: ScorePyramid, level: int, base: np.ndarray, a: np.ndarray, ox: 
     (ox, oy) cells (k,); ``base`` (yaws, n) the points' flat cell indices
     per yaw."""
     ny = pyr.levels[level].shape[1]
-    flat = base[a] + (ox * ny + oy)[:, None]
-    return pyr.lookup_flat(level, flat).mean(axis=1)
+    flat = base[a] + (ox * ny + oy).astype(np.int32)[:, None]
+    return pyr.lookup_flat(level, flat).mean(axis=1) * (1.0 / LEVELS)
 
 
 def _children(level: int, a: np.ndarray, ox: np.ndarray, oy: np.ndarray, hi: int):
@@ -99,7 +99,7 @@ class CorrelativeSearch:
         cells = pyr.cells(np.stack([x, y], axis=-1)) - w
         ix = np.clip(cells[..., 0], 0, nx - 1 - hi)
         iy = np.clip(cells[..., 1], 0, ny - 1 - hi)
-        self.base = ix.astype(np.int64) * ny + iy
+        self.base = (ix.astype(np.int64) * ny + iy).astype(np.int32)  # grids stay below 2^31 cells
         self.evaluated = 0
 
     def scores(self, level: int, a: np.ndarray, ox: np.ndarray, oy: np.ndarray) -> np.ndarray:
