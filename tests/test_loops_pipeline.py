@@ -55,7 +55,7 @@ def test_loops_are_logged_with_their_decisions(maps):
     rows = list(csv.DictReader(io.StringIO((res.out_dir / "loops.csv").read_text())))
     assert len(rows) == res.metrics["loops"]["found"]
     assert {r["decision"] for r in rows} <= {"accepted", "rejected"}
-    assert all(r["source"] == "scans" and int(r["i"]) < int(r["j"]) - 1 for r in rows)
+    assert all(r["source"] == "submaps" and int(r["i"]) < int(r["j"]) - 1 for r in rows)
     steps = list(csv.DictReader(io.StringIO((res.out_dir / "validation.csv").read_text())))
     logged = " ".join(s["loops"] for s in steps)
     assert logged.count(":") == len(rows)
@@ -70,18 +70,19 @@ def test_isam2_adds_loops_as_it_goes(maps):
 
 
 def test_carmen_log_loops(tmp_path):
-    # freiburg-101 is one of the logs the CARMEN loop parameters were tuned on.
+    # freiburg-101 is one of the logs the CARMEN submaps and loops were tuned on.
     log = real_data("carmen/freiburg-101-corrected.log.gz")
     config = CONFIGS / "datasets" / "carmen.yaml"
     results = {}
-    for enabled in ("false", "true"):
-        cfg = load_config(config, ["output.plots=false", f"loops.enabled={enabled}"])
-        results[enabled] = run_map(log, cfg, tmp_path / enabled).metrics
-    loops = results["true"]["loops"]
-    # Measured: 31 found, 29 kept, 3 of them more than 0.15 m or 3 deg off;
-    # ATE 1.35 -> 0.16 m.
-    assert loops["accepted"] >= 10 and loops["wrong_accepted"] <= 0.2 * loops["accepted"]
-    assert results["true"]["ate_rmse_m"] < 0.5 * results["false"]["ate_rmse_m"]
+    for name, overrides in {"odometry and scan matching": ["loops.enabled=false", "submaps.enabled=false"],
+                            "shipped": []}.items():
+        cfg = load_config(config, ["output.plots=false", *overrides])
+        results[name] = run_map(log, cfg, tmp_path / name.replace(" ", "_")).metrics
+    loops = results["shipped"]["loops"]
+    assert loops["source"] == "submaps" and loops["accepted"] >= 50
+    assert loops["wrong_accepted"] <= 0.03 * loops["accepted"]
+    assert results["shipped"]["ate_rmse_m"] < 0.1 < results["odometry and scan matching"]["ate_rmse_m"]
+    assert results["shipped"]["factor_counts"]["submap"] > 0
 
 
 def test_librsf_listed_loops_with_false_matches(tmp_path):

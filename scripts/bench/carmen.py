@@ -53,7 +53,8 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import CONFIGS, REPO, publish, simulated, table
+from scripts.bench.common import CONFIGS, REPO, include_in_readme, publish, simulated, table
+from slam.io.atomic import atomic_path
 from scripts.bench.peers import PeerRun, export_scans, kiss_slam
 from slam.config import load_config
 from slam.evaluation import ate, rpe
@@ -323,6 +324,10 @@ def main(argv: list[str] | None = None) -> int:
             for seed in seeds:
                 print(f"== {scenario} seed {seed}", flush=True)
                 missions.extend(bench_mission(scenario, seed, work, peer))
+        intel = work / "gslam" / "intel" / "map.png"
+        if intel.is_file():  # the README's picture, from this run
+            with atomic_path(REPO / "docs" / "figures" / "intel_map.png") as tmp_png:
+                tmp_png.write_bytes(intel.read_bytes())
     text = ("## gated-slam on the logs\n\n"
             f"Config `{args.config.relative_to(REPO) if args.config.is_relative_to(REPO) else args.config}`"
             f"{' with ' + ', '.join(args.overrides) if args.overrides else ''}. Relative errors are means; "
@@ -332,5 +337,6 @@ def main(argv: list[str] | None = None) -> int:
     if missions:
         text += ("\n## Simulated missions (ground truth; `configs/telemax.yaml`, gated)\n\n" + comparison(missions))
     publish("carmen", "Maps of the standard 2D laser logs and the simulated missions", text, argv)
+    include_in_readme("carmen")
     print(text)
     return 0
