@@ -54,12 +54,12 @@ from pathlib import Path
 import numpy as np
 
 from scripts.bench.common import CONFIGS, REPO, include_in_readme, publish, simulated, table
-from slam.io.atomic import atomic_path
 from scripts.bench.peers import PeerRun, export_scans, kiss_slam
 from slam.config import load_config
 from slam.evaluation import ate, rpe
 from slam.frontend import run_frontend
 from slam.geometry import between, wrap_angle
+from slam.io.atomic import atomic_path
 from slam.io.datasets import data_root
 from slam.io.readers import read_recording
 from slam.io.tum import read_tum

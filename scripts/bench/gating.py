@@ -14,7 +14,11 @@ scenario, the median and worst ATE of each variant, the ratio of gated to
 the best robust kernel (the kernel with the lowest median ATE on that
 scenario; per seed against that kernel's run on the same seed) and to the
 tight oracle; per twin, gated against ungated and the alarm fraction; and
-the detection delay and blame-end lag.
+the detection delay and blame-end lag. With a variant ``gated_no_loops``
+(``configs/bench_variants.yaml``: the same without submaps and loops), a
+section on what loop closing does: per scenario, gated with loops against
+gated without (median ratio, and on how many seeds it is worse), and the
+loops kept with how many are wrong (the simulator knows the true poses).
 """
 
 from __future__ import annotations
@@ -74,6 +78,8 @@ def _flat(metrics: dict) -> dict:
         values = metrics.get(f"{key}_s")
         vals = [v for v in values.values() if v is not None] if isinstance(values, dict) else []
         row[f"{key}_median_s"] = float(np.median(vals)) if vals else None
+    loops = metrics.get("loops") if isinstance(metrics.get("loops"), dict) else {}
+    row["loops_kept"], row["loops_wrong"] = loops.get("accepted"), loops.get("wrong_accepted")
     return row
 
 
@@ -156,6 +162,26 @@ def summarise(rows: list[dict], variants: list[str]) -> str:
             alarms = [_num(e.get("alarm_fraction")) for e in other.get((s, "gated"), {}).values()]
             cell_r = f"{med(r):.3f}, {max(r):.3f}" if r else "–"
             lines.append(f"| {s} | {cell_r} | {med(alarms):.4f}, {np.nanmax(alarms):.4f} |")
+
+    # 4. Loop closing: gated with loops against gated without, and the loops' precision.
+    if any((s, "gated_no_loops") in ate for s in scenarios):
+        lines += ["", "## Loop closing: gated with loops against gated without", "",
+                  "A kept loop is wrong when it is more than 0.15 m or 3 deg off the truth.", ""]
+        lines += ["| scenario | gated [m] | gated without loops [m] | with / without: median, worst | "
+                  "seeds worse (> 1 %) | loops kept | wrong | precision |", "|---|---|---|---|---|---|---|---|"]
+        for s in scenarios:
+            g, n = ate.get((s, "gated"), {}), ate.get((s, "gated_no_loops"), {})
+            if not g or not n:
+                continue
+            r = [g[i] / n[i] for i in g if i in n]
+            worse = sum(x > 1.01 for x in r)
+            kept = sum(int(_num(e.get("loops_kept")) or 0) for e in other[(s, "gated")].values()
+                       if np.isfinite(_num(e.get("loops_kept"))))
+            wrong = sum(int(_num(e.get("loops_wrong"))) for e in other[(s, "gated")].values()
+                        if np.isfinite(_num(e.get("loops_wrong"))))
+            precision = f"{100 * (1 - wrong / kept):.1f} %" if kept else "–"
+            lines.append(f"| {s} | {med(g.values()):.3f} | {med(n.values()):.3f} | {med(r):.2f}, {max(r):.2f} | "
+                         f"{worse} of {len(r)} | {kept} | {wrong} | {precision} |")
     return "\n".join(lines) + "\n"
 
 

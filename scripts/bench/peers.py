@@ -70,6 +70,18 @@ def export_scans(scans: Scans, folder: Path, min_range: float, max_range: float)
         o3d.io.write_point_cloud(str(folder / f"{i:06d}.ply"), cloud)
 
 
+def _last_error(text: str) -> str:
+    """The error a program ended with, from its (rich-formatted) output: the
+    exception's name and the last plain line."""
+    plain = re.sub(r"\x1b\[[0-9;]*m", "", text)
+    lines = [ln.strip() for ln in plain.splitlines() if ln.strip() and ln.strip()[0] not in "│╭╰─"]
+    if not lines:
+        return "no output"
+    names = [m.group(1) for ln in lines if (m := re.match(r"(\w+(?:Error|Exception)):", ln))]
+    last = lines[-1]
+    return (f"{names[-1]}: {last}" if names and not last.startswith(names[-1]) else last)[:160]
+
+
 def kiss_slam(executable: str, scans_folder: Path, t: np.ndarray, work: Path, setting: str) -> PeerRun:
     """Run kiss-slam (``setting``: ``default`` or ``indoor``) on a folder of
     PLY scans taken at times ``t``, in ``work``."""
@@ -85,8 +97,7 @@ def kiss_slam(executable: str, scans_folder: Path, t: np.ndarray, work: Path, se
     wall = time.perf_counter() - start
     poses = sorted(work.glob("slam_output/*/*_poses_kitti.txt"))
     if not poses:
-        tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or ["no output"]
-        return PeerRun(None, None, wall, f"exit {done.returncode}: {tail[0][:120]}")
+        return PeerRun(None, None, wall, f"exit {done.returncode}: {_last_error(done.stderr or done.stdout)}")
     rows = np.loadtxt(poses[-1]).reshape(-1, 3, 4)
     n = min(len(rows), len(t))
     yaw = np.arctan2(rows[:n, 1, 0], rows[:n, 0, 0])
