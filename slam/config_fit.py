@@ -18,7 +18,6 @@ made once the recording is read and before any work on it.
   would leave an observer that silently does nothing, so they are errors.
 * **Factors left**: an enabled factor whose stream the recording lacks adds
   nothing; if no enabled factor has its stream, there is no graph: an error.
-  Loops searched in scans or submaps without scans: an error too.
 """
 
 from __future__ import annotations
@@ -52,7 +51,6 @@ def check_fit(rec: Recording, config: PipelineConfig, source: object) -> None:
     if config.frontend.enabled and config.backend.factors.scan_matching.enabled and rec.scans is not None:
         _check_laser(rec, config, source)
     _check_factors(rec, config, source)
-    _check_loops(rec, config, source)
     _check_windows(rec, config, source)
 
 
@@ -101,14 +99,6 @@ def _check_factors(rec: Recording, config: PipelineConfig, source: object) -> No
     raise GslamError(f"{source}: no factor left: the config enables {', '.join(enabled)}, whose streams the recording "
                      f"lacks (it has {', '.join(has) or 'none of them'}); enable a factor of a stream it has "
                      "(backend.factors)")
-
-
-def _check_loops(rec: Recording, config: PipelineConfig, source: object) -> None:
-    """Loops searched in the scans or the submaps need scans to match."""
-    loops = config.loops
-    if loops.enabled and loops.source in ("submaps", "scans") and rec.scans is None:
-        raise GslamError(f"{source}: loops.source {loops.source} needs laser scans, and the run has none to match; "
-                         "set loops.enabled: false to map it without loop closing")
 
 
 def _check_windows(rec: Recording, config: PipelineConfig, source: object) -> None:

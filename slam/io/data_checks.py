@@ -160,7 +160,7 @@ def check_scans(rec: Recording, source: object) -> None:
         raise GslamError(f"{where} have no beams")
     if n_beams < MIN_BEAMS:
         log.warning("%s: %d beam%s per scan, too few to match scans (at least %d); the scans are left out, so no "
-                    "scan-matching factor", where, n_beams, "s" if n_beams > 1 else "", MIN_BEAMS)
+                    "scan-matching factor and no loop closing from them", where, n_beams, "s" if n_beams > 1 else "", MIN_BEAMS)
         rec.scans = None
         return
     angles = np.asarray(scans.angles, dtype=np.float64)
@@ -211,5 +211,6 @@ def _check_ranges(rec: Recording, where: str) -> None:
         why = f"its range limits are [{lo:g}, {hi:g}] m"
     else:
         why = f"every range is outside its limits [{lo:g}, {hi:g}] m"
-    log.warning("%s: the laser returns nothing (%s); the scans are left out, so no scan-matching factor", where, why)
+    log.warning("%s: the laser returns nothing (%s); the scans are left out, so no scan-matching factor and no "
+                "loop closing from them", where, why)
     rec.scans = None

@@ -59,9 +59,10 @@ def find_loops(
     if source == "auto":
         source = "file" if recording.place_matches is not None else "submaps" if submaps is not None else "scans"
     if source == "submaps":
-        if submaps is None:
-            log.warning("%s: no laser scans to build submaps from (or scan matching is off): no loop closing",
-                        recording.name)
+        if submaps is None:  # no scans: the reader said why; scans without scan matching: said here
+            (log.info if recording.scans is None else log.warning)(
+                "%s: no submaps to close loops in (%s): no loop closing", recording.name,
+                "no laser scans" if recording.scans is None else "scan matching is off")
             return LoopSearch(chain, [], None, "none", time.perf_counter() - start)
         kept, dropped = submap_loops(submaps.of_kind("loop")), submap_loops(submaps.dropped_of_kind("loop"))
         for k, lp in enumerate(dropped, start=len(kept)):
