@@ -117,3 +117,22 @@ def test_repeated_doors_are_rivals_and_a_unique_room_has_none():
     search = CorrelativeSearch(pyr, scan, np.array([0.3, -0.2, 0.05]), 3.0, np.radians(20))
     best = search.best()
     assert len(search.rivals(best.pose, 0.9 * best.score, 0.5, np.radians(5))) == 0
+
+
+def test_a_guess_further_off_than_the_window_reaches_ends_on_its_rim():
+    from slam.submaps.local import on_rim
+
+    rng = np.random.default_rng(6)
+    room = walls()
+    pyr = score_pyramid(room, 0.05, 0.05, 6, 0.3, pad_cells=60)
+    scan = scan_of(room, np.zeros(3), 150, rng)
+    # The truth within the window: its best pose is inside, where the truth is.
+    near = CorrelativeSearch(pyr, scan, np.array([0.3, -0.2, 0.05]), 0.6, np.radians(10))
+    best = near.best()
+    assert np.hypot(*best.pose[:2]) < 0.08 and not on_rim(near, best.pose, np.zeros((0, 3)))
+    # A guess 1.2 m off with a 0.6 m window: the window's best is on its rim.
+    far = CorrelativeSearch(pyr, scan, np.array([1.2, 0.1, 0.0]), 0.6, np.radians(10))
+    best = far.best()
+    assert on_rim(far, best.pose, np.zeros((0, 3)))
+    # Along a direction the match leaves free the rim says nothing.
+    assert not on_rim(far, np.array([0.6, 0.1, 0.0]), np.array([[1.0, 0.0, 0.0]]))

@@ -77,6 +77,9 @@ class ConstraintSearchConfig(_Strict):
     ``optimise_every`` scans after new constraints; at the end, graduated
     non-convexity drops the constraints it finds outliers, with an inlier
     threshold at the chi-square quantile ``inlier_probability``.
+    ``refine_near``: refine a match against its nearest scan of the submap
+    and that scan's neighbours. ``inside``: a match whose best pose lies on
+    the window's rim makes no constraint (the truth may lie beyond it).
     """
 
     max_distance_m: float = Field(10.0, gt=0.0)
@@ -97,6 +100,7 @@ class ConstraintSearchConfig(_Strict):
     inlier_probability: float = Field(0.99, gt=0.0, lt=1.0)
     optimise_every: int = Field(10, ge=1)
     refine_near: bool = True
+    inside: bool = True
 
 
 class AmbiguityConfig(_Strict):

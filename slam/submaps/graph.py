@@ -146,7 +146,8 @@ class GlobalSlam:
                 guess = between(est[sm.anchor], est[i])
                 tried += 1
                 searches += 1
-                m = match_scan(sm, self.points, i, guess, cfg, lin, ang, min_score, sid, unique=cfg.ambiguity.enabled)
+                m = match_scan(sm, self.points, i, guess, cfg, lin, ang, min_score, sid, unique=cfg.ambiguity.enabled,
+                               inside=cc.inside)
                 if m is None or not m.refined:
                     continue
                 self._add_inter(m, sm.anchor, "loop" if loop else "near")

@@ -113,13 +113,14 @@ class Match:
 def match_scan(
     submap: Submap, points: ScanPoints, scan: int, guess: np.ndarray, cfg: SubmapsConfig,
     linear_window_m: float, angular_window_rad: float, min_score: float, submap_id: int = -1,
-    unique: bool = False,
+    unique: bool = False, inside: bool = False,
 ) -> Match | None:
     """Search and refine ``scan``'s pose in ``submap`` around ``guess``
     (in the submap's frame); None when nothing scores ``min_score``. With
     ``unique``, a scan that fits elsewhere in the window about as well
     (:func:`rival_elsewhere`) is matched but not ``refined``: it makes no
-    constraint."""
+    constraint. With ``inside``, neither is one whose best pose lies on the
+    window's rim in a direction it pins (:func:`on_rim`)."""
     q = points.points[scan]
     if len(points.search[scan]) == 0:
         return None
@@ -149,7 +150,22 @@ def match_scan(
     pinned = len(weak) == 0 or (len(weak) == 1 and abs(weak[0][2]) * rc.weak_length_m < np.hypot(*weak[0][:2]))
     if pinned and unique and rival_elsewhere(search, found, weak, cfg):
         pinned = False  # it still places the scan in local SLAM, but constrains nothing
+    if pinned and inside and on_rim(search, found.pose, weak):
+        pinned = False
     return Match(submap_id, scan, found.pose + d, found.score, ref.rms_m, ref.inliers, covariance, weak, pinned)
+
+
+def on_rim(search: CorrelativeSearch, pose: np.ndarray, weak: np.ndarray) -> bool:
+    """Whether ``pose`` lies on the rim of the search window, in a direction
+    the match pins: the best pose inside the window, not necessarily the
+    best there is. When drift has carried the guess further from the truth
+    than the window reaches, the window's best is the nearest look-alike (a
+    corridor's next stretch), at its rim; a loop from it would be wrong by
+    the drift itself."""
+    d, limit = search.edge_offsets(pose)
+    for v in weak:
+        d = d - v * (v @ d) / (v @ v)
+    return bool(np.any(np.abs(d) >= limit))
 
 
 def rival_elsewhere(search: CorrelativeSearch, found, weak: np.ndarray, cfg: SubmapsConfig) -> bool:

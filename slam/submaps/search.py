@@ -173,6 +173,18 @@ class CorrelativeSearch:
         k = int(np.argmin(far))
         return SearchResult(cand[k], float(sc[tie][k]), self.evaluated)
 
+    def edge_offsets(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``pose``'s offset from the guess (x, y, yaw) and the largest offset
+        that is not on the window's rim (a cell, a yaw step inside it); the
+        rim is infinite in a dimension the window does not search."""
+        res = self.pyr.resolution_m
+        d = np.asarray(pose, dtype=float) - self.guess
+        d[2] = (d[2] + np.pi) % (2.0 * np.pi) - np.pi
+        n_yaw = (len(self.yaws) - 1) // 2
+        lin = (self.w - 1) * res if self.w >= 2 else np.inf
+        ang = (n_yaw - 1) * self.step if n_yaw >= 2 else np.inf
+        return d, np.array([lin, lin, ang])
+
     def rivals(self, pose: np.ndarray, bound: float, exclude_m: float, exclude_rad: float) -> np.ndarray:
         """Poses (k, 3) that score ``bound`` or more outside the box of
         ``exclude_m`` and ``exclude_rad`` around ``pose``: other places the
