@@ -12,6 +12,9 @@ fresh interpreter, compared like with like:
   default config on one thread);
 * ``gslam all cores`` (``--set frontend.threads=0``) against ``kiss``
   (KISS-ICP's default: all cores);
+* ``gslam`` against ``gslam no outputs`` (``--set output.grid=false --set
+  output.mcap=false``, the map's figure kept): what the occupancy grid and
+  ``run.mcap`` cost as a user pays for them, target at most 1.10;
 * with ``--before DIR``, ``before``: the default command with the code of
   another checkout (``git archive COMMIT | tar -x -C DIR``), against
   ``kiss 1 thread``, and whether both wrote the same bytes.
@@ -23,7 +26,7 @@ program: the median and worst wall time, the CPU time (user + sys of the
 process and its children), the real-time factor, the pipeline's own split
 from ``metrics.json`` (``start-up`` is the wall time outside
 ``runtime_s``) and the load average around the runs. Targets: a ratio of
-at most 1.15 with one thread, 1.3 with all cores.
+at most 1.15 with one thread, 1.3 with all cores, 1.10 for the outputs.
 """
 
 from __future__ import annotations
@@ -50,6 +53,8 @@ SEED = 5
 PEERS = {"gslam": "kiss 1 thread", "gslam all cores": "kiss", "before": "kiss 1 thread"}
 """The program each gslam program is compared with."""
 TARGETS = {"gslam": 1.15, "gslam all cores": 1.3}
+OUTPUTS = ("gslam", "gslam no outputs", 1.10)
+"""Program, the same without the grid and run.mcap, and the target of their ratio."""
 STEPS = ("read", "prepare", "frontend", "frontend_wait", "validation", "loops", "graph_build", "optimise", "write", "grid",
          "mcap", "plots_wait")
 TIMING_KEYS = ("runtime_s", "realtime_factor", "timings_s", "validation_time_s")
@@ -179,6 +184,14 @@ def report(samples: list[Sample], programs: list[str], identity: dict[str, list[
                 r = _med(ratios)
                 verdicts.append(f"- {inp}, {prog} against {PEERS[prog]}: {r:.2f} "
                                 f"({'within' if r <= TARGETS[prog] else 'above'} the target {TARGETS[prog]})")
+        with_out, without, target = OUTPUTS
+        bare = {s.round: s for s in samples if s.input == inp and s.program == without}
+        costs = [s.wall_s / bare[s.round].wall_s for s in samples
+                 if s.input == inp and s.program == with_out and s.round in bare]
+        if costs:
+            r = _med(costs)
+            verdicts.append(f"- {inp}, the grid and run.mcap ({with_out} against {without}): {r:.2f} "
+                            f"(worst round {max(costs):.2f}; {'within' if r <= target else 'above'} the target {target})")
     lines = [note, "", table(head, rows), *verdicts, "",
              "Split of the gslam runs (medians, s; steps may overlap: the front-end runs in a second process "
              "while the first reads and prepares; `frontend_wait` and `plots_wait` are what the first process "
@@ -207,9 +220,10 @@ def speed_section(out: Path, repeats: int, inputs: list[str], laps: int, config:
         raise GslamError("--repeats: expected at least 1")
     out.mkdir(parents=True, exist_ok=True)
     kiss_threads = {"kiss 1 thread": 1, "kiss": 0}
-    gslam_sets = {"gslam": (), "gslam all cores": ("frontend.threads=0",), "before": ()}
-    programs = ["kiss 1 thread", "gslam", "kiss", "gslam all cores"] + (["before"] if before else [])
-    code = {"gslam": ROOT, "gslam all cores": ROOT, "before": before.resolve() if before else None}
+    gslam_sets = {"gslam": (), "gslam all cores": ("frontend.threads=0",), "before": (),
+                  "gslam no outputs": ("output.grid=false", "output.mcap=false")}
+    programs = ["kiss 1 thread", "gslam", "kiss", "gslam all cores", "gslam no outputs"] + (["before"] if before else [])
+    code = {"gslam": ROOT, "gslam all cores": ROOT, "gslam no outputs": ROOT, "before": before.resolve() if before else None}
     samples: list[Sample] = []
     identity: dict[str, list[str]] = {}
     loads_start = os.getloadavg()
