@@ -17,7 +17,10 @@ Sections:
   loop's information) added to the loops found, ``--false-fraction`` of
   them (0.25: one wrong loop for three genuine), before the loop observer;
   how many survive and how much the ATE moves, on ``telemax_lab`` (gated)
-  and the CARMEN logs (``configs/datasets/carmen.yaml``).
+  and the CARMEN logs (``configs/datasets/carmen.yaml``). Where the config
+  takes its loops from the submaps (``loops.source: submaps``, both shipped
+  ones), the wrong loops join the submap graph's loop constraints before
+  graduated non-convexity judges them, as a wrong match would.
 * ``corridor``: libRSF Corridor (``configs/datasets/librsf_corridor.yaml``),
   ATE without loops, with the file's loops through the loop observer, with
   each check alone, with none, and with the loops that agree with ground
@@ -96,6 +99,9 @@ def mapped(path: Path, config_path: Path, overrides: list[str], shared: dict, wr
     shared["rec"], shared["fe"] = pipe.recording, pipe.frontend
     pipe.build_measurements()
     pipe.validate()
+    pipe.learn_odometry_scale()
+    pipe.recheck()
+    pipe.build_submaps()
     pipe.close_loops()
     pipe.optimise()
     pipe.evaluate()
@@ -109,15 +115,57 @@ class Injecting(MappingPipeline):
     seed = 0
     injected = 0
 
+    def build_submaps(self) -> None:
+        """The submaps, with wrong loop constraints among the genuine ones
+        when GNC judges them (marked by a score of -1)."""
+        from slam.submaps import graph
+
+        if self.wrong_fraction <= 0 or not self.config.submaps.enabled:
+            return super().build_submaps()
+        judge, pipe = graph.GlobalSlam._gnc_outliers, self
+
+        def with_wrong(slam, est, n):
+            genuine = [c for c in slam.constraints if c.kind == "loop"]
+            count = math.ceil(pipe.wrong_fraction * len(genuine) / (1.0 - pipe.wrong_fraction)) if genuine else 0
+            slam.constraints.extend(wrong_submap_loops(genuine, count, pipe.seed))
+            pipe.injected = count
+            return judge(slam, est, n)
+
+        graph.GlobalSlam._gnc_outliers = with_wrong
+        try:
+            super().build_submaps()
+        finally:
+            graph.GlobalSlam._gnc_outliers = judge
+
     def find_loops(self):
         from slam.loops.inject import wrong_loops
 
         search = super().find_loops()
-        if self.wrong_fraction > 0 and search.loops:
+        if self.wrong_fraction > 0 and search.loops and not self.config.submaps.enabled:
             count = math.ceil(self.wrong_fraction * len(search.loops) / (1.0 - self.wrong_fraction))
             search.loops = search.loops + wrong_loops(search.chain, search.loops, count, self.seed)
             self.injected = count
         return search
+
+
+def wrong_submap_loops(genuine: list, count: int, seed: int) -> list:
+    """``count`` copies of genuine submap loop constraints, shifted as
+    :func:`slam.loops.inject.wrong_loops` shifts its copies (1-3 m, 3-15
+    deg), with the genuine one's information; score -1 marks them."""
+    from dataclasses import replace
+
+    from slam.loops.chain import compose
+
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(count):
+        model = genuine[int(rng.integers(len(genuine)))]
+        angle = rng.uniform(0.0, 2.0 * np.pi)
+        shift = rng.uniform(1.0, 3.0) * np.array([np.cos(angle), np.sin(angle)])
+        yaw = np.radians(rng.uniform(3.0, 15.0)) * rng.choice([-1.0, 1.0])
+        delta = compose(np.asarray(model.delta, float), np.array([shift[0], shift[1], yaw]))
+        out.append(replace(model, delta=delta, score=-1.0))
+    return out
 
 
 def stats(values: list[float]) -> str:
@@ -172,15 +220,22 @@ def bench_false_loops(report: Report, cache: Path, seeds: list[int], root: Path,
         shared = {}
         clean = mapped(path, config, overrides, shared)
         dirty = mapped(path, config, overrides, shared, wrong_fraction=fraction, seed=1000 + k)
-        injected = [v for v in dirty.loop_observation.verdicts if v.loop.source == "injected"]
-        kept = sum(v.accepted for v in injected)
-        reasons = {}
-        for v in injected:
-            if not v.accepted:
-                reasons[v.reason] = reasons.get(v.reason, 0) + 1
+        if dirty.submaps is not None:  # the wrong loops went to the submap graph's GNC
+            injected = [c for c in [*dirty.submaps.of_kind("loop"), *dirty.submaps.dropped_of_kind("loop")]
+                        if c.score == -1.0]
+            kept = sum(c.score == -1.0 for c in dirty.submaps.of_kind("loop"))
+            reasons = {"gnc": len(injected) - kept} if len(injected) > kept else {}
+        else:
+            injected = [v for v in dirty.loop_observation.verdicts if v.loop.source == "injected"]
+            kept = sum(v.accepted for v in injected)
+            reasons = {}
+            for v in injected:
+                if not v.accepted:
+                    reasons[v.reason] = reasons.get(v.reason, 0) + 1
         a, b = clean.metrics["ate_rmse_m"], dirty.metrics["ate_rmse_m"]
         found = clean.metrics["loops"]["found"]
-        rows.append([label, str(found), f"{len(injected)} ({len(injected) / (found + len(injected)):.0%})", str(kept),
+        share = f"{len(injected) / (found + len(injected)):.0%}" if found + len(injected) else "–"
+        rows.append([label, str(found), f"{len(injected)} ({share})", str(kept),
                      " ".join(f"{r} {n}" for r, n in sorted(reasons.items())), f"{a:.3f}", f"{b:.3f}",
                      f"{100.0 * (b - a) / a:+.1f} %"])
         log.info("false loops %s done", label)
