@@ -292,6 +292,14 @@ backend:
     scan_matching: {{enabled: {sm}}}
     gps: {{enabled: {on(t.gps)}}}
 
+loops:                         # loop closing (docs/loops.md): with a laser, the loops of the
+  enabled: {sm}                # scan-to-submap search, judged by GNC over the submap graph
+  source: auto
+  observer: {{chain_check: false, pcm: false, min_support: 0}}
+
+submaps:                       # scan-to-submap constraints on the laser (slam/submaps)
+  enabled: {sm}
+
 """ + validation_sections(proposal, None, None)
 
 
