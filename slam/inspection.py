@@ -146,7 +146,7 @@ def _starter(found: Inspection, fmt: str, base: Path | None) -> None:
 
 def _propose(path: Path, config: PipelineConfig, origins: dict[str, str], shared: dict[str, str]) -> ModelProposal:
     rec = read_recording(path, config.input)
-    return propose_model(recording_sources(rec, config, origins, shared))
+    return propose_model(recording_sources(rec, config, origins, shared), loops=config.loops.enabled)
 
 
 def _inspect_bag(path: Path, bag: Path) -> Inspection:

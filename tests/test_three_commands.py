@@ -93,6 +93,17 @@ def test_streams_that_do_not_move_together_are_dropped_with_the_reason(tmp_path)
     assert "yaw_vo_gyro" not in vcfg.model.relations and "yaw_vo_gyro" not in {r.name for r in vcfg.observers.relations}
 
 
+def test_a_config_whose_every_relation_is_dropped_still_loads(tmp_path):
+    """A magnetometer and an unrelated odometry: the relation goes, the field check stays."""
+    bag = sensor_bag(["mag", "vo"], seed=1, unrelated=["vo"]).write(tmp_path / "run.bag")
+    starter = tmp_path / "starter.yaml"
+    starter.write_text(inspect_recording(bag, starter=True).starter)
+    res = calibrate([bag], starter, tmp_path / "learnt.yaml")
+    assert res.dropped
+    vcfg, _ = validation_sections(load_config(res.out))
+    assert vcfg.observers.relations == () and vcfg.observers.magnetometer.enabled
+
+
 def test_the_compass_mounting_is_learnt_from_the_gps_course(tmp_path):
     bag = sensor_bag(["imu", "odom", "gps"], seed=1, heading_offset=np.radians(30.0)).write(tmp_path / "run.bag")
     starter = tmp_path / "starter.yaml"

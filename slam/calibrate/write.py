@@ -132,6 +132,8 @@ def calibrated_config(
             continue
         block += [f"{_INDENT}# {line}" for line in _relation_comment(choice, target, runs)]
         block.append(_INDENT + _flow(choice.relation))
+    if all(line.lstrip().startswith("#") for line in block[1:]):  # every relation dropped: an empty list, not null
+        block[0] = f"{_INDENT}relations: []"
     if proposals:
         block.append(f"{_INDENT}# Proposed: streams of different sensors whose rates correlate. To use one, uncomment")
         block.append(f"{_INDENT}# it and add its line under validation.model.relations.")

@@ -115,8 +115,10 @@ def _origin(source: Source) -> str:
     return f" {source.origin}" if source.origin else ""
 
 
-def propose_model(sources: Sequence[Source]) -> ModelProposal:
-    """The model of the module docstring for ``sources``."""
+def propose_model(sources: Sequence[Source], loops: bool = False) -> ModelProposal:
+    """The model of the module docstring for ``sources``; ``loops``: the
+    config closes loops, so LOOP and its check stand in the model even
+    without a laser (a loop list, or a later recording with one)."""
     sources = tuple(sources)
     kinds = {s.kind: s for s in sources}
     gyro, compass, scan, gps = (kinds.get(k) for k in ("gyro", "compass", "scan", "gps"))
@@ -165,6 +167,7 @@ def propose_model(sources: Sequence[Source]) -> ModelProposal:
         for axis, comp in (("dist", "SM_DIST"), ("lat", "SM_LAT"), ("yaw", "SM_YAW")):
             unary[f"scan_degenerate_{axis}"] = comp
         checks["scan"] = True
+    if scan is not None or loops:
         components.append("LOOP")
         unary["loop_consistency"] = "LOOP"
         priors["LOOP"] = _PRIORS["LOOP"]
