@@ -34,15 +34,15 @@ TUNING = {
 QUICK = {  # the arguments of each bench under `all --quick`: every page in under 30 minutes on 2 cores
     "gating": ["--seeds", "11-12"],
     "perf": ["--quick"],
-    "loops": ["--seeds", "1", "2", "--repeats", "1"],
-    "carmen": [],
+    "loops": ["--seeds", "1", "--repeats", "1", "--sections", "telemax", "false_loops", "corridor"],
+    "carmen": ["--mission-seeds", "1"],
     "carmen_cuts": ["--logs", "aces"],
     "broad": [],
     "broad_loto": ["--only", "trend"],
     "husky": [],
     "husky_dipole": ["--sets", "trend", "shipped", "--passes", "offline", "--no-folds"],
     "husky_faults": [],
-    "proposal": ["--seeds", "11-12"],
+    "proposal": ["--seeds", "11-12", "--carmen-logs", "intel", "aces"],
     "walkthrough": [],
 }
 

@@ -1,6 +1,6 @@
 """The proposed system model against the shipped hand-written ones, held out.
 
-    python -m scripts.bench proposal [--data DIR] [--sets telemax husky carmen] [--seeds 11-20]
+    python -m scripts.bench proposal [--data DIR] [--sets telemax husky carmen] [--seeds 11-20] [--carmen-logs intel aces]
                                      [--choice] [--out runs/bench_proposal]
 
 For each data set, the shipped config maps every run gated twice, all else
@@ -272,6 +272,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", type=Path, default=None)
     ap.add_argument("--sets", nargs="+", choices=list(CONFIGS), default=list(CONFIGS))
     ap.add_argument("--seeds", default="11-20", help="Telemax seeds reported on")
+    ap.add_argument("--carmen-logs", nargs="+", choices=CARMEN_REPORT, default=list(CARMEN_REPORT),
+                    help="the CARMEN logs reported on (default all three)")
     ap.add_argument("--choice", action="store_true", help="report on the data the constants were chosen on")
     ap.add_argument("--out", type=Path, default=ROOT / "runs/bench_proposal",
                     help="rows.csv (and choice.md with --choice; else docs/results/proposal.md)")
@@ -291,7 +293,7 @@ def main(argv: list[str] | None = None) -> int:
         if "husky" in args.sets:
             husky(data, HUSKY_CHOICE_FAULTS if args.choice else FAULTS, tmp, rows, notes)
         if "carmen" in args.sets:
-            carmen(data, TUNING if args.choice else CARMEN_REPORT, tmp, rows, notes)
+            carmen(data, TUNING if args.choice else tuple(args.carmen_logs), tmp, rows, notes)
     text = page(rows, notes)
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "rows.csv", csv_text([vars(r) for r in rows]))
