@@ -145,3 +145,30 @@ def test_nodes_are_taken_by_motion():
     steps[5, 2] = np.radians(10)
     nodes = select_nodes(steps, 0.25, np.radians(5))
     assert list(nodes) == [0, 3, 5, 8]
+
+
+@pytest.mark.parametrize("overrides, from_submaps", [
+    ((), True),
+    (("backend.robust_kernel=dcs", "backend.robust_param=2.0"), False),
+    (("backend.optimizer=gnc_tls",), False),
+])
+def test_the_submaps_estimate_starts_the_graph_unless_a_robust_kernel_judges_it(short_run, tmp_path, monkeypatch,
+                                                                                 overrides, from_submaps):
+    import slam.backend
+    from slam.config import load_config
+    from slam.pipeline import MappingPipeline
+    from tests.conftest import TELEMAX_CONFIG
+
+    starts = []
+    real = slam.backend.optimise
+
+    def spy(*args, **kwargs):
+        starts.append(kwargs.get("initial_poses"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(slam.backend, "optimise", spy)
+    config = load_config(TELEMAX_CONFIG, ["output.plots=false", *overrides])
+    pipe = MappingPipeline(short_run.run_dir, config, tmp_path / "out", concurrent=False)
+    pipe.run()
+    assert pipe.submaps is not None and len(starts) == 1
+    assert (starts[0] is not None) == from_submaps
