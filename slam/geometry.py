@@ -74,6 +74,12 @@ def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[2] - a[2])])
 
 
+def rotation(yaw: float) -> np.ndarray:
+    """The 2 x 2 rotation matrix of ``yaw`` (rad)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
 def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Points (n, 2) given in the frame of ``pose`` (x, y, yaw), in its parent frame."""
     c, s = math.cos(pose[2]), math.sin(pose[2])

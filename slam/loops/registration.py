@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from slam.geometry import rotation
+
 _NO_POINT = np.iinfo(np.int64).max
 _INDEX_BITS = 24
 
@@ -142,15 +144,10 @@ class Registration:
     converged: bool
 
 
-def _rotation(yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s], [s, c]])
-
-
 def _residuals(q: np.ndarray, pmap: PointMap, pose: np.ndarray, max_distance_m: float):
     """Correspondences of ``q`` at ``pose`` within ``max_distance_m``: mask
     (n,), point-to-line residuals (m,) and Jacobians (m, 3) of the matched."""
-    rq = q @ _rotation(pose[2]).T
+    rq = q @ rotation(pose[2]).T
     qw = rq + pose[:2]
     idx = pmap.grid.lookup(qw)
     found = idx >= 0

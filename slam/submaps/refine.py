@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from slam.geometry import rotation
+
 
 @dataclass(frozen=True)
 class PointMap:
@@ -60,13 +62,8 @@ class Refinement:
     converged: bool
 
 
-def _rotation(yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s], [s, c]])
-
-
 def _linearise(q: np.ndarray, pmap: PointMap, pose: np.ndarray, gate_m: float):
-    rq = q @ _rotation(pose[2]).T
+    rq = q @ rotation(pose[2]).T
     qw = rq + pose[:2]
     dist, idx = pmap.tree.query(qw, distance_upper_bound=gate_m)
     ok = np.isfinite(dist)
