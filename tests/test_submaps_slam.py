@@ -172,3 +172,35 @@ def test_the_submaps_estimate_starts_the_graph_unless_a_robust_kernel_judges_it(
     pipe.run()
     assert pipe.submaps is not None and len(starts) == 1
     assert (starts[0] is not None) == from_submaps
+
+
+def test_a_loop_is_made_only_where_the_carriers_scans_confirm_the_submap(monkeypatch):
+    import slam.submaps.graph as graph
+    from slam.submaps.local import Match
+
+    def match(pose):
+        return Match(0, 1, np.asarray(pose, dtype=float), 0.9, 0.02, 0.8, np.eye(3) * 1e-4, np.zeros((0, 3)))
+
+    delta = np.array([1.0, 0.5, 0.2])
+    assert graph._agree(match(delta + [0.01, -0.01, np.radians(0.1)]), delta, 0.02, np.radians(0.3))
+    assert not graph._agree(None, delta, 0.02, np.radians(0.3))
+    assert not graph._agree(match(delta + [0.03, 0.0, 0.0]), delta, 0.02, np.radians(0.3))
+    assert not graph._agree(match(delta + [0.0, 0.0, np.radians(0.5)]), delta, 0.02, np.radians(0.3))
+
+    # The carrier's scans never confirm: no loop, while the near constraints stay.
+    monkeypatch.setattr(graph, "refine_near", lambda *args, **kwargs: None)
+    rng = np.random.default_rng(7)
+    truth = ring_path(0.7, 2.0)
+    scans = simulate(building(), truth, rng)
+    steps, cov = drifting_odometry(truth, rng)
+    fe = FrontendConfig(max_range_m=50.0)
+    strict = build_submap_constraints(scans, np.arange(len(truth)), steps, cov, fe, SubmapsConfig(enabled=True))
+    assert not strict.of_kind("loop") and strict.of_kind("near")
+    lenient = SubmapsConfig.model_validate({"enabled": True, "constraints": {"agree": []}})
+    assert len(build_submap_constraints(scans, np.arange(len(truth)), steps, cov, fe, lenient).of_kind("loop")) >= 10
+
+
+def test_agreement_needs_the_carriers_refinement():
+    with pytest.raises(ValueError, match="refine_near"):
+        SubmapsConfig.model_validate({"constraints": {"refine_near": False}})
+    SubmapsConfig.model_validate({"constraints": {"refine_near": False, "agree": []}})

@@ -7,7 +7,9 @@ scan's points, :mod:`slam.submaps.grid`).
 
 from __future__ import annotations
 
-from pydantic import Field
+from typing import Literal
+
+from pydantic import Field, model_validator
 
 from validation.yamlio import Strict as _Strict
 
@@ -78,8 +80,13 @@ class ConstraintSearchConfig(_Strict):
     non-convexity drops the constraints it finds outliers, with an inlier
     threshold at the chi-square quantile ``inlier_probability``.
     ``refine_near``: refine a match against its nearest scan of the submap
-    and that scan's neighbours. ``inside``: a match whose best pose lies on
-    the window's rim makes no constraint (the truth may lie beyond it).
+    and that scan's neighbours. ``agree``: the kinds of constraint (``near``,
+    ``loop``) made only when that refinement succeeds within ``agree_m`` and
+    ``agree_deg`` of the submap's answer: two maps of the place, one of a
+    few metres and one of three scans, must say the same (a submap bent by
+    its own drift, or a scan that overlaps the carrier too little, fails).
+    ``inside``: a match whose best pose lies on the window's rim makes no
+    constraint (the truth may lie beyond it).
     """
 
     max_distance_m: float = Field(10.0, gt=0.0)
@@ -100,7 +107,17 @@ class ConstraintSearchConfig(_Strict):
     inlier_probability: float = Field(0.99, gt=0.0, lt=1.0)
     optimise_every: int = Field(10, ge=1)
     refine_near: bool = True
+    agree: list[Literal["near", "loop"]] = ["loop"]
+    agree_m: float = Field(0.02, gt=0.0)
+    agree_deg: float = Field(0.3, gt=0.0)
     inside: bool = True
+
+    @model_validator(mode="after")
+    def _agree_needs_refine_near(self):
+        if self.agree and not self.refine_near:
+            raise ValueError(f"agree: {self.agree} compares with the refinement refine_near makes; "
+                             "set refine_near: true or agree: []")
+        return self
 
 
 class AmbiguityConfig(_Strict):

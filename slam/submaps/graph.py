@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from slam.geometry import between, compose
+from slam.geometry import between, compose, wrap_angle
 from slam.loops.factors import loop_noise
 from slam.submaps.config import SubmapsConfig
 from slam.submaps.local import LocalResult, Match, match_scan, refine_near
@@ -188,8 +188,11 @@ class GlobalSlam:
         where = np.array([sm.poses[n][:2] for n in k])
         near = k[int(np.argmin(np.hypot(*(where - m.pose[:2]).T)))]
         delta = between(sm.poses[near], m.pose)
-        if kind != "intra" and self.cfg.constraints.refine_near:
+        cc = self.cfg.constraints
+        if kind != "intra" and cc.refine_near:
             again = refine_near(self.points, self.local.poses, sm.scans[near], m.scan, delta, self.cfg, m.submap, m.score)
+            if kind in cc.agree and not _agree(again, delta, cc.agree_m, np.radians(cc.agree_deg)):
+                return
             if again is not None:
                 m, delta = again, again.pose
         info = self._information(m, kind != "intra")
@@ -281,6 +284,16 @@ class GlobalSlam:
             p = result.atPose2(pose_key(i))
             out[i] = (p.x(), p.y(), p.theta())
         return out
+
+
+def _agree(again: Match | None, delta: np.ndarray, max_m: float, max_rad: float) -> bool:
+    """Whether the carrier's own scans confirm a submap match: their
+    refinement ``again`` succeeded and stayed within ``max_m`` and
+    ``max_rad`` of the submap's answer ``delta``."""
+    if again is None:
+        return False
+    d = again.pose - delta
+    return bool(np.hypot(d[0], d[1]) <= max_m and abs(wrap_angle(d[2])) <= max_rad)
 
 
 def match_information(pose: np.ndarray, covariance: np.ndarray, weak: np.ndarray, sigma_xy_m: float,
