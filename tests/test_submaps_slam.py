@@ -194,13 +194,40 @@ def test_a_loop_is_made_only_where_the_carriers_scans_confirm_the_submap(monkeyp
     scans = simulate(building(), truth, rng)
     steps, cov = drifting_odometry(truth, rng)
     fe = FrontendConfig(max_range_m=50.0)
-    strict = build_submap_constraints(scans, np.arange(len(truth)), steps, cov, fe, SubmapsConfig(enabled=True))
-    assert not strict.of_kind("loop") and strict.of_kind("near")
-    lenient = SubmapsConfig.model_validate({"enabled": True, "constraints": {"agree": []}})
+    strict = SubmapsConfig.model_validate({"enabled": True, "constraints": {"agree": ["loop"]}})
+    found = build_submap_constraints(scans, np.arange(len(truth)), steps, cov, fe, strict)
+    assert not found.of_kind("loop") and found.of_kind("near")
+    lenient = SubmapsConfig(enabled=True)  # agree: [] by default
     assert len(build_submap_constraints(scans, np.arange(len(truth)), steps, cov, fe, lenient).of_kind("loop")) >= 10
 
 
 def test_agreement_needs_the_carriers_refinement():
     with pytest.raises(ValueError, match="refine_near"):
-        SubmapsConfig.model_validate({"constraints": {"refine_near": False}})
-    SubmapsConfig.model_validate({"constraints": {"refine_near": False, "agree": []}})
+        SubmapsConfig.model_validate({"constraints": {"refine_near": False, "agree": ["loop"]}})
+    SubmapsConfig.model_validate({"constraints": {"refine_near": False}})
+
+
+def test_a_place_beyond_the_windows_is_recognised_and_its_loops_are_right():
+    # No submap is near enough the estimate to be searched: only recognition can close the loops.
+    rng = np.random.default_rng(11)
+    truth = ring_path(0.7, 2.0)
+    scans = simulate(building(), truth, rng)
+    steps, cov = drifting_odometry(truth, rng)
+    fe = FrontendConfig(max_range_m=50.0)
+    narrow = {"max_distance_m": 1e-3}
+
+    def loops(recognition: bool):
+        cfg = SubmapsConfig.model_validate({"enabled": True, "constraints": narrow,
+                                            "recognition": {"enabled": recognition, "min_path_m": 10.0}})
+        result = build_submap_constraints(scans, np.arange(len(truth)), steps, cov, fe, cfg)
+        return result, result.of_kind("loop")
+
+    _, blind = loops(False)
+    result, seen = loops(True)
+    assert not blind and len(seen) >= 5
+    for c in seen:
+        e = pinned_error(c.information, between(between(truth[c.anchor], truth[c.scan]), c.delta))
+        assert np.hypot(e[0], e[1]) <= 0.15 and abs(e[2]) <= np.radians(3.0), (c.anchor, c.scan, e)
+    start = truth[0]
+    est = np.array([compose(start, between(result.estimate[0], p)) for p in result.estimate])
+    assert np.hypot(*(est[-1, :2] - truth[-1, :2])) < 0.3

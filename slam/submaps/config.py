@@ -107,7 +107,7 @@ class ConstraintSearchConfig(_Strict):
     inlier_probability: float = Field(0.99, gt=0.0, lt=1.0)
     optimise_every: int = Field(10, ge=1)
     refine_near: bool = True
-    agree: list[Literal["near", "loop"]] = ["loop"]
+    agree: list[Literal["near", "loop"]] = []
     agree_m: float = Field(0.02, gt=0.0)
     agree_deg: float = Field(0.3, gt=0.0)
     inside: bool = True
@@ -133,6 +133,43 @@ class AmbiguityConfig(_Strict):
     exclude_deg: float = Field(5.0, gt=0.0)
 
 
+class RecognitionConfig(_Strict):
+    """Loops found by recognising a place, for drift larger than the
+    constraint search's window (:mod:`slam.submaps.graph`): after
+    ``min_path_m`` of path without a loop, every ``spacing_m`` the node's
+    surroundings (its submap so far) are described by Scan Context
+    (``rings`` x ``sectors`` up to ``max_radius_m``) and compared with every
+    finished submap at least ``constraints.loop_separation_m`` of path
+    back; the ``candidates`` nearest within ``max_distance`` are searched
+    for around the pose the descriptor gives, within ``linear_window_m``
+    and ``angular_window_deg``, at ``min_score`` or better, unique and
+    inside the window. The pose found must lie within the drift the run can
+    have gathered since its last loop: the windows plus ``max_drift_per_m``
+    and ``max_turn_per_m_deg`` per metre of path; a place further off is a
+    look-alike (a symmetric building's other wing). A recognition is a loop
+    only when a second one, at most ``confirm_within_m`` of path later,
+    places the run within ``agree_m`` and ``agree_deg`` of the first; both
+    then join the graph without a robust kernel, so the graph closes the
+    loop at once."""
+
+    enabled: bool = True
+    min_path_m: float = Field(30.0, ge=0.0)
+    spacing_m: float = Field(1.0, gt=0.0)
+    rings: int = Field(20, ge=2)
+    sectors: int = Field(60, ge=4)
+    max_radius_m: float = Field(20.0, gt=0.0)
+    max_distance: float = Field(0.4, gt=0.0, le=1.0)
+    candidates: int = Field(3, ge=1)
+    linear_window_m: float = Field(3.0, gt=0.0)
+    angular_window_deg: float = Field(12.0, gt=0.0, le=180.0)
+    min_score: float = Field(0.6, ge=0.0, le=1.0)
+    max_drift_per_m: float = Field(0.1, ge=0.0)
+    max_turn_per_m_deg: float = Field(1.0, ge=0.0)
+    confirm_within_m: float = Field(5.0, gt=0.0)
+    agree_m: float = Field(0.3, gt=0.0)
+    agree_deg: float = Field(3.0, gt=0.0)
+
+
 class SubmapsConfig(_Strict):
     """Submaps over the keyframes that moved ``node_spacing_m`` or turned
     ``node_turn_deg`` since the last one taken (the nodes; the others keep
@@ -156,3 +193,12 @@ class SubmapsConfig(_Strict):
     refine: RefineConfig = RefineConfig()
     constraints: ConstraintSearchConfig = ConstraintSearchConfig()
     ambiguity: AmbiguityConfig = AmbiguityConfig()
+    recognition: RecognitionConfig = RecognitionConfig()
+
+    @property
+    def max_window_m(self) -> float:
+        """The widest linear window any search uses: the submaps' grids are padded by it."""
+        windows = [self.local.max_linear_window_m, self.constraints.max_linear_window_m]
+        if self.recognition.enabled:
+            windows.append(self.recognition.linear_window_m)
+        return max(windows)

@@ -24,11 +24,12 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from slam.geometry import between, compose, wrap_angle
+from slam.geometry import between, compose, transform_points, wrap_angle
+from slam.loops.descriptor import context_distance, ring_key, scan_context
 from slam.loops.factors import loop_noise
 from slam.submaps.config import SubmapsConfig
 from slam.submaps.local import LocalResult, Match, match_scan, refine_near
@@ -59,6 +60,9 @@ class Constraint:
     score: float
     information: np.ndarray
     weak: np.ndarray
+    recognised: bool = False
+    """Found by place recognition (confirmed by a second one): no robust
+    kernel while the run is walked, so the graph closes the loop."""
 
 
 @dataclass
@@ -89,6 +93,7 @@ class GlobalSlam:
         steps = np.hypot(*np.diff(local.poses[:, :2], axis=0).T)
         self.path = np.concatenate([[0.0], np.cumsum(steps)])
         self.constraints: list[Constraint] = []
+        self._contexts: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     # -- the walk ---------------------------------------------------------------
 
@@ -112,6 +117,9 @@ class GlobalSlam:
         last_tied = np.full(len(local.submaps), -np.inf)  # path at the last inter constraint of each submap
         self.robust = gtsam.noiseModel.mEstimator.Cauchy.Create(cc.robust_scale)
         self.chain_robust = gtsam.noiseModel.mEstimator.Cauchy.Create(cc.robust_scale)
+        rc = cfg.recognition
+        last_loop, last_try = 0.0, -np.inf  # path at the last loop and at the last recognition tried
+        recognitions: list[tuple[int, Match, int, np.ndarray]] = []  # (node, match, submap, its global pose)
         for i in range(n):
             if i > 0:
                 est[i] = compose(est[i - 1], between(local.poses[i - 1], local.poses[i]))
@@ -153,6 +161,18 @@ class GlobalSlam:
                 self._add_inter(m, sm.anchor, "loop" if loop else "near")
                 last_tied[sid] = self.path[i]
                 pending += 1
+                if loop:
+                    last_loop = self.path[i]
+            if rc.enabled and self.path[i] - last_loop >= rc.min_path_m and self.path[i] - last_try >= rc.spacing_m:
+                # Drift may have carried the estimate beyond the windows: recognise the place.
+                last_try = self.path[i]
+                found, tried = self._recognise(i, est, member, last_scan, recognitions, self.path[i] - last_loop)
+                searches += tried
+                if found:
+                    est[: i + 1] = self._optimise(est[: i + 1], i + 1)
+                    # Closed: from now on they are loops like the others, under the kernel.
+                    self.constraints = [replace(c, recognised=False) for c in self.constraints]
+                    last_opt, pending, last_loop = i, 0, self.path[i]
             if pending and i - last_opt >= cc.optimise_every:
                 est[: i + 1] = self._optimise(est[: i + 1], i + 1)
                 last_opt, pending = i, 0
@@ -175,7 +195,83 @@ class GlobalSlam:
     def _add_inter(self, m: Match, anchor: int, kind: str) -> None:
         self._add(m, kind)
 
-    def _add(self, m: Match, kind: str, before: int | None = None) -> None:
+    # -- place recognition -----------------------------------------------------------
+
+    def _recognise(self, i: int, est: np.ndarray, member: dict[int, set[int]], last_scan: np.ndarray,
+                   recognitions: list, unpinned_m: float) -> tuple[bool, int]:
+        """Look for node ``i``'s surroundings among the finished submaps far
+        back along the path (see :class:`RecognitionConfig`), ``unpinned_m``
+        of path after the last loop: whether a confirmed recognition joined
+        the graph, and how many searches ran."""
+        cfg, rc = self.cfg, self.cfg.recognition
+        query = self._context_of_node(i, member)
+        far = [sid for sid in np.nonzero(last_scan < i)[0]
+               if self.path[i] - self.path[last_scan[sid]] >= cfg.constraints.loop_separation_m]
+        if query is None or not far:
+            return False, 0
+        contexts = [self._context_of_submap(sid) for sid in far]
+        keys = np.array([ring_key(c[0]) for c in contexts])
+        nearest = np.argsort(np.abs(keys - ring_key(query)).sum(axis=1))[: 4 * rc.candidates]
+        scored = []
+        for k in nearest:
+            d, yaw = context_distance(contexts[k][0], query)
+            if d <= rc.max_distance:
+                scored.append((d, far[k], yaw))
+        scored.sort()
+        tried = 0
+        for _, sid, yaw in scored[: rc.candidates]:
+            tried += 1
+            sm = self.local.submaps[sid]
+            guess = compose(self._context_of_submap(sid)[1], np.array([0.0, 0.0, yaw]))
+            m = match_scan(sm, self.points, i, guess, cfg, rc.linear_window_m, np.radians(rc.angular_window_deg),
+                           rc.min_score, sid, unique=cfg.ambiguity.enabled, inside=True)
+            if m is None or not m.refined:
+                continue
+            pose = compose(est[sm.anchor], m.pose)
+            moved = between(est[i], pose)
+            if (np.hypot(moved[0], moved[1]) > rc.linear_window_m + rc.max_drift_per_m * unpinned_m
+                    or abs(moved[2]) > np.radians(rc.angular_window_deg + rc.max_turn_per_m_deg * unpinned_m)):
+                continue  # further than the run can have drifted: a look-alike
+            for j, mj, sj, pj in recognitions:
+                if not 0 < self.path[i] - self.path[j] <= rc.confirm_within_m:
+                    continue
+                d = between(compose(pj, between(self.local.poses[j], self.local.poses[i])), pose)
+                if np.hypot(d[0], d[1]) <= rc.agree_m and abs(d[2]) <= np.radians(rc.agree_deg):
+                    before = len(self.constraints)
+                    self._add(mj, "loop", recognised=True)
+                    self._add(m, "loop", recognised=True)
+                    if len(self.constraints) - before == 2:
+                        recognitions.clear()
+                        return True, tried
+                    del self.constraints[before:]
+            recognitions.append((i, m, sid, pose))
+            del recognitions[: -4 * rc.candidates]
+        return False, tried
+
+    def _context_of_node(self, i: int, member: dict[int, set[int]]):
+        """The Scan Context of node ``i``'s submap so far, in ``i``'s frame."""
+        rc = self.cfg.recognition
+        sm = self.local.submaps[min(member.get(i, {0}))]
+        if i not in sm.scans:
+            return None
+        upto = sm.scans.index(i) + 1
+        here = sm.poses[upto - 1]
+        pts = [transform_points(between(here, p), self.points.points[k]) for k, p in zip(sm.scans[:upto], sm.poses[:upto])]
+        return scan_context(np.concatenate(pts), rc.rings, rc.sectors, rc.max_radius_m)
+
+    def _context_of_submap(self, sid: int):
+        """A finished submap's Scan Context, about its node nearest its
+        centre, and that node's pose in the submap's frame."""
+        if sid not in self._contexts:
+            rc = self.cfg.recognition
+            sm = self.local.submaps[sid]
+            poses = np.asarray(sm.poses)
+            centre = poses[np.argmin(np.hypot(*(poses[:, :2] - poses[:, :2].mean(axis=0)).T))]
+            pts = [transform_points(between(centre, p), self.points.points[k]) for k, p in zip(sm.scans, sm.poses)]
+            self._contexts[sid] = (scan_context(np.concatenate(pts), rc.rings, rc.sectors, rc.max_radius_m), centre)
+        return self._contexts[sid]
+
+    def _add(self, m: Match, kind: str, before: int | None = None, recognised: bool = False) -> None:
         """The match as a constraint from the submap's scan nearest to it
         (of those inserted ``before`` the matched scan, for a local match,
         and placed by a refined match themselves): the submap is rigid, so
@@ -196,7 +292,8 @@ class GlobalSlam:
             if again is not None:
                 m, delta = again, again.pose
         info = self._information(m, kind != "intra")
-        self.constraints.append(Constraint(m.submap, sm.scans[near], m.scan, delta, kind, m.score, info, m.weak))
+        self.constraints.append(Constraint(m.submap, sm.scans[near], m.scan, delta, kind, m.score, info, m.weak,
+                                           recognised))
 
     def _placed(self, scan: int) -> bool:
         """Whether local SLAM placed ``scan`` by a refined match (or it is the first)."""
@@ -261,7 +358,7 @@ class GlobalSlam:
         for k, c in enumerate(self.constraints):
             if c.scan >= n:
                 continue
-            robust = self.robust if c.kind != "intra" and robust_inter else None
+            robust = self.robust if c.kind != "intra" and robust_inter and not c.recognised else None
             index.append((g.size(), k))
             g.add(gtsam.BetweenFactorPose2(pose_key(c.anchor), pose_key(c.scan), gtsam.Pose2(*c.delta),
                                            loop_noise(c.information, robust)))

@@ -72,8 +72,7 @@ class Submap:
     def pyramid(self, points: ScanPoints, cfg: SubmapsConfig) -> ScorePyramid:
         if self._pyramid is None:
             pts, _ = self.gather(points)
-            window = max(cfg.local.max_linear_window_m, cfg.constraints.max_linear_window_m)
-            pad = 2 * int(np.ceil(window / cfg.resolution_m))
+            pad = 2 * int(np.ceil(cfg.max_window_m / cfg.resolution_m))
             self._pyramid = score_pyramid(pts, cfg.resolution_m, cfg.resolution_m, cfg.search_depth,
                                           3 * cfg.resolution_m, pad)
         return self._pyramid
