@@ -150,21 +150,19 @@ class Injecting(MappingPipeline):
 
 def wrong_submap_loops(genuine: list, count: int, seed: int) -> list:
     """``count`` copies of genuine submap loop constraints, shifted as
-    :func:`slam.loops.inject.wrong_loops` shifts its copies (1-3 m, 3-15
-    deg), with the genuine one's information; score -1 marks them."""
+    :func:`slam.loops.inject.wrong_loops` shifts its copies
+    (:func:`~slam.loops.inject.wrong_shift`), with the genuine one's
+    information; score -1 marks them."""
     from dataclasses import replace
 
     from slam.loops.chain import compose
+    from slam.loops.inject import wrong_shift
 
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(count):
         model = genuine[int(rng.integers(len(genuine)))]
-        angle = rng.uniform(0.0, 2.0 * np.pi)
-        shift = rng.uniform(1.0, 3.0) * np.array([np.cos(angle), np.sin(angle)])
-        yaw = np.radians(rng.uniform(3.0, 15.0)) * rng.choice([-1.0, 1.0])
-        delta = compose(np.asarray(model.delta, float), np.array([shift[0], shift[1], yaw]))
-        out.append(replace(model, delta=delta, score=-1.0))
+        out.append(replace(model, delta=compose(np.asarray(model.delta, float), wrong_shift(rng)), score=-1.0))
     return out
 
 

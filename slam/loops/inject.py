@@ -34,9 +34,15 @@ def wrong_loops(chain: Chain, genuine: list[LoopConstraint], count: int, seed: i
                 if chain.path_m[j] - chain.path_m[i] >= min_separation_m:
                     break
             delta = between(chain.poses[i], chain.poses[j])
-        angle = rng.uniform(0.0, 2.0 * np.pi)
-        shift = rng.uniform(1.0, 3.0) * np.array([np.cos(angle), np.sin(angle)])
-        yaw = np.radians(rng.uniform(3.0, 15.0)) * rng.choice([-1.0, 1.0])
-        wrong = compose(np.asarray(delta, float), np.array([shift[0], shift[1], yaw]))
+        wrong = compose(np.asarray(delta, float), wrong_shift(rng))
         out.append(LoopConstraint(next_id + k, i, j, wrong, info.copy(), "injected"))
     return out
+
+
+def wrong_shift(rng: np.random.Generator) -> np.ndarray:
+    """A shift (x, y, yaw) that makes a loop wrong but plausible: 1-3 m in
+    a random direction and 3-15 deg of yaw, random sign."""
+    angle = rng.uniform(0.0, 2.0 * np.pi)
+    shift = rng.uniform(1.0, 3.0) * np.array([np.cos(angle), np.sin(angle)])
+    yaw = np.radians(rng.uniform(3.0, 15.0)) * rng.choice([-1.0, 1.0])
+    return np.array([shift[0], shift[1], yaw])

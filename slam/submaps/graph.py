@@ -24,11 +24,11 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from slam.geometry import between, compose, transform_points, wrap_angle
+from slam.geometry import between, compose, wrap_angle
 from slam.loops.descriptor import context_distance, ring_key, scan_context
 from slam.loops.factors import loop_noise
 from slam.submaps.config import SubmapsConfig
@@ -60,9 +60,6 @@ class Constraint:
     score: float
     information: np.ndarray
     weak: np.ndarray
-    recognised: bool = False
-    """Found by place recognition (confirmed by a second one): no robust
-    kernel while the run is walked, so the graph closes the loop."""
 
 
 @dataclass
@@ -93,7 +90,7 @@ class GlobalSlam:
         steps = np.hypot(*np.diff(local.poses[:, :2], axis=0).T)
         self.path = np.concatenate([[0.0], np.cumsum(steps)])
         self.constraints: list[Constraint] = []
-        self._contexts: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._contexts: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     # -- the walk ---------------------------------------------------------------
 
@@ -169,9 +166,9 @@ class GlobalSlam:
                 found, tried = self._recognise(i, est, member, last_scan, recognitions, self.path[i] - last_loop)
                 searches += tried
                 if found:
-                    est[: i + 1] = self._optimise(est[: i + 1], i + 1)
-                    # Closed: from now on they are loops like the others, under the kernel.
-                    self.constraints = [replace(c, recognised=False) for c in self.constraints]
+                    # Without the kernel, so the graph closes the loop; from
+                    # then on they are loops like the others, under it.
+                    est[: i + 1] = self._optimise(est[: i + 1], i + 1, plain=found)
                     last_opt, pending, last_loop = i, 0, self.path[i]
             if pending and i - last_opt >= cc.optimise_every:
                 est[: i + 1] = self._optimise(est[: i + 1], i + 1)
@@ -198,19 +195,19 @@ class GlobalSlam:
     # -- place recognition -----------------------------------------------------------
 
     def _recognise(self, i: int, est: np.ndarray, member: dict[int, set[int]], last_scan: np.ndarray,
-                   recognitions: list, unpinned_m: float) -> tuple[bool, int]:
+                   recognitions: list, unpinned_m: float) -> tuple[set[int], int]:
         """Look for node ``i``'s surroundings among the finished submaps far
         back along the path (see :class:`RecognitionConfig`), ``unpinned_m``
-        of path after the last loop: whether a confirmed recognition joined
-        the graph, and how many searches ran."""
+        of path after the last loop: the indices of the constraints a
+        confirmed recognition added (none if none), and how many searches ran."""
         cfg, rc = self.cfg, self.cfg.recognition
         query = self._context_of_node(i, member)
         far = [sid for sid in np.nonzero(last_scan < i)[0]
                if self.path[i] - self.path[last_scan[sid]] >= cfg.constraints.loop_separation_m]
         if query is None or not far:
-            return False, 0
+            return set(), 0
         contexts = [self._context_of_submap(sid) for sid in far]
-        keys = np.array([ring_key(c[0]) for c in contexts])
+        keys = np.array([c[1] for c in contexts])
         nearest = np.argsort(np.abs(keys - ring_key(query)).sum(axis=1))[: 4 * rc.candidates]
         scored = []
         for k in nearest:
@@ -222,7 +219,7 @@ class GlobalSlam:
         for _, sid, yaw in scored[: rc.candidates]:
             tried += 1
             sm = self.local.submaps[sid]
-            guess = compose(self._context_of_submap(sid)[1], np.array([0.0, 0.0, yaw]))
+            guess = compose(self._context_of_submap(sid)[2], np.array([0.0, 0.0, yaw]))
             m = match_scan(sm, self.points, i, guess, cfg, rc.linear_window_m, np.radians(rc.angular_window_deg),
                            rc.min_score, sid, unique=cfg.ambiguity.enabled, inside=True)
             if m is None or not m.refined:
@@ -238,15 +235,15 @@ class GlobalSlam:
                 d = between(compose(pj, between(self.local.poses[j], self.local.poses[i])), pose)
                 if np.hypot(d[0], d[1]) <= rc.agree_m and abs(d[2]) <= np.radians(rc.agree_deg):
                     before = len(self.constraints)
-                    self._add(mj, "loop", recognised=True)
-                    self._add(m, "loop", recognised=True)
+                    self._add(mj, "loop")
+                    self._add(m, "loop")
                     if len(self.constraints) - before == 2:
                         recognitions.clear()
-                        return True, tried
+                        return {before, before + 1}, tried
                     del self.constraints[before:]
             recognitions.append((i, m, sid, pose))
             del recognitions[: -4 * rc.candidates]
-        return False, tried
+        return set(), tried
 
     def _context_of_node(self, i: int, member: dict[int, set[int]]):
         """The Scan Context of node ``i``'s submap so far, in ``i``'s frame."""
@@ -255,23 +252,22 @@ class GlobalSlam:
         if i not in sm.scans:
             return None
         upto = sm.scans.index(i) + 1
-        here = sm.poses[upto - 1]
-        pts = [transform_points(between(here, p), self.points.points[k]) for k, p in zip(sm.scans[:upto], sm.poses[:upto])]
-        return scan_context(np.concatenate(pts), rc.rings, rc.sectors, rc.max_radius_m)
+        return scan_context(sm.points_about(self.points, sm.poses[upto - 1], upto), rc.rings, rc.sectors,
+                            rc.max_radius_m)
 
-    def _context_of_submap(self, sid: int):
-        """A finished submap's Scan Context, about its node nearest its
-        centre, and that node's pose in the submap's frame."""
+    def _context_of_submap(self, sid: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A finished submap's Scan Context about its node nearest its
+        centre, its ring key, and that node's pose in the submap's frame."""
         if sid not in self._contexts:
             rc = self.cfg.recognition
             sm = self.local.submaps[sid]
             poses = np.asarray(sm.poses)
             centre = poses[np.argmin(np.hypot(*(poses[:, :2] - poses[:, :2].mean(axis=0)).T))]
-            pts = [transform_points(between(centre, p), self.points.points[k]) for k, p in zip(sm.scans, sm.poses)]
-            self._contexts[sid] = (scan_context(np.concatenate(pts), rc.rings, rc.sectors, rc.max_radius_m), centre)
+            context = scan_context(sm.points_about(self.points, centre), rc.rings, rc.sectors, rc.max_radius_m)
+            self._contexts[sid] = (context, ring_key(context), centre)
         return self._contexts[sid]
 
-    def _add(self, m: Match, kind: str, before: int | None = None, recognised: bool = False) -> None:
+    def _add(self, m: Match, kind: str, before: int | None = None) -> None:
         """The match as a constraint from the submap's scan nearest to it
         (of those inserted ``before`` the matched scan, for a local match,
         and placed by a refined match themselves): the submap is rigid, so
@@ -292,8 +288,7 @@ class GlobalSlam:
             if again is not None:
                 m, delta = again, again.pose
         info = self._information(m, kind != "intra")
-        self.constraints.append(Constraint(m.submap, sm.scans[near], m.scan, delta, kind, m.score, info, m.weak,
-                                           recognised))
+        self.constraints.append(Constraint(m.submap, sm.scans[near], m.scan, delta, kind, m.score, info, m.weak))
 
     def _placed(self, scan: int) -> bool:
         """Whether local SLAM placed ``scan`` by a refined match (or it is the first)."""
@@ -334,7 +329,9 @@ class GlobalSlam:
         by_factor = dict(index)
         return {by_factor[f] for f in inter if weights[f] < 0.5}
 
-    def _graph(self, n: int, robust_inter: bool = True):
+    def _graph(self, n: int, robust_inter: bool = True, plain: set[int] = frozenset()):
+        """The graph of the first ``n`` nodes; the inter constraints under the
+        kernel when ``robust_inter``, except those indexed in ``plain``."""
         import gtsam
 
         from slam.factors import pose_key
@@ -358,18 +355,18 @@ class GlobalSlam:
         for k, c in enumerate(self.constraints):
             if c.scan >= n:
                 continue
-            robust = self.robust if c.kind != "intra" and robust_inter and not c.recognised else None
+            robust = self.robust if c.kind != "intra" and robust_inter and k not in plain else None
             index.append((g.size(), k))
             g.add(gtsam.BetweenFactorPose2(pose_key(c.anchor), pose_key(c.scan), gtsam.Pose2(*c.delta),
                                            loop_noise(c.information, robust)))
         return g, index
 
-    def _optimise(self, est: np.ndarray, n: int) -> np.ndarray:
+    def _optimise(self, est: np.ndarray, n: int, plain: set[int] = frozenset()) -> np.ndarray:
         import gtsam
 
         from slam.factors import pose_key
 
-        g, _ = self._graph(n)
+        g, _ = self._graph(n, plain=plain)
         values = gtsam.Values()
         for i in range(n):
             values.insert(pose_key(i), gtsam.Pose2(*est[i]))

@@ -69,6 +69,12 @@ class Submap:
             nrm.append(points.normals[k] @ np.array([[c, s], [-s, c]]))
         return np.concatenate(pts), np.concatenate(nrm)
 
+    def points_about(self, points: ScanPoints, pose: np.ndarray, count: int | None = None) -> np.ndarray:
+        """The points (m, 2) of its first ``count`` scans (all by default)
+        in the frame of ``pose``, a pose in the submap's frame."""
+        placed = zip(self.scans[:count], self.poses[:count])
+        return np.concatenate([transform_points(between(pose, p), points.points[k]) for k, p in placed])
+
     def pyramid(self, points: ScanPoints, cfg: SubmapsConfig) -> ScorePyramid:
         if self._pyramid is None:
             pts, _ = self.gather(points)
