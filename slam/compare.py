@@ -18,7 +18,6 @@ from __future__ import annotations
 import csv
 import io
 import logging
-import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +28,7 @@ import yaml
 from slam.config import PipelineConfig, config_files, load_config, load_yaml
 from slam.errors import GslamError
 from slam.io.outdir import result_folder
+from slam.io.records import PLAIN_NAME, PLAIN_NAME_RULE
 from slam.pipeline import RESULT_FILES, MapResult, MappingPipeline
 from slam.report import Figure, Section, Table, write_report
 from slam.resources import shipped_config
@@ -38,7 +38,6 @@ log = logging.getLogger(__name__)
 COMPARE_FILES = ("comparison.csv", "comparison.md", "report.html", "trajectories.png", "trajectories_full.png",
                  "compass_trends.png", "observer_alarms.png")
 """The files of a comparison beside its variants' folders."""
-_VARIANT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
 
 COLUMNS: tuple[tuple[str, str, str], ...] = (
     # (metric key, column header, format)
@@ -79,9 +78,9 @@ def load_variants(path: str | Path, only: list[str] | None = None) -> dict[str, 
     variants: dict[str, list[str]] = {}
     for key, overrides in data.items():
         name = str(key)
-        if not _VARIANT_NAME.fullmatch(name) or name in COMPARE_FILES:
-            raise GslamError(f"{path}: variant {name!r}: a variant's name names its result folder: letters, digits "
-                             f"and _.+- (not starting with . or -), other than {', '.join(COMPARE_FILES)}")
+        if not PLAIN_NAME.fullmatch(name) or name in COMPARE_FILES:
+            raise GslamError(f"{path}: variant {name!r}: a variant's name names its result folder: {PLAIN_NAME_RULE}, "
+                             f"other than {', '.join(COMPARE_FILES)}")
         if not isinstance(overrides, dict):
             raise GslamError(f"{path}: variant '{name}': expected a mapping of dotted.key: value")
         variants[name] = [f"{k}={_yaml_scalar(v)}" for k, v in overrides.items()]

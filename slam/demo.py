@@ -60,7 +60,7 @@ def run_demo(
     classify(Path(out_dir), "demo", inputs, force)
     if not reuse:
         classify(run_dir, "simulate", [scenario], force)
-    classify(Path(out_dir) / "compare", "compare", inputs, force)
+    classify(Path(out_dir) / "compare", "compare", [run_dir, *inputs[1:]], force)
     out = open_container(out_dir, "demo", inputs, force, (f"{scenario.stem}/", "compare/"))
     duration = 0.0
     if not reuse:

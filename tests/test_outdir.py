@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -92,6 +93,92 @@ def test_a_legacy_marker_without_a_file_list_replaces_names_and_removes_nothing(
     (out / "notes.txt").write_text("mine\n")
     build(out, files=("a.txt",))
     assert (out / "a.txt").read_text() == "a.txt by map\n" and (out / "notes.txt").read_text() == "mine\n"
+
+
+# --- a marker is input ----------------------------------------------------------------
+
+
+def sentinels(tmp_path: Path) -> dict[Path, bytes]:
+    """Files of the user's beside and above a result folder, with their bytes."""
+    files = {tmp_path / "victim.txt": b"precious\n", tmp_path / "outside" / "v.txt": b"mine\n"}
+    for path, data in files.items():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    return files
+
+
+def unchanged(files: dict[Path, bytes]) -> bool:
+    return all(p.is_file() and not p.is_symlink() and p.read_bytes() == data for p, data in files.items())
+
+
+@pytest.mark.parametrize("listed", ["../victim.txt", "{tmp}/victim.txt", "a/../../victim.txt", "./a.txt", "a//b.txt",
+                                    "", 7])
+@pytest.mark.parametrize("force", [False, True])
+def test_a_marker_that_names_a_path_outside_its_folder_is_refused(tmp_path, listed, force):
+    victims = sentinels(tmp_path)
+    out = tmp_path / "out"
+    build(out, files=("a.txt",))
+    marker = json.loads((out / RESULT_MARKER).read_text())
+    marker["files"].append(listed.format(tmp=tmp_path) if isinstance(listed, str) else listed)
+    (out / RESULT_MARKER).write_text(json.dumps(marker))
+    if isinstance(listed, str):
+        with pytest.raises(GslamError, match=r"\.gslam-result\.json: lists .* not a file inside the folder") as e:
+            build(out, force=force, files=("b.txt",))
+        assert "\n" not in str(e.value)
+    else:
+        build(out, force=force, files=("b.txt",))  # not a list of names: an old marker's missing list
+    assert unchanged(victims) and (out / "a.txt").exists()
+
+
+def test_an_added_record_that_names_a_path_outside_its_folder_is_refused(tmp_path):
+    victims = sentinels(tmp_path)
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / ADDED_MARKER).write_text(json.dumps({"map": {"files": ["../victim.txt"]}}))
+    with pytest.raises(GslamError, match=r"\.gslam-added\.json: lists '\.\./victim\.txt'"):
+        build(out, force=True, files=("b.txt",))
+    assert unchanged(victims)
+
+
+def test_nothing_is_removed_through_a_linked_folder(tmp_path):
+    victims = sentinels(tmp_path)
+    out = tmp_path / "out"
+    build(out, files=("a.txt", "sub/v.txt"))
+    (out / "sub" / "v.txt").unlink()
+    (out / "sub").rmdir()
+    (out / "sub").symlink_to(tmp_path / "outside")  # sub/v.txt, as the marker lists it, is now the user's file
+    for force in (False, True):
+        build(out, force=force, files=("a.txt",))
+        assert unchanged(victims)
+    assert (out / "sub").is_symlink()
+
+
+def test_replacing_the_result_of_another_input_needs_force(tmp_path):
+    first, second = tmp_path / "a.bag", tmp_path / "b.bag"
+    for path in (first, second):
+        path.write_text("bag\n")
+    out = tmp_path / "out"
+    build(out, inputs=[first])
+    assert json.loads((out / RESULT_MARKER).read_text())["input"] == str(first.resolve())
+    build(out, inputs=[first])  # the same input: replaced
+    with pytest.raises(GslamError, match=rf"--out holds the gslam map result of {first.resolve()}, not of "
+                                         rf"{second.resolve()}; .*--force"):
+        build(out, inputs=[second], files=("b.txt",))
+    assert listing(out) == {"a.txt", RESULT_MARKER}
+    build(out, inputs=[second], force=True, files=("b.txt",))
+    assert listing(out) == {"b.txt", RESULT_MARKER}
+    assert json.loads((out / RESULT_MARKER).read_text())["input"] == str(second.resolve())
+
+
+def test_a_container_of_another_input_needs_force(tmp_path):
+    first, second = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    for path in (first, second):
+        path.write_text("name: x\n")
+    out = open_container(tmp_path / "sweep", "ablate", [first])
+    with pytest.raises(GslamError, match=f"ablate result of {first.resolve()}, not of {second.resolve()}"):
+        open_container(out, "ablate", [second])
+    open_container(out, "ablate", [second], force=True)
+    assert open_container(out, "ablate", [second]) == out
 
 
 def test_an_empty_folder_is_new(tmp_path):
@@ -309,6 +396,18 @@ def commands(short_run, short_scenario_yaml, tmp_path):
     }
 
 
+def with_other_input(argv: list, folder: Path) -> list:
+    """``argv`` with its input (the first argument, or demo's --scenario)
+    copied into ``folder``: the same content, another input."""
+    i = argv.index("--scenario") + 1 if "--scenario" in argv else 1
+    source = Path(argv[i])
+    folder.mkdir(exist_ok=True)
+    copy = folder / source.name
+    if not copy.exists():
+        (shutil.copytree if source.is_dir() else shutil.copy)(source, copy)
+    return [*argv[:i], copy, *argv[i + 1:]]
+
+
 @pytest.mark.parametrize("command", ["simulate", "map", "compare", "demo", "ablate", "inject"])
 def test_out_rule_for_every_command(command, commands, tmp_path, capsys):
     argv = commands[command]
@@ -322,6 +421,28 @@ def test_out_rule_for_every_command(command, commands, tmp_path, capsys):
     code, err = run(capsys, *argv, out)
     assert code == 0, err
     assert listing(out) == first
+    # 2b. a marker naming files outside the folder (a marker is input): refused, nothing outside touched
+    victims = sentinels(tmp_path)
+    poisoned = 0
+    for marker in out.rglob(RESULT_MARKER):
+        data = json.loads(marker.read_text())
+        if isinstance(data.get("files"), list):
+            data["files"] += ["../../victim.txt", str(tmp_path / "outside" / "v.txt")]
+            marker.write_text(json.dumps(data))
+            poisoned += 1
+    code, err = run(capsys, *argv, out)
+    if command != "ablate":  # a resumed sweep rewrites no finished job: it reads no job's list
+        assert poisoned and code == 1 and err.count("\n") == 1 and "not a file inside the folder" in err, err
+    assert unchanged(victims)
+    shutil.rmtree(out)
+    code, err = run(capsys, *argv, out)
+    assert code == 0, err
+    # 2c. the result of another input: refused, naming the earlier one
+    other = tmp_path / "other"
+    other_argv = with_other_input(argv, other)
+    code, err = run(capsys, *other_argv, out)
+    assert code == 1 and err.count("\n") == 1 and f"result of {Path(argv[argv.index('--scenario') + 1] if command == 'demo' else argv[1]).resolve()}, not of" in err, err
+    assert listing(out) == first and unchanged(victims)
     # 3. a file, a foreign folder, another command's result: refused, untouched
     (tmp_path / "file").write_text("precious\n")
     mine = tmp_path / "mine"

@@ -12,7 +12,7 @@ from enum import Enum
 from pathlib import Path
 
 from slam.errors import GslamError
-from slam.io.records import MARKERS, RESULT_MARKER, Record, in_the_way, result_command
+from slam.io.records import MARKERS, RESULT_MARKER, Record, in_the_way, result_command, result_input
 from validation.yamlio import special_file
 
 _FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
@@ -80,6 +80,7 @@ def classify(out: str | Path, command: str, inputs: Iterable[str | Path] = (), f
     """Check a result folder ``out`` against the rule of the module
     docstring, without writing anything; a one-line :class:`GslamError` if
     it is refused."""
+    inputs = list(inputs)
     out = check_out_path(out)
     target = out.resolve()
     check_inputs(out, target, inputs)
@@ -89,6 +90,10 @@ def classify(out: str | Path, command: str, inputs: Iterable[str | Path] = (), f
         raise refuse(out, "exists and is not a folder; give a new folder name")
     found = result_command(out)
     if found == command:
+        earlier, now = result_input(out), source_of(inputs)
+        if earlier is not None and now is not None and earlier != now and not force:
+            raise refuse(out, f"holds the gslam {command} result of {earlier}, not of {now}; give a new folder "
+                               "name, or --force to replace it")
         return Existing.SAME
     if not any(out.iterdir()):
         return Existing.NEW
@@ -99,6 +104,16 @@ def classify(out: str | Path, command: str, inputs: Iterable[str | Path] = (), f
         out, f"is a folder that is {what}; give a new folder name, or --force to add the {command} files "
         "to it (nothing of yours there is replaced)"
     )
+
+
+def source_of(inputs: Iterable[str | Path]) -> str | None:
+    """The input a result is made from, as its marker records it: the
+    first of a command's inputs, as an absolute path."""
+    for given in inputs:
+        if given is None or str(given) == "":
+            return None
+        return str(Path(given).resolve())
+    return None
 
 
 def check_free(out: Path, folder: Path, need_bytes: int | None) -> None:

@@ -13,9 +13,13 @@ Refused, with or without ``--force``, before any work starts:
 
 A **result folder** (simulate, map, compare, inject) must be new (or an
 empty folder) or an earlier result of the same command, recognised by its
-marker (:mod:`slam.io.records`). The marker lists the files the command
-wrote: running again replaces those and removes the ones it no longer
-writes; every other file there (notes, the user's own figures) stays.
+marker (:mod:`slam.io.records`), made from the same input (the first of
+the command's inputs: the recording, the scenario, the spec): replacing
+the result of another input needs ``--force``, and the refusal names it.
+The marker lists the files the command wrote: running again replaces
+those and removes the ones it no longer writes; every other file there
+(notes, the user's own figures) stays. A marker is input: one that names
+a path outside its folder is refused, and nothing is removed through a link.
 ``--force`` writes into a folder that is not such a result: the command's
 files join the user's, recorded as gslam's in ``.gslam-added.json``, and
 replace nothing but what an earlier forced run of the same command wrote.
@@ -34,6 +38,10 @@ each part atomically, so that an interrupted run resumes
 the same command (its first line says so); ``--force`` replaces a file
 another gslam command wrote, never one of the user's
 (:func:`check_new_file`).
+
+Every command creates the missing folders on the way to its ``--out``
+(and ``--config-out``): a result folder's before its work starts (removed
+again if it fails), a single file's as the file is written.
 
 Everything is created with the permissions the umask allows (0644 files,
 0755 folders under the usual umask), never the 0600/0700 of ``tempfile``.
@@ -54,10 +62,10 @@ from pathlib import Path
 from slam.errors import GslamError
 from slam.io.out_checks import (
     Existing, check_free, check_inputs, check_names, check_out_path, classify, disk_full, make_parents, refuse,
-    remove_empty,
+    remove_empty, source_of,
 )
 from slam.io.records import (
-    ADDED_MARKER, MARKERS, RESULT_MARKER, Record, list_files, only_gslams, read_record, result_command,
+    ADDED_MARKER, MARKERS, RESULT_MARKER, Record, inside, list_files, only_gslams, read_record, result_command,
     write_added_record, write_result_marker,
 )
 from slam.io.tempfiles import TEMP_MARKER, TEMP_TAG, host_tag, make_temp_dir, remove_stale_temps, temp_name
@@ -87,6 +95,7 @@ class ResultFolder:
     tmp: Path
     record: Record | None = None
     created: list[Path] = field(default_factory=list)
+    source: str | None = None  # the input the result is made from, for its marker
 
     @classmethod
     def prepare(cls, out: str | Path, command: str, inputs: Iterable[str | Path] = (), force: bool = False,
@@ -95,6 +104,7 @@ class ResultFolder:
         writable); nothing of the user's is touched. ``names``: the files
         (and folders, ending in ``/``) the command will write, checked
         against what stands there; ``need_bytes``: the space it will need."""
+        inputs = list(inputs)
         existing = classify(out, command, inputs, force)
         out = Path(out)
         target = out.resolve()
@@ -113,7 +123,7 @@ class ResultFolder:
                 except OSError as e:
                     remove_empty(created)
                     raise refuse(out, f"cannot be written: {target.parent} ({e.strerror or e})") from None
-                folder = cls(out, target, command, existing, tmp, record, created)
+                folder = cls(out, target, command, existing, tmp, record, created, source_of(inputs))
             check_free(out, target.parent, need_bytes)
         except BaseException:
             if folder is not None:
@@ -126,7 +136,7 @@ class ResultFolder:
         (self.tmp / TEMP_MARKER).unlink()
         files = list_files(self.tmp, skip=MARKERS)
         if self.existing is Existing.NEW:
-            write_result_marker(self.tmp, self.command, files)
+            write_result_marker(self.tmp, self.command, files, self.source)
             try:
                 os.rename(self.tmp, self.target)  # also over an empty folder
             except OSError as e:
@@ -134,7 +144,7 @@ class ResultFolder:
             return self.out
         record = read_record(self.target, self.command)
         if self.existing is Existing.SAME and record is not None and not record.added and only_gslams(self.target, record):
-            write_result_marker(self.tmp, self.command, files)
+            write_result_marker(self.tmp, self.command, files, self.source)
             _swap(self.tmp, self.target)
             return self.out
         self._publish_in_place(files, record)
@@ -147,16 +157,22 @@ class ResultFolder:
         check_names(self.out, self.target, self.command, files, record, what="would replace")
         old = set(record.files or ()) if record is not None else set()
         added = self.existing is Existing.FORCED
-        mark = write_added_record if added else write_result_marker
+
+        def mark(names: set[str]) -> None:
+            if added:
+                write_added_record(self.target, self.command, names)
+            else:
+                write_result_marker(self.target, self.command, names, self.source)
+
         with held():
-            mark(self.target, self.command, old | files)
+            mark(old | files)
             for name in sorted(files):
                 dest = self.target / name
                 dest.parent.mkdir(parents=True, exist_ok=True)
                 os.replace(self.tmp / name, dest)
             for name in sorted(old - files):
                 _remove_file(self.target, name)
-            mark(self.target, self.command, files)
+            mark(files)
         shutil.rmtree(self.tmp, ignore_errors=True)
 
     def discard(self) -> None:
@@ -171,8 +187,10 @@ class ResultFolder:
 
 def _remove_file(target: Path, name: str) -> None:
     """Remove a file gslam wrote earlier and no longer writes, and the
-    folders it leaves empty."""
-    path = target / name
+    folders it leaves empty; nothing outside ``target`` or behind a link."""
+    path = inside(target, name)
+    if path is None:
+        return
     try:
         if stat.S_ISREG(path.lstat().st_mode):
             path.unlink()
@@ -240,6 +258,7 @@ def open_container(out: str | Path, command: str, inputs: Iterable[str | Path] =
     demo), create and mark it; ``names``: the files and folders (ending in
     ``/``) it writes there, which must not be the user's when forced into
     a folder of theirs (they are then recorded as gslam's)."""
+    inputs = list(inputs)
     existing = classify(out, command, inputs, force)
     out = Path(out)
     target = out.resolve()
@@ -248,7 +267,7 @@ def open_container(out: str | Path, command: str, inputs: Iterable[str | Path] =
     try:
         if existing is Existing.NEW:
             target.mkdir(exist_ok=True)
-            write_result_marker(target, command, None)
+            write_result_marker(target, command, None, source_of(inputs))
         elif not os.access(target, os.W_OK | os.X_OK):
             raise refuse(out, "cannot be written (permission denied)")
         elif existing is Existing.FORCED:
@@ -256,6 +275,8 @@ def open_container(out: str | Path, command: str, inputs: Iterable[str | Path] =
             names = list(names)
             check_names(out, target, command, names, record)
             write_added_record(target, command, {n.rstrip("/") for n in names})
+        elif force and (record := read_record(target, command)) is not None and record.input != source_of(inputs):
+            write_result_marker(target, command, None, source_of(inputs))  # forced onto another input's container
     except OSError as e:
         remove_empty(created)
         raise refuse(out, f"cannot be written ({e.strerror})") from None
@@ -307,10 +328,15 @@ def check_new_file(path: str | Path, inputs: Iterable[str | Path] = (), force: b
         if found != command and not force:
             raise refuse(path, f"is a gslam {found} result, not a {command} result; give a new file name, or "
                                 "--force to replace it", flag)
-    if not target.parent.is_dir() or not os.path.isdir(path.parent):  # big/../x.yaml needs big
-        missing = target.parent if not target.parent.is_dir() else path.parent
-        raise refuse(path, f"cannot be written: no folder {missing}", flag)
-    if not os.access(target.parent, os.W_OK | os.X_OK):
-        raise refuse(path, f"cannot be written: {target.parent} (permission denied)", flag)
-    remove_stale_temps(target.parent)
+    # Missing folders on the way are created, as for a result folder: here
+    # the nearest one that exists must be a folder that can be written.
+    nearest = target.parent
+    while not nearest.exists() and nearest.parent != nearest:
+        nearest = nearest.parent
+    if not nearest.is_dir():
+        raise refuse(path, f"cannot be written: {nearest} is not a folder", flag)
+    if not os.access(nearest, os.W_OK | os.X_OK):
+        raise refuse(path, f"cannot be written: {nearest} (permission denied)", flag)
+    if nearest == target.parent:
+        remove_stale_temps(target.parent)
     return path

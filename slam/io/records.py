@@ -1,6 +1,7 @@
 """What gslam wrote into a folder: its result markers.
 
-* ``.gslam-result.json``: the folder is a result of ``command``, and
+* ``.gslam-result.json``: the folder is a result of ``command``, ``input``
+  names what it was made from (absolute; absent in older markers), and
   ``files`` lists every file it wrote there (paths relative to the folder;
   a marker of gslam 0.1 before the list has none: see :class:`Record`).
 * ``.gslam-added.json``: files that commands wrote with ``--force`` into a
@@ -8,6 +9,10 @@
 
 A command replaces or removes only files that one of these lists as its
 own; everything else in a folder is the user's (:func:`in_the_way`).
+A marker is read from disk, so it is input like any other: a list that
+names a path outside its folder (absolute, with ``..``, or through a link)
+is refused with one line (:class:`BadMarker`), and a file is removed only
+where no link lies on its way (:func:`inside`).
 A single-file result (calibrate's config, inspect's starter) says whose it
 is in its first line instead (:func:`file_mark`).
 """
@@ -16,12 +21,19 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import stat
 import time
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
+from slam.errors import GslamError
+
 RESULT_MARKER = ".gslam-result.json"
+# A name read from a file that becomes a file or folder name (a scenario's,
+# a variant's): one plain path part, never a way out of its folder.
+PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,99}")
+PLAIN_NAME_RULE = "letters, digits and _.+- (not starting with . or -), at most 100 characters"
 ADDED_MARKER = ".gslam-added.json"
 MARKERS = (RESULT_MARKER, ADDED_MARKER)
 
@@ -35,6 +47,16 @@ class Record:
     command: str
     files: frozenset[str] | None
     added: bool = False  # written with --force into a folder that is not its result
+    input: str | None = None  # what the result was made from, where the marker says
+
+
+class BadMarker(GslamError):
+    """A marker that names a path outside its folder: not one gslam wrote."""
+
+    def __init__(self, marker: Path, name: object):
+        super().__init__(
+            f"{marker}: lists {name!r}, which is not a file inside the folder; gslam never writes such a marker, "
+            "so nothing there is replaced or removed: move the marker away and run again")
 
 
 def _read_json(path: Path) -> dict | None:
@@ -48,10 +70,25 @@ def _read_json(path: Path) -> dict | None:
     return data if isinstance(data, dict) else None
 
 
-def _files(value) -> frozenset[str] | None:
+def plain_relative(name: object) -> bool:
+    """True for a relative POSIX path whose every part is a plain name
+    (no ``..``, ``.``, empty part, NUL or absolute start)."""
+    if not isinstance(name, str) or not name or "\0" in name or name.startswith("/"):
+        return False
+    return all(part not in ("", ".", "..") for part in name.split("/"))
+
+
+def _files(value, marker: Path) -> frozenset[str] | None:
     if not isinstance(value, list) or not all(isinstance(f, str) for f in value):
         return None
+    for name in value:
+        if not plain_relative(name):
+            raise BadMarker(marker, name)
     return frozenset(value)
+
+
+def _input(value) -> str | None:
+    return value if isinstance(value, str) and value else None
 
 
 def result_command(folder: Path) -> str | None:
@@ -61,18 +98,41 @@ def result_command(folder: Path) -> str | None:
     return command if isinstance(command, str) else None
 
 
+def result_input(folder: Path) -> str | None:
+    """What the result in ``folder`` was made from, where its marker says."""
+    data = _read_json(Path(folder) / RESULT_MARKER)
+    return _input(data.get("input")) if data is not None else None
+
+
 def read_record(folder: Path, command: str) -> Record | None:
     """What ``command`` wrote into ``folder``, as its result or added with
-    ``--force``; None if it wrote nothing there."""
+    ``--force``; None if it wrote nothing there. :class:`BadMarker` if the
+    marker names a path outside ``folder``."""
     folder = Path(folder)
     data = _read_json(folder / RESULT_MARKER)
     if data is not None and data.get("command") == command:
-        return Record(command, _files(data.get("files")))
+        return Record(command, _files(data.get("files"), folder / RESULT_MARKER), input=_input(data.get("input")))
     added = _read_json(folder / ADDED_MARKER) or {}
     entry = added.get(command)
     if isinstance(entry, dict):
-        return Record(command, _files(entry.get("files")) or frozenset(), added=True)
+        return Record(command, _files(entry.get("files"), folder / ADDED_MARKER) or frozenset(), added=True)
     return None
+
+
+def inside(folder: Path, name: str) -> Path | None:
+    """``folder / name`` if every folder on its way there is a real folder
+    (no link, nothing outside ``folder``); None otherwise."""
+    if not plain_relative(name):
+        return None
+    node = folder
+    for part in name.split("/")[:-1]:
+        node = node / part
+        try:
+            if not stat.S_ISDIR(node.lstat().st_mode):
+                return None
+        except OSError:
+            return None
+    return folder / name
 
 
 def _stamp() -> dict:
@@ -87,10 +147,13 @@ def _write_json(path: Path, data: dict) -> None:
     write_text(path, json.dumps(data, indent=2) + "\n")
 
 
-def write_result_marker(folder: Path, command: str, files: set[str] | frozenset[str] | None) -> None:
-    """Mark ``folder`` as a result of ``command`` holding ``files`` (None:
-    a container, filled over several runs)."""
+def write_result_marker(folder: Path, command: str, files: set[str] | frozenset[str] | None,
+                        source: str | None = None) -> None:
+    """Mark ``folder`` as a result of ``command`` made from ``source``
+    holding ``files`` (None: a container, filled over several runs)."""
     data = {"command": command, **_stamp()}
+    if source is not None:
+        data["input"] = source
     if files is not None:
         data["files"] = sorted(files)
     _write_json(folder / RESULT_MARKER, data)

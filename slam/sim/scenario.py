@@ -19,6 +19,7 @@ import yaml
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from slam.config import describe_validation_error
+from slam.io.records import PLAIN_NAME, PLAIN_NAME_RULE
 from slam.io.yamlfile import check_finite, load_yaml
 from slam.errors import GslamError
 from validation.yamlio import Strict
@@ -232,6 +233,13 @@ class Scenario(Strict):
     sensors: SensorsConfig = SensorsConfig()
     environment: EnvironmentConfig = EnvironmentConfig()
     faults: FaultsConfig = FaultsConfig()
+
+    @field_validator("name")
+    @classmethod
+    def _plain_name(cls, name: str) -> str:
+        if not PLAIN_NAME.fullmatch(name):
+            raise ValueError(f"{name!r}: a scenario's name names its run folders: {PLAIN_NAME_RULE}")
+        return name
 
 
 def load_scenario(path: str | Path) -> Scenario:
