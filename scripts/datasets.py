@@ -5,7 +5,7 @@ local copies.
     python scripts/datasets.py verify [--root DIR]
 
 The data root defaults to ``$GSLAM_DATA`` or ``../shared/data`` beside the
-project (see :mod:`slam.io.datasets`). ``verify`` exits with 1 when a file is
+project (see :mod:`slam.readers.datasets`). ``verify`` exits with 1 when a file is
 missing or differs.
 """
 
@@ -15,7 +15,7 @@ import argparse
 from pathlib import Path
 
 
-from slam.io.datasets import CHECKSUMS, DATASETS, FileStatus, data_root, verify
+from slam.readers.datasets import CHECKSUMS, DATASETS, FileStatus, data_root, verify
 
 
 def _list() -> int:

@@ -14,9 +14,10 @@ import sys
 from pathlib import Path
 
 from slam import __version__
-from slam.errors import GslamError, Terminated
-from slam.signals import STOPS, as_interrupt
-from validation.errors import ValidationError
+from slam.errors import Terminated
+from slam.processes.signals import STOPS, as_interrupt
+from validation.base.errors import InputError
+from validation.base.modes import GatingMode
 
 log = logging.getLogger("gslam")
 
@@ -73,7 +74,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 def _cmd_inject(args: argparse.Namespace) -> int:
     from slam.config import load_config
-    from slam.inject import inject
+    from slam.commands.inject import inject
 
     from slam.config import config_files
 
@@ -89,7 +90,7 @@ def _cmd_inject(args: argparse.Namespace) -> int:
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from slam.calibrate import calibrate
+    from slam.commands.calibrate import calibrate
 
     res = calibrate(args.runs, _config_path(args.config), args.out, clean=args.clean, false_alarm=args.false_alarm,
                     force=args.force, progress=not args.quiet, overrides=args.set or [],
@@ -134,8 +135,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_inspect(args: argparse.Namespace) -> int:
-    from slam.inspection import inspect_recording
-    from slam.io.outdir import check_new_file
+    from slam.commands.inspect.inspection import inspect_recording
+    from slam.results.outdir import check_new_file
 
     base = _config_path(args.config) if args.config is not None else None
     if args.config_out is not None:
@@ -149,7 +150,7 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
         print(f"a starter config, with the system model proposed for these streams: "
               f"gslam inspect {args.input} --config-out my_robot.yaml")
         return 0
-    from slam.io.atomic import write_text
+    from slam.results.atomic import write_text
 
     write_text(args.config_out, found.starter)
     if found.proposal is not None and found.proposal.nothing_to_validate() is None:
@@ -164,7 +165,7 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 
 def _cmd_map(args: argparse.Namespace) -> int:
     from slam.config import config_files, load_config
-    from slam.pipeline import run_map
+    from slam.pipeline.folder import run_map
 
     overrides = list(args.set or [])
     if args.gating is not None:
@@ -178,7 +179,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from slam.compare import run_compare
+    from slam.commands.compare import run_compare
 
     only = args.only.split(",") if args.only else None
     res = run_compare(args.input, _config_path(args.config), args.out, _config_path(args.variants), only,
@@ -195,7 +196,7 @@ def _report_hint(folder: Path) -> str:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from slam.demo import run_demo
+    from slam.commands.demo import run_demo
 
     only = args.only.split(",") if args.only else None
     res = run_demo(args.out, _config_path(args.scenario), _config_path(args.config), _config_path(args.variants),
@@ -210,7 +211,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_ablate(args: argparse.Namespace) -> int:
-    from slam.ablate import load_spec, run_ablation
+    from slam.commands.ablate import load_spec, run_ablation
 
     spec_path = _config_path(args.spec)
     spec = load_spec(spec_path, max_seeds=args.seeds, max_jobs=args.max_jobs)
@@ -235,24 +236,22 @@ def _print_metrics(out_dir: Path, metrics: dict) -> None:
     print(json.dumps(shown, indent=2))
 
 
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected 1 or more, got {value}")
-    return value
+def _whole(minimum: int):
+    """An argparse type: a whole number of at least ``minimum``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"expected {minimum} or more, got {value}")
+        return value
+
+    return parse
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected 0 or more, got {value}")
-    return value
+_positive, _seed = _whole(1), _whole(0)
 
 
 def _out_path(text: str) -> str:
@@ -315,7 +314,7 @@ def build_parser() -> argparse.ArgumentParser:
              "--out runs/aces_cut\n  gslam inject $GSLAM_DATA/rosbag/test1_husky_2015.bag --config configs/datasets/husky.yaml "
              "--fault dipole@100:120,moment_A_m2=2000,distance_m=3 --out runs/husky_dipole\n"
              "  gslam map runs/aces_cut --config configs/datasets/carmen.yaml --out runs/aces_cut_map --gating on\n\n"
-             "fault kinds (times in s from the recording's start; parameters in slam/inject/spec.py):\n"
+             "fault kinds (times in s from the recording's start; parameters in slam/commands/inject/spec.py):\n"
              "  dipole@T0:T1[,moment_A_m2=500,distance_m=2,side=left,height_m=0,azimuth_deg=90,target=auto,label_deg=5]\n"
              "  laser_cut@T0:T1[,range_m=4]   gyro_bias@T0:T1[,bias_deg_s=2]   slip@T0:T1[,scale=1.5,yaw_scale=1]\n"
              "  multipath@T0:T1[,bias_m=8,azimuth_deg=0]\n\n" + OUTPUT_RULE, common)
@@ -378,7 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "gslam inspect INPUT --config-out FILE writes a starter)")
     _add_out(m, "result folder", required=True)
     m.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (repeatable)")
-    m.add_argument("--gating", choices=["off", "on", "oracle", "interval_oracle"], default=None,
+    m.add_argument("--gating", choices=[mode.value for mode in GatingMode], default=None,
                    help="off: every factor in; on: sensor validation gates factors (offline or causal as "
                         "validation.pass says; offline by default); oracle: the tight oracle, from ground truth: "
                         "each degree of freedom of a measurement off by more than validation.oracle_k_sigma sigmas "
@@ -429,7 +428,7 @@ def main(argv: list[str] | None = None) -> int:
         # A signal whose exception was swallowed where Python cannot raise
         # (a destructor, a callback) stopped nothing: the command finished.
         return _stopped(received[0]) if received else code
-    except (GslamError, ValidationError) as e:
+    except InputError as e:
         print(f"gslam: error: {_one_line(str(e))}", file=sys.stderr)
         return 1
     except BrokenPipeError:  # the reader left (gslam inspect ... | head): no more to say

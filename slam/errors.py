@@ -1,4 +1,4 @@
-"""The one exception type of the ``slam`` package.
+"""The exception type of the ``slam`` package, and how a command stops.
 
 Bad input (a missing topic, a malformed file, an unknown config key) raises
 :class:`GslamError` with a one-line message that names the file, line or
@@ -6,9 +6,11 @@ topic and what was expected. The CLI prints that line and exits with code 1;
 a traceback is reserved for bugs.
 """
 
+from validation.base.errors import InputError
 
-class GslamError(Exception):
-    """A user-facing error: bad input, bad config, missing data."""
+GslamError = InputError
+"""The pipeline's name for :class:`validation.base.errors.InputError`: bad
+input, bad config, missing data."""
 
 
 class Terminated(KeyboardInterrupt):
@@ -31,11 +33,9 @@ def run_script(name: str, main) -> None:
     on stderr and code 1, as the CLI does, instead of a traceback."""
     import sys
 
-    from validation.errors import ValidationError
-
     try:
         code = main()
-    except (GslamError, ValidationError) as e:
+    except InputError as e:
         print(f"{name}: error: {e}", file=sys.stderr)
         sys.exit(1)
     sys.exit(code or 0)

@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from validation.base.geometry import wrap_angle
+
 COMPONENTS: tuple[str, ...] = ("ODO_DIST", "ODO_YAW", "IMU_GYRO", "IMU_YAW", "SM_DIST", "SM_LAT", "SM_YAW", "GPS")
 
 SENSOR_MODALITIES: dict[str, tuple[str, ...]] = {
@@ -184,3 +186,63 @@ class Recording:
             if s is not None and len(s.t)
         ]
         return float(max(ends)) if ends else 0.0
+
+
+# --- poses and intervals along a run ----------------------------------------
+
+
+def relative_poses(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``inverse(a) * b`` for rows of planar poses (x, y, yaw), (n, 3)."""
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+    return np.column_stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[:, 2] - a[:, 2])])
+
+
+def interpolate_poses(traj: Trajectory, t: np.ndarray) -> np.ndarray:
+    """Poses (len(t), 3) linearly interpolated at ``t`` (yaw unwrapped first)."""
+    yaw = np.unwrap(traj.yaw)
+    return np.column_stack(
+        [np.interp(t, traj.t, traj.x), np.interp(t, traj.t, traj.y), wrap_angle(np.interp(t, traj.t, yaw))]
+    )
+
+
+def covered(sample_t: np.ndarray, t: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """True where ``t`` lies within the stream's span and a sample is no
+    further than ``max_gap_s`` away."""
+    idx = np.clip(np.searchsorted(sample_t, t), 1, len(sample_t) - 1)
+    nearest = np.minimum(np.abs(sample_t[idx] - t), np.abs(sample_t[idx - 1] - t))
+    return (t >= sample_t[0]) & (t <= sample_t[-1]) & (nearest <= max_gap_s)
+
+
+def path_length(xy: np.ndarray) -> np.ndarray:
+    """Cumulative path length (n,) of positions (n, 2), starting at 0."""
+    steps = np.hypot(*np.diff(xy, axis=0).T) if len(xy) > 1 else np.zeros(0)
+    return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+def intervals_from_mask(t: np.ndarray, mask: np.ndarray, merge_gap_s: float, min_duration_s: float) -> list[Interval]:
+    """Runs of True in ``mask`` over times ``t`` (s) as merged intervals."""
+    if not np.any(mask):
+        return []
+    m = np.concatenate([[False], mask.astype(bool), [False]])
+    starts = np.flatnonzero(~m[:-1] & m[1:])
+    ends = np.flatnonzero(m[:-1] & ~m[1:]) - 1
+    merged: list[list[float]] = []
+    for a, b in zip(t[starts], t[ends]):
+        if merged and a - merged[-1][1] <= merge_gap_s:
+            merged[-1][1] = float(b)
+        else:
+            merged.append([float(a), float(b)])
+    return [(round(a, 6), round(b, 6)) for a, b in merged if b - a >= min_duration_s]
+
+
+def union_intervals(*lists: list[Interval]) -> list[Interval]:
+    """Union of interval lists, sorted and merged where they overlap."""
+    spans = sorted(iv for lst in lists for iv in lst)
+    out: list[list[float]] = []
+    for a, b in spans:
+        if out and a <= out[-1][1]:
+            out[-1][1] = max(out[-1][1], b)
+        else:
+            out.append([a, b])
+    return [(a, b) for a, b in out]

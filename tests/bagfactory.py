@@ -22,9 +22,9 @@ from typing import Any
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
-from slam.geometry import quaternion_from_yaw
+from validation.base.geometry import quaternion_from_yaw
 
-from slam.io.rosbag import IMU, LASER_SCAN, MAGNETIC_FIELD, NAV_SAT_FIX, ODOMETRY, POSE_STAMPED
+from slam.readers.rosbag import IMU, LASER_SCAN, MAGNETIC_FIELD, NAV_SAT_FIX, ODOMETRY, POSE_STAMPED
 
 
 def _ns(t: float) -> int:
@@ -248,7 +248,7 @@ def driving_bag(
     (5 beams at 2 m), Imu 100 Hz (rate 0, orientation ``yaw``), magnetometer
     20 Hz (level, no declination), odometry 20 Hz, GPS 5 Hz about ``datum``,
     ground truth 100 Hz."""
-    from slam.geometry import geodetic_from_enu
+    from validation.base.geometry import geodetic_from_enu
 
     bag = BagBuilder(ros)
     c, s = np.cos(yaw), np.sin(yaw)
@@ -290,7 +290,7 @@ def ned_driving_bag(
     ``/ground_truth`` 50 Hz. Sensor noise is seeded: gyro 0.2 deg/s, heading
     1 deg, odometry 2 % of distance and turn. Returns the bag and the true
     ENU path (``t`` s from ``t0``, ``x``, ``y``, ``yaw``)."""
-    from slam.geometry import geodetic_from_enu
+    from validation.base.geometry import geodetic_from_enu
 
     rng = np.random.default_rng(seed)
     dt = 0.02
@@ -365,7 +365,7 @@ def sensor_bag(
     (the same speeds, other turns). ``heading_offset`` (rad) turns the
     IMU's orientation heading and the magnetometer's (a sensor mounted
     turned). ``t`` starts at ``t0``."""
-    from slam.geometry import geodetic_from_enu
+    from validation.base.geometry import geodetic_from_enu
 
     rng = np.random.default_rng(seed)
     faults = faults or {}

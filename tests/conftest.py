@@ -14,13 +14,16 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 import pytest
 import yaml
 
-from slam.config import load_config
-from slam.io.datasets import data_root
-from slam.pipeline import MapResult, run_map
-from slam.sim import Scenario, SimulationResult, load_scenario, simulate_scenario
+# slam is imported by the fixtures that need it, not here: validation's own
+# tests (tests/validation/) run without it.
+if TYPE_CHECKING:
+    from slam.pipeline.folder import MapResult
+    from slam.sim import Scenario, SimulationResult
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "configs"
@@ -30,6 +33,8 @@ SHORT_WAYPOINTS = [(1.0, 2.6), (1.0, 1.2), (7.5, 1.2)]
 
 def short_scenario() -> Scenario:
     """The compass scenario cut to its first leg (see the module docstring)."""
+    from slam.sim import load_scenario
+
     full = load_scenario(CONFIGS / "scenarios" / "telemax_compass.yaml")
     robot = full.robot.model_copy(update={"waypoints": SHORT_WAYPOINTS})
     return full.model_copy(update={"robot": robot, "name": "short_compass"})
@@ -46,6 +51,8 @@ def short_scenario_yaml(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="session")
 def short_run(tmp_path_factory: pytest.TempPathFactory) -> SimulationResult:
     """The short run, simulated once per session."""
+    from slam.sim import simulate_scenario
+
     return simulate_scenario(short_scenario(), tmp_path_factory.mktemp("sim") / "short_compass")
 
 
@@ -53,6 +60,9 @@ def short_run(tmp_path_factory: pytest.TempPathFactory) -> SimulationResult:
 def mapped(short_run: SimulationResult, tmp_path_factory: pytest.TempPathFactory) -> Callable[..., MapResult]:
     """``mapped(mode, *overrides)``: the short run mapped with
     ``configs/telemax.yaml`` and ``validation.mode=mode``, once per session."""
+    from slam.config import load_config
+    from slam.pipeline.folder import run_map
+
     root = tmp_path_factory.mktemp("maps")
     cache: dict[tuple[str, ...], MapResult] = {}
 
@@ -69,6 +79,8 @@ def mapped(short_run: SimulationResult, tmp_path_factory: pytest.TempPathFactory
 def real_data(relative: str) -> Path:
     """A file under the data root (``$GSLAM_DATA``, else ``../shared/data``);
     the calling test is skipped, naming the path, when it is absent."""
+    from slam.readers.datasets import data_root
+
     path = data_root() / relative
     if not path.is_file():
         pytest.skip(f"real data not found: {path} (set GSLAM_DATA to the data folder)")

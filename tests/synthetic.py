@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from slam.geometry import wrap_angle
+from validation.base.geometry import wrap_angle
 from validation.streams import Stream
 
 Turn = tuple[float, float, float]  # start s, end s, yaw rate rad/s

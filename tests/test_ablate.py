@@ -15,14 +15,17 @@ from pathlib import Path
 import pytest
 import yaml
 
-from slam.ablate import expand_jobs, load_spec, run_ablation
-from slam.ablate.jobs import config_overrides, set_path, sweep_points
-from slam.ablate.runner import dispatch_order
+from slam.commands.ablate import expand_jobs, load_spec, run_ablation
+from slam.commands.ablate.jobs import config_overrides, set_path, sweep_points
+from slam.commands.ablate.runner import dispatch_order
 from slam.cli import main
-from slam.config import load_config, load_yaml
+from slam.config import load_config
+from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
 
 from conftest import TELEMAX_CONFIG
+
+pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
 
 TIMING = ("runtime_s", "realtime_factor", "validation_time_s", "timings_s.", "input_path")
 
@@ -254,7 +257,7 @@ def test_ray_gives_the_same_summary_as_local(finished, tmp_path):
 
 
 def test_jobs_sharing_reading_and_scan_matching_are_grouped(tmp_path, short_scenario_yaml):
-    from slam.ablate.sharing import share_groups
+    from slam.commands.ablate.sharing import share_groups
 
     variants = {"ungated": {"validation.mode": "off"}, "gated": {"validation.mode": "on"},
                 "coarse": {"frontend.voxel_size_m": 0.2}}
@@ -270,8 +273,8 @@ def test_jobs_sharing_reading_and_scan_matching_are_grouped(tmp_path, short_scen
 
 
 def test_shared_jobs_write_what_jobs_on_their_own_write(finished, tmp_path):
-    from slam.ablate.worker import run_job
-    from slam.ablate.sharing import run_jobs
+    from slam.commands.ablate.worker import run_job
+    from slam.commands.ablate.sharing import run_jobs
 
     spec_path, res = finished
     out = tmp_path / "out"

@@ -4,10 +4,11 @@ import gtsam
 import numpy as np
 import pytest
 
-from slam.backend import optimise, unit_weights
+from slam.graph.backend import optimise, unit_weights
 from slam.config import BackendConfig
-from slam.factors import pose_key, yaw_increment_error, yaw_increment_factor, yaw_only_noise
-from slam.measurements import BetweenMeasurement, Measurements, PositionMeasurement, ScalarMeasurement, relative_poses
+from slam.graph.factors import pose_key, yaw_increment_error, yaw_increment_factor, yaw_only_noise
+from slam.graph.measurements import BetweenMeasurement, Measurements, PositionMeasurement, ScalarMeasurement
+from slam.recording import relative_poses
 
 
 def _between(deltas, sigma=(0.1, 0.1, 0.01)):
@@ -136,7 +137,7 @@ def test_yaw_increment_factor_weighs_only_the_yaw_with_exact_jacobians():
 
 def test_compass_priors_say_no_more_than_the_independent_errors_of_their_stretch():
     from slam.config import FactorsConfig
-    from slam.measurements import build_measurements
+    from slam.graph.measurements import build_measurements
     from slam.recording import Compass, Recording
 
     t = np.arange(0.0, 20.0, 0.1)
@@ -159,7 +160,7 @@ def test_a_correlated_compass_pulls_the_heading_less():
     held at 0: independent, they move the heading most of the way;
     correlated over the whole stretch, they say no more than one."""
     from slam.config import FactorsConfig
-    from slam.measurements import build_measurements
+    from slam.graph.measurements import build_measurements
     from slam.recording import Compass, Gyro, Recording
 
     t = np.arange(0.0, 21.0, 0.1)

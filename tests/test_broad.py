@@ -12,8 +12,8 @@ from scipy.spatial.transform import Rotation
 
 from conftest import real_data
 from slam.errors import GslamError
-from slam.geometry import heading_from_magnetometer, wrap_angle
-from slam.io.broad import MAG_LAG_S, gyro_heading, level_field, looks_like_broad, read_broad
+from validation.base.geometry import heading_from_magnetometer, wrap_angle
+from slam.readers.broad import MAG_LAG_S, gyro_heading, level_field, looks_like_broad, read_broad
 
 FS = 100.0
 STRENGTH_UT = 50.0
@@ -212,6 +212,7 @@ def real_trial(name: str) -> Path:
     return real_data(f"broad/{name}.mat")
 
 
+@pytest.mark.slow
 def test_real_undisturbed_and_attached_magnet():
     clean = read_broad(real_trial("10_undisturbed_slow_translation_A"))
     assert 190.0 < clean.duration < 200.0
@@ -227,6 +228,7 @@ def test_real_undisturbed_and_attached_magnet():
     assert 30.0 < labelled < 120.0
 
 
+@pytest.mark.slow
 def test_real_magnetometer_lag_alone_turns_the_heading_past_the_label():
     # Undisturbed fast rotation: with the magnetometer's 12 ms lag left in,
     # its heading is more than 20 deg off the optical one for seconds.

@@ -1,5 +1,5 @@
 """``gslam calibrate``: relation models and observer parameters learnt from
-data (slam/calibrate)."""
+data (slam/commands/calibrate)."""
 
 from __future__ import annotations
 
@@ -8,15 +8,15 @@ import pytest
 import yaml
 
 from conftest import TELEMAX_CONFIG
-from slam.calibrate import calibrate, parse_clean
-from slam.calibrate.fit import fit_rates
-from slam.calibrate.runs import CalibrationRun
-from slam.calibrate.select import calibrate_relation
-from slam.calibrate.write import _relation_comment
+from slam.commands.calibrate import calibrate, parse_clean
+from slam.commands.calibrate.fit import fit_rates
+from slam.commands.calibrate.runs import CalibrationRun
+from slam.commands.calibrate.select import calibrate_relation
+from slam.commands.calibrate.write import _relation_comment
 from slam.cli import main
 from slam.config import load_config
 from slam.errors import GslamError
-from slam.pipeline import run_map
+from slam.pipeline.folder import run_map
 from validation.config import ValidationConfig
 from validation.observers import observe_steps
 from validation.observers.config import RelationConfig
@@ -90,6 +90,7 @@ def test_cusum_relation_is_calibrated_like_a_residual_one():
     assert choice.met and choice.relation.kind == "cusum" and choice.relation.k_sigma >= 5.0
 
 
+@pytest.mark.slow
 def test_held_offset_relation_is_learnt_about_its_held_level():
     """An offset relation held to a drift rate keeps it; its noise is the
     spread about the held level, and the relation then sees a standing
@@ -132,6 +133,7 @@ def test_parse_clean():
             parse_clean(bad)
 
 
+@pytest.mark.slow
 def test_calibrate_writes_a_config_that_maps_other_runs(short_run, tmp_path, capsys):
     out = tmp_path / "calibrated.yaml"
     # The compass is disturbed from 10.85 s: learn from the first 10 s.
@@ -198,7 +200,7 @@ def heading_run(tau_s: float, sd_rad: float, seed: int = 0, duration_s: float = 
 
 @pytest.mark.parametrize("tau_s", [2.0, 10.0])
 def test_compass_noise_is_its_error_against_the_gyro_and_how_long_that_lasts(tau_s):
-    from slam.calibrate.noise import learn_compass_noise
+    from slam.commands.calibrate.noise import learn_compass_noise
 
     runs = [heading_run(tau_s, 0.07, seed) for seed in range(3)]
     noise = learn_compass_noise(runs, RATE_HZ)
@@ -218,8 +220,9 @@ def test_compass_noise_is_its_error_against_the_gyro_and_how_long_that_lasts(tau
     assert learn_compass_noise([heading_run(10.0, 0.07, clean=(0.0, 25.0))], RATE_HZ) is None
 
 
+@pytest.mark.slow
 def test_calibrate_writes_the_compass_noise_into_the_factor(tmp_path):
-    from slam.calibrate import learn
+    from slam.commands.calibrate import learn
 
     tree = yaml.safe_load(TELEMAX_CONFIG.read_text())
     tree["validation"]["model"] = str((TELEMAX_CONFIG.parent / tree["validation"]["model"]).resolve())

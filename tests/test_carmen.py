@@ -12,8 +12,8 @@ import pytest
 
 from conftest import real_data
 from slam.errors import GslamError
-from slam.io.carmen import chain_steps, looks_like_carmen, read_carmen
-from slam.measurements import relative_poses
+from slam.readers.carmen import chain_steps, looks_like_carmen, read_carmen
+from slam.recording import relative_poses
 
 CORRECTED = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, np.pi / 2], [1.0, 1.0, np.pi]])
 RAW_STEPS = np.array([[1.1, 0.05, 1.5], [0.9, -0.1, 1.6]])

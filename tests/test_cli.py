@@ -80,6 +80,7 @@ def test_shipped_pipeline_configs_found():
     assert TELEMAX_CONFIG in PIPELINE_CONFIGS
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gating", [None, "on", "oracle", "interval_oracle"])
 @pytest.mark.parametrize("config", PIPELINE_CONFIGS, ids=lambda p: p.name)
 def test_map_with_every_shipped_pipeline_config(capsys, short_run, tmp_path, config, gating):
@@ -146,6 +147,7 @@ def test_simulate(capsys, short_scenario_yaml, short_run, tmp_path):
     assert json.loads((out / "truth.json").read_text()) == truth
 
 
+@pytest.mark.slow
 def test_demo_simulates_and_maps_from_any_folder(capsys, short_scenario_yaml, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # the default config and variants are the shipped ones
     code, stdout, stderr = run_cli(capsys, "demo", "--scenario", short_scenario_yaml)
@@ -203,6 +205,7 @@ def test_help_lists_every_input_format(capsys, command):
         assert fmt in out, fmt
 
 
+@pytest.mark.slow
 def test_compare_works_from_any_folder(capsys, short_run, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # configs/... names the shipped configs; the variants are the shipped ones
     code, stdout, stderr = run_cli(capsys, "compare", short_run.run_dir, "--config", "configs/telemax.yaml",
@@ -211,6 +214,7 @@ def test_compare_works_from_any_folder(capsys, short_run, tmp_path, monkeypatch)
     assert "| dcs |" in stdout and (tmp_path / "cmp" / "dcs" / "metrics.json").is_file()
 
 
+@pytest.mark.slow
 def test_inspect_lists_topics_and_its_starter_config_maps_the_run(capsys, short_run, tmp_path):
     starter = tmp_path / "starter.yaml"
     code, stdout, stderr = run_cli(capsys, "inspect", short_run.run_dir, "--config-out", starter)
@@ -249,6 +253,7 @@ def test_inspect_a_ros1_bag(capsys, tmp_path):
 # --- errors ------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "extra, expected",
     [
@@ -295,6 +300,7 @@ def gslam(*argv) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 def test_entry_point_maps_and_fails_cleanly(short_run, tmp_path):
     out = tmp_path / "map"
     done = gslam("-q", "map", short_run.run_dir, "--config", TELEMAX_CONFIG, "--out", out, "--gating", "on")
@@ -320,6 +326,7 @@ def test_a_reader_that_leaves_early_gets_no_error(short_run):
     assert stderr == ""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv", [
     ["husky_faults", "--faults", "bogus@1:2"],   # checked before any work
     ["husky_faults", "--data", "{tmp}"],          # no bag there

@@ -1,7 +1,7 @@
 """The concurrent pipeline writes what the plain one writes.
 
 ``gslam map`` matches scans and draws figures in a second process
-(slam.background, slam.scan_matching, slam.io.result_writer) and writes its large
+(slam.processes.background, slam.frontend.worker, slam.outputs.result_writer) and writes its large
 files vectorised (map.ply with numpy, TUM files a block of lines at a
 time). Each test compares against the plain path: the same run mapped with
 ``concurrent=False``, open3d's PLY writer, a TUM writer that formats one
@@ -17,16 +17,18 @@ import signal
 import numpy as np
 import pytest
 
-from slam.background import Forked, Inline, can_fork, start
+from slam.processes.background import Forked, Inline, can_fork, start
 from slam.config import load_config
 from slam.errors import GslamError
-from slam.geometry import quaternion_from_yaw
-from slam.io.pointcloud import import_open3d, ply_bytes, write_ply
-from slam.io.readers import read_recording
-from slam.io.tum import read_tum, tum_text
-from slam.pipeline import run_map
+from validation.base.geometry import quaternion_from_yaw
+from slam.outputs.pointcloud import import_open3d, ply_bytes, write_ply
+from slam.readers.read import read_recording
+from slam.outputs.tum import read_tum, tum_text
+from slam.pipeline.folder import run_map
 from slam.recording import Trajectory
 from tests.conftest import TELEMAX_CONFIG
+
+pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
 
 TIMINGS = ("runtime_s", "realtime_factor", "timings_s", "validation_time_s")
 needs_fork = pytest.mark.skipif(not can_fork(), reason="no fork on this platform: the pipeline runs in one process")
@@ -181,7 +183,7 @@ def test_closing_unfinished_background_work_ends_its_process():
 
 @needs_fork
 def test_a_failing_figure_is_an_error_of_the_map_and_leaves_no_process(tmp_path, monkeypatch):
-    import slam.io.result_writer as result_writer
+    import slam.outputs.result_writer as result_writer
 
     def broken(run, grid, points):
         raise ValueError("no room for the legend")
@@ -213,7 +215,7 @@ def _parent_of(pid: int) -> int | None:
 
 @needs_fork
 def test_an_error_preparing_the_scans_reaches_the_caller(short_run, monkeypatch):
-    import slam.scan_matching as scan_matching
+    import slam.frontend.worker as scan_matching
 
     def broken(scans, config, guesses):
         yield from ()

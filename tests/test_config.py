@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from slam.config import PipelineConfig, dump_config, load_config, load_yaml, parse_override, validation_sections
+from slam.config import PipelineConfig, dump_config, load_config, parse_override, validation_sections
+from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
 from validation.diagnosis.model import load_model
 
@@ -248,6 +249,7 @@ def test_dump_config_round_trip(tmp_path, overrides):
 SHIPPED = sorted([*(REPO / "configs").glob("*.yaml"), *(REPO / "configs" / "datasets").glob("*.yaml")])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["off", "on", "oracle"])
 @pytest.mark.parametrize("config", [p for p in SHIPPED if p.name not in ("variants.yaml", "bench_variants.yaml")], ids=lambda p: p.name)
 def test_every_shipped_config_round_trips_with_every_section_spelled_out(tmp_path, config, mode):
@@ -331,7 +333,7 @@ def test_missing_file_is_named(tmp_path):
 def test_shipped_variants_are_valid_overrides(name):
     """Every variant of the shipped variant files loads on the shipped config;
     the benchmark's file holds compare's variants unchanged, and three more."""
-    from slam.compare import load_variants
+    from slam.commands.compare import load_variants
 
     variants = load_variants(REPO / "configs" / name)
     for overrides in variants.values():

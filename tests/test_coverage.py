@@ -11,7 +11,7 @@ import pytest
 
 from slam.recording import Recording, Trajectory
 from validation.config import parse_sections
-from validation.errors import ValidationError
+from validation.base.errors import ValidationError
 from validation.observers import RelationConfig, observe_steps
 from validation.observers.coverage import observer_coverage, require_observations, warn_low_coverage
 from validation.streams import Stream, resample_streams, stream_max_gap

@@ -1,5 +1,5 @@
-"""Physics checks on what is read (slam/io/data_checks.py) and on whether a
-config fits it (slam/config_fit.py): each check by itself on a recording
+"""Physics checks on what is read (slam/readers/data_checks.py) and on whether a
+config fits it (slam/pipeline/config_fit.py): each check by itself on a recording
 built by hand, and the real recordings read without a word."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from slam.config import load_config
-from slam.config_fit import check_fit
+from slam.pipeline.config_fit import check_fit
 from slam.errors import GslamError
-from slam.io.data_checks import check_recording, check_time_offsets
+from slam.readers.data_checks import check_recording, check_time_offsets
 from slam.recording import Gyro, Recording, Scans, Trajectory
 from slam.sim.route import check_route
 from slam.sim.scenario import load_scenario
@@ -164,17 +164,18 @@ REAL = [("carmen/intel-corrected.log.gz", "datasets/carmen.yaml"), ("carmen/csai
         ("broad/28_disturbed_stationary_magnet_A.mat", "datasets/broad.yaml")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, config", REAL, ids=[n.split("/")[1].split(".")[0] for n, _ in REAL])
 def test_real_recordings_pass_the_checks_without_a_new_word(name, config, caplog):
     """The checks on real data: no error, and no warning beyond what the
     readers said before them (CARMEN's repaired stamps)."""
-    from slam.io.readers import read_recording
+    from slam.readers.read import read_recording
 
     path = real_data(name)
     cfg = load_config(CONFIGS / config)
     with caplog.at_level(logging.WARNING):
         rec = read_recording(path, cfg.input)
         check_fit(rec, cfg, path)
-    ours = [r for r in caplog.records if r.levelno >= logging.WARNING and r.name in ("slam.io.data_checks", "slam.config_fit")]
+    ours = [r for r in caplog.records if r.levelno >= logging.WARNING and r.name in ("slam.readers.data_checks", "slam.pipeline.config_fit")]
     assert ours == []
     assert rec.scans is not None or "carmen" not in name  # a laser log keeps its scans

@@ -18,7 +18,9 @@ from rosbags.typesys import Stores, get_typestore
 
 from conftest import real_data
 from slam.cli import main
-from slam.io.map_server import read_map
+from slam.outputs.map_server import read_map
+
+pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
 
 ROOT = Path(__file__).resolve().parents[1]
 

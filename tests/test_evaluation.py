@@ -9,7 +9,7 @@ import pytest
 from matplotlib.image import imread
 
 from slam.errors import GslamError
-from slam.evaluation import (
+from slam.outputs.evaluation import (
     align_se2,
     associate,
     ate,
@@ -17,8 +17,8 @@ from slam.evaluation import (
     path_pairs,
     rpe,
 )
-from slam.io.tum import read_tum, write_tum
-from slam.plots import plot_map, plot_trajectories
+from slam.outputs.tum import read_tum, write_tum
+from slam.outputs.plots import plot_map, plot_trajectories
 from slam.recording import Trajectory
 
 

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from slam.evaluation import ate, evaluate, rpe
-from slam.io.tum import read_tum, write_tum
+from slam.outputs.evaluation import ate, evaluate, rpe
+from slam.outputs.tum import read_tum, write_tum
 from slam.recording import Trajectory
 
 def _evo_tool(name: str) -> str | None:
@@ -96,6 +96,7 @@ def _run_evo(jobs: dict[str, list[str]], tmp_path: Path) -> dict[str, tuple[dict
     return results
 
 
+@pytest.mark.slow
 def test_ate_and_rpe_agree_with_evo(tmp_path):
     ref_path, est_path = _loop_with_drift(tmp_path)
     ref, _ = read_tum(ref_path, t0=T0)

@@ -10,7 +10,7 @@ import pytest
 from bagfactory import sensor_bag
 from slam.config import InputConfig, load_config
 from slam.errors import GslamError
-from slam.io.readers import read_recording
+from slam.readers.read import read_recording
 from validation.streams import stream_component, validation_streams
 from validation.streams.names import is_angular, is_integrated, is_stream_name, split_source_stream
 

@@ -5,8 +5,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from slam.calibrate.runs import CalibrationRun
-from slam.calibrate.select import calibrate_field_gyro
+from slam.commands.calibrate.runs import CalibrationRun
+from slam.commands.calibrate.select import calibrate_field_gyro
 from validation.observers.checks import FieldGyroCheck, unary_checks
 from validation.observers.config import FieldGyroCheckConfig, field_gyro_stream, observers_config
 from validation.streams import fixed_rate_steps, resample_streams, validation_streams
@@ -105,7 +105,7 @@ def test_calibration_sets_the_tolerance_from_the_worst_run_and_a_fault_does_not_
 
 @pytest.mark.parametrize("window_s", [0.0, -1.0])
 def test_a_window_must_be_positive(window_s):
-    from validation.errors import ValidationError
+    from validation.base.errors import ValidationError
 
     with pytest.raises(ValidationError, match="window_s"):
         observers_config({"field_gyro": {"enabled": True, "window_s": window_s}})

@@ -6,23 +6,25 @@ from __future__ import annotations
 import copy
 
 import numpy as np
+import pytest
 from matplotlib.colors import to_hex
 
-import slam.plots
-import slam.validation_figures
-from slam.plots import fault_shading, plot_trajectories
-from slam.validation_figures import plot_observer_alarms
+import slam.outputs.plots
+import slam.outputs.validation_figures
+from slam.outputs.plots import fault_shading, plot_trajectories
+from slam.outputs.validation_figures import plot_observer_alarms
 
 
 def capture(monkeypatch) -> list:
     """From now on, figures are collected instead of saved. (Call it after
     the session's maps are made: they must write their figures.)"""
     figures: list = []
-    monkeypatch.setattr(slam.plots, "save_figure", lambda fig, path: figures.append(fig))
-    monkeypatch.setattr(slam.validation_figures, "save_figure", lambda fig, path: figures.append(fig))
+    monkeypatch.setattr(slam.outputs.plots, "save_figure", lambda fig, path: figures.append(fig))
+    monkeypatch.setattr(slam.outputs.validation_figures, "save_figure", lambda fig, path: figures.append(fig))
     return figures
 
 
+@pytest.mark.slow
 def test_observer_alarms_colours_rows_and_legend(mapped, monkeypatch):
     res = mapped("on")
     recording = copy.copy(res.recording)
@@ -46,6 +48,7 @@ def test_observer_alarms_colours_rows_and_legend(mapped, monkeypatch):
     assert legend == ["true IMU_YAW fault", "true SM fault", "any true fault"]
 
 
+@pytest.mark.slow
 def test_gated_and_oracle_are_drawn_on_top_and_apart(mapped, monkeypatch):
     trajectories = {name: mapped("off").trajectory for name in ("ungated", "huber", "cauchy", "dcs")}
     trajectories["oracle"] = mapped("oracle").trajectory

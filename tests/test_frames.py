@@ -1,4 +1,4 @@
-"""Frame conventions (``input.frames``, slam/io/frames.py): a bag recorded
+"""Frame conventions (``input.frames``, slam/readers/frames.py): a bag recorded
 with NED conventions maps by config alone; large (UTM) references are
 plotted relative to their start."""
 
@@ -13,10 +13,10 @@ import yaml
 
 from slam.cli import main
 from slam.config import StreamFrameConfig, load_config
-from slam.geometry import wrap_angle
-from slam.io import frames
-from slam.io.readers import read_recording
-from slam.plots import relative_to_reference
+from validation.base.geometry import wrap_angle
+from slam.readers import frames
+from slam.readers.read import read_recording
+from slam.outputs.plots import relative_to_reference
 from slam.recording import Trajectory
 from tests.bagfactory import ned_driving_bag
 from tests.conftest import CONFIGS
@@ -69,6 +69,7 @@ def ned_bag(tmp_path_factory) -> Path:
     return bag.write(tmp_path_factory.mktemp("ned") / "ned.bag")
 
 
+@pytest.mark.slow
 def test_a_ned_bag_is_read_as_enu_by_config_alone(ned_bag, tmp_path):
     _, truth = ned_driving_bag()
     rec = read_recording(ned_bag, load_config(_config(tmp_path, True)).input)
@@ -86,6 +87,7 @@ def test_a_ned_bag_is_read_as_enu_by_config_alone(ned_bag, tmp_path):
     assert np.sum(0.5 * (plain.gyro.rate[1:] + plain.gyro.rate[:-1]) * np.diff(plain.gyro.t)) == pytest.approx(-gyro_turn)
 
 
+@pytest.mark.slow
 def test_a_ned_bag_maps_with_gyro_compass_and_odometry_agreeing(ned_bag, tmp_path):
     metrics = {}
     for gyro_frd in (True, False):

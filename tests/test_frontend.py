@@ -6,9 +6,10 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from slam.config import FrontendConfig
-from slam.frontend import ScanMatcher, planar, scan_points
+from slam.frontend.kiss import ScanMatcher, planar, scan_points
 
 
 def test_scan_points_drop_beams_without_a_return():
@@ -51,7 +52,7 @@ def test_registration_follows_a_known_motion():
 
 
 def test_threads_reach_kiss_icp_and_all_cores_register_alike():
-    from slam.frontend import kiss_config
+    from slam.frontend.kiss import kiss_config
 
     assert kiss_config(FrontendConfig(), 30.0).registration.max_num_threads == 1  # the bit-identical default
     assert kiss_config(FrontendConfig(threads=0), 30.0).registration.max_num_threads == 0
@@ -62,6 +63,7 @@ def test_threads_reach_kiss_icp_and_all_cores_register_alike():
     np.testing.assert_allclose(poses[0], poses[1], atol=1e-6)  # the same registration, summed in another order
 
 
+@pytest.mark.slow
 def test_the_blind_outdoor_stretch_of_seed_6_does_not_abort(tmp_path):
     # telemax_lab, seed 6: about 100 scans without a point outdoors. KISS-ICP
     # then only predicts, compounding 4x4 products; unprojected, its rotation
@@ -74,8 +76,8 @@ def test_the_blind_outdoor_stretch_of_seed_6_does_not_abort(tmp_path):
     code = textwrap.dedent(
         f"""
         from slam.config import load_config
-        from slam.frontend import run_frontend
-        from slam.io.readers import read_recording
+        from slam.frontend.kiss import run_frontend
+        from slam.readers.read import read_recording
         cfg = load_config(None)
         rec = read_recording({str(run)!r}, cfg.input)
         res = run_frontend(rec.scans, cfg.frontend)

@@ -520,14 +520,21 @@ def check_error_output(code: int, err: str, case: Case) -> None:
         assert lines[-1] == errors[0] and lines[0].startswith("usage: gslam")
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
-def test_malformed_input_gives_one_clean_error(case: Case, world: World, tmp_path: Path, capsys):
+def prepare(case: Case, world: World, tmp_path: Path, fingerprint=None):
+    """The case's folder with its inputs made, the places a failed command
+    must leave as they were, and their fingerprint before it runs
+    (``fingerprint``, :func:`checksums` by default)."""
     d = tmp_path / "case"
     d.mkdir()
     if case.make is not None:
         case.make(d, world)
     watched = (d, world.run, world.scenario.parent, CONFIGS)
-    before = checksums(*watched)
+    return d, watched, (fingerprint or checksums)(*watched)
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def test_malformed_input_gives_one_clean_error(case: Case, world: World, tmp_path: Path, capsys):
+    d, watched, before = prepare(case, world, tmp_path)
     capsys.readouterr()
     with time_limit(TIME_LIMIT_S):
         try:
@@ -554,6 +561,7 @@ PROCESS_CASES = ["config-random-bytes", "scenario-nan-waypoint", "map-out-proc",
                  "compare-out-is-a-file", "ablate-out-is-a-file"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case_id", PROCESS_CASES)
 def test_as_a_process(case_id: str, world: World, tmp_path: Path):
     case = next(c for c in CASES if c.id == case_id)

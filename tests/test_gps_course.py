@@ -1,6 +1,6 @@
 """The GPS course stream (validation/streams/course.py) and the compass's offset
 relation against it with a level of 0 (validation/observers/quantitative.py), learnt
-by calibrate (slam/calibrate)."""
+by calibrate (slam/commands/calibrate)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import yaml
 
-from slam.calibrate.runs import CalibrationRun
-from slam.calibrate.select import calibrate_relation
-from slam.calibrate.write import _flow
+from slam.commands.calibrate.runs import CalibrationRun
+from slam.commands.calibrate.select import calibrate_relation
+from slam.commands.calibrate.write import _flow
 from validation.config import ValidationConfig
 from validation.diagnosis.model import Observation, load_model
 from validation.diagnosis.reiter import Diagnoser

@@ -50,9 +50,12 @@ from slam.cli import main
 from tests.bagfactory import driving_bag
 from tests.conftest import CONFIGS, REPO, TELEMAX_CONFIG
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
-    Case, World, both, broad_mat, check_error_output, copy_run, data, expand, scenario, set_in, spec, text, time_limit,
+    Case, World, both, broad_mat, check_error_output, copy_run, data, expand, prepare, scenario, set_in, spec, text,
+    time_limit,
     world,
 )
+
+pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
 
 TIME_LIMIT_S = 60
 MAP = ("map", "{run}", "--config", "{cfg}")
@@ -543,12 +546,7 @@ def _run(argv: list[str], capsys) -> tuple[int, str, list]:
 
 @pytest.mark.parametrize("case", ERRORS, ids=[c.id for c in ERRORS])
 def test_hostile_input_gives_one_clean_error(case: Case, world: World, tmp_path: Path, capsys):
-    d = tmp_path / "case"
-    d.mkdir()
-    if case.make is not None:
-        case.make(d, world)
-    watched = (d, world.run, world.scenario.parent, CONFIGS)
-    before = checksums(*watched)
+    d, watched, before = prepare(case, world, tmp_path, checksums)
     capsys.readouterr()
     code, err, leaked = _run(expand(case.argv, d, world), capsys)
     assert code == case.code, f"exit {code}: {err[-800:]}"

@@ -1,5 +1,5 @@
 """``gslam inject``: faults from physics added to recordings, with their
-true intervals beside them (slam/inject/)."""
+true intervals beside them (slam/commands/inject/)."""
 
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ import pytest
 from slam.cli import main
 from slam.config import InputConfig, StreamFrameConfig, load_config
 from slam.errors import GslamError
-from slam.geometry import heading_from_magnetometer, wrap_angle
-from slam.inject import inject, parse_fault
-from slam.inject import physics
-from slam.inject.spec import DipoleFault, SlipFault
-from slam.io.readers import read_recording
+from validation.base.geometry import heading_from_magnetometer, wrap_angle
+from slam.commands.inject import inject, parse_fault
+from slam.commands.inject import physics
+from slam.commands.inject.spec import DipoleFault, SlipFault
+from slam.readers.read import read_recording
 from slam.recording import Trajectory
 from tests.bagfactory import ned_driving_bag
 from tests.conftest import CONFIGS, real_data
@@ -145,6 +145,7 @@ def test_labels_follow_the_time_offset_of_the_stream_they_were_written_into(shor
     assert len(disturbed) and all(any(a <= t <= b for a, b in after.faults["IMU_YAW"]) for t in disturbed)
 
 
+@pytest.mark.slow
 def test_a_ned_bag_takes_a_heading_fault_in_its_own_frame(tmp_path):
     bag = ned_driving_bag(duration_s=40.0)[0].write(tmp_path / "ned.bag")
     frames = {"compass": StreamFrameConfig(world="ned"), "odometry": StreamFrameConfig(world="ned"),
@@ -171,6 +172,7 @@ def test_faults_a_recording_cannot_have_are_refused(short_run, tmp_path):
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.slow
 def test_the_command_writes_a_run_folder_map_reads(short_run, tmp_path, capsys):
     out = tmp_path / "run"
     argv = ["-q", "inject", str(short_run.run_dir), "--fault", "gyro_bias@5:10,bias_deg_s=4", "--out", str(out)]
@@ -201,6 +203,7 @@ def test_real_carmen_log_laser_cut_and_slip(tmp_path):
     assert res.injected["ODO_DIST"] and all(800 <= a and b <= 900 for a, b in res.injected["ODO_DIST"])
 
 
+@pytest.mark.slow
 def test_real_broad_trial_magnetometer_dipole(tmp_path):
     trial = real_data("broad/02_undisturbed_slow_rotation_B.mat")
     cfg = InputConfig(format="broad")
@@ -214,6 +217,7 @@ def test_real_broad_trial_magnetometer_dipole(tmp_path):
     assert change[(t < 59.9) | (t > 70.1)].max() < 1e-6 and change[(t > 60) & (t < 70)].max() > 10.0
 
 
+@pytest.mark.slow
 def test_real_husky_bag_compass_dipole(tmp_path):
     bag = real_data("rosbag/test1_husky_2015.bag")
     cfg = load_config(CONFIGS / "datasets" / "husky.yaml").input

@@ -10,8 +10,8 @@ import pytest
 
 from conftest import real_data
 from slam.errors import GslamError
-from slam.geometry import wrap_angle
-from slam.io.librsf import dataset_files, looks_like_librsf, read_librsf
+from validation.base.geometry import wrap_angle
+from slam.readers.librsf import dataset_files, looks_like_librsf, read_librsf
 
 V, W, DT, N = 0.5, 0.1, 0.1, 301  # m/s, rad/s, s: a circle of radius 5 m
 

@@ -11,17 +11,21 @@ import gtsam
 import numpy as np
 import pytest
 
-from slam.factors import pose_key
-from slam.loops.chain import between, build_chain, compose, integrate, world_discrepancy
-from slam.loops.config import LoopsConfig, ObserverConfig
-from slam.loops.constraints import LoopConstraint
-from slam.loops.correlative import correlative_search, score_grid
-from slam.loops.descriptor import context_distance, scan_context
+from slam.graph.factors import pose_key
+from slam.loops.chain import build_chain
+from validation.loops.chain import integrate, world_discrepancy
+from validation.base.geometry import between, compose
+from slam.config.loops import LoopsConfig, ObserverConfig
+from validation.loops.constraint import LoopConstraint
+from slam.matching.grid import score_pyramid
+from slam.matching.search import branch_and_bound
+from slam.matching.descriptor import context_distance, scan_context
 from slam.loops.detector import pinned_information
-from slam.loops.factors import loop_factor
+from slam.graph.loop_factors import loop_factor
 from slam.loops.file_loops import file_loops
-from slam.loops.registration import build_point_map, register, scan_normals
-from slam.measurements import BetweenMeasurement, Measurements
+from slam.matching.icp import refine
+from slam.matching.points import point_map, scan_normals
+from slam.graph.measurements import BetweenMeasurement, Measurements
 from slam.recording import PlaceMatches
 from validation.loops.cliques import maximum_clique
 from validation.loops.gating import gate_loops
@@ -44,9 +48,9 @@ def room_points():
     return np.concatenate([wall(a, b) for a, b in zip(corners[:-1], corners[1:])])
 
 
-def point_map_of(points, voxel=0.05, radius=1.0):
+def point_map_of(points):
     normals, _ = scan_normals(points, 2, 0.3)
-    return build_point_map(points, normals, voxel, radius)
+    return point_map(points, normals)
 
 
 def transform(points, pose):
@@ -67,17 +71,17 @@ def test_registration_recovers_a_known_transform():
     world = room_points()
     pose = np.array([0.3, -0.2, np.radians(5.0)])
     query = inverse_transform(world, pose)  # the room seen from ``pose``
-    reg = register(query, point_map_of(world), np.zeros(3), 1.0, 0.2, 0.05)
+    reg = refine(query, point_map_of(world), np.zeros(3), 1.0, 0.2, 0.05)
     np.testing.assert_allclose(reg.pose[:2], pose[:2], atol=2e-3)
     assert abs(reg.pose[2] - pose[2]) < np.radians(0.1)
-    assert reg.overlap > 0.95 and reg.rms_m < 0.01
+    assert reg.inliers > 0.95 and reg.rms_m < 0.01
 
 
 def test_a_corridor_does_not_pin_its_axis():
     # Two long parallel walls along x: nothing fixes x.
     world = np.concatenate([wall((-10, -1), (10, -1)), wall((10, 1), (-10, 1))])
     world = world + np.random.default_rng(0).normal(0, 0.005, world.shape)
-    reg = register(world, point_map_of(world), np.zeros(3), 1.0, 0.2, 0.05)
+    reg = refine(world, point_map_of(world), np.zeros(3), 1.0, 0.2, 0.05)
     info, dims = pinned_information(reg, length_m=5.0, min_relative=0.05)
     assert dims == 2
     values, vectors = np.linalg.eigh(info)
@@ -85,17 +89,18 @@ def test_a_corridor_does_not_pin_its_axis():
     assert abs(weak[0]) > 0.99  # the unpinned direction is x
     # In the room, every direction is pinned.
     room = room_points() + np.random.default_rng(1).normal(0, 0.005, room_points().shape)
-    reg = register(room, point_map_of(room), np.zeros(3), 1.0, 0.2, 0.05)
+    reg = refine(room, point_map_of(room), np.zeros(3), 1.0, 0.2, 0.05)
     assert pinned_information(reg, 5.0, 0.05)[1] == 3
 
 
-def test_correlative_search_brings_a_far_guess_into_icp_range():
+def test_the_likelihood_field_search_brings_a_far_guess_into_icp_range():
     world = room_points()
     pose = np.array([0.8, 0.5, np.radians(12.0)])
     query = inverse_transform(world, pose)
-    guess, score = correlative_search(query[::4], score_grid(world, 0.1, 2.0), np.zeros(3), 1.2, np.radians(15), np.radians(1))
-    assert np.hypot(*(guess[:2] - pose[:2])) < 0.15 and abs(guess[2] - pose[2]) < np.radians(1.5)
-    assert score > 0.5
+    pyr = score_pyramid(world, 0.1, 0.1, 5, 0.3, 24)
+    found = branch_and_bound(pyr, query[::4], np.zeros(3), 1.2, np.radians(15), angular_step_rad=np.radians(1))
+    assert np.hypot(*(found.pose[:2] - pose[:2])) < 0.15 and abs(found.pose[2] - pose[2]) < np.radians(1.5)
+    assert found.score > 0.5
 
 
 # --- descriptor ------------------------------------------------------------
@@ -265,7 +270,7 @@ def test_loop_factors_close_the_square():
 
 
 def test_gnc_drops_a_false_loop_the_observer_let_through():
-    from slam.backend import _optimise_gnc_loops
+    from slam.graph.backend import _optimise_gnc_loops
 
     truth, chain, true_loop, false_loop = square_case()
     graph, values = odometry_graph(chain)
@@ -302,7 +307,7 @@ def test_a_rejected_loop_makes_loop_the_diagnosis_and_gates_the_next():
 
 
 def test_validation_model_without_loop_is_an_error():
-    from validation.errors import ValidationError
+    from validation.base.errors import ValidationError
     from validation.gating import GatingConfig
     from validation.diagnosis.model import SystemModel
 

@@ -12,8 +12,10 @@ import pytest
 
 from conftest import CONFIGS, TELEMAX_CONFIG, real_data
 from slam.config import load_config
-from slam.pipeline import run_map
+from slam.pipeline.folder import run_map
 from slam.sim import load_scenario, simulate_scenario
+
+pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
 
 # Around the lab's central bench, twice: 29 m a lap, 127 s in all.
 LAB_LOOP = [(1.0, 6.0), (1.0, 1.2), (10.5, 1.2), (10.5, 6.0), (1.0, 6.0)]

@@ -1,4 +1,4 @@
-"""map.pgm + map.yaml (slam.io.map_server): what nav2's map_server reads
+"""map.pgm + map.yaml (slam.outputs.map_server): what nav2's map_server reads
 back is the grid written, and the parser follows map_server's rules."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import pytest
 import yaml
 
 from slam.errors import GslamError
-from slam.io.map_server import read_map, read_pgm, write_map
-from slam.occupancy import FREE, OCCUPIED, UNKNOWN, GridMap
+from slam.outputs.map_server import read_map, read_pgm, write_map
+from slam.outputs.occupancy import FREE, OCCUPIED, UNKNOWN, GridMap
 
 
 def random_grid(rows: int = 7, cols: int = 11, seed: int = 0) -> GridMap:

@@ -8,7 +8,7 @@ import pytest
 from slam.recording import Compass, Gps, Gyro, MagneticReference, Recording, Trajectory
 from tests.synthetic import field_body, yaw_scenario
 from validation.diagnosis.model import Observation, Plausibility
-from validation.errors import ValidationError
+from validation.base.errors import ValidationError
 from validation.observers import (
     DEFAULT_RELATIONS,
     GpsQualityCheck,
@@ -293,6 +293,7 @@ def test_gps_quality_check():
 # --- batch == online ------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rule", ["paper", "project"])
 def test_batch_and_online_agree(rule):
     sc = yaw_scenario(duration_s=120.0, compass_drift=(40.0, 70.0), seed=3)

@@ -1,4 +1,4 @@
-"""The occupancy grid (slam.occupancy): the vectorised ray casting against a
+"""The occupancy grid (slam.outputs.occupancy): the vectorised ray casting against a
 loop over beams and samples, and the map of a room seen from known poses."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slam.occupancy import FREE, OCCUPIED, UNKNOWN, GridModel, build_grid, crossed_cells, free_start, logit
+from slam.outputs.occupancy import FREE, OCCUPIED, UNKNOWN, GridModel, build_grid, crossed_cells, free_start, logit
 from slam.recording import Trajectory
 
 RES = 0.05

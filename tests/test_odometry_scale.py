@@ -1,10 +1,10 @@
 """The odometry's distance scale, learnt where validation keeps both the
-odometry and the scan matcher (slam/odometry_scale.py)."""
+odometry and the scan matcher (slam/gating/odometry_scale.py)."""
 
 import numpy as np
 
-from slam.measurements import BetweenMeasurement, Measurements
-from slam.odometry_scale import odometry_scale
+from slam.graph.measurements import BetweenMeasurement, Measurements
+from slam.gating.odometry_scale import odometry_scale
 
 K = 401  # 0.1 m a step: 40 m of travel
 

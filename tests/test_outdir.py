@@ -1,4 +1,4 @@
-"""The --out rule (slam/io/outdir.py): by itself, then for every command."""
+"""The --out rule (slam/results/outdir.py): by itself, then for every command."""
 
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ import yaml
 
 from slam.cli import main
 from slam.errors import GslamError
-from slam.io.atomic import write_text
-from slam.io.outdir import (
+from slam.results.atomic import write_text
+from slam.results.outdir import (
     ADDED_MARKER, RESULT_MARKER, TEMP_MARKER, ResultFolder, host_tag, open_container, remove_stale_temps, result_folder,
 )
 from tests.conftest import REPO, TELEMAX_CONFIG
@@ -344,6 +344,7 @@ def _processes_naming(path) -> list[int]:
     return found
 
 
+@pytest.mark.slow
 def test_a_killed_map_leaves_a_temp_folder_the_next_run_removes(short_run, tmp_path, capsys):
     out = tmp_path / "map"
     argv = ["map", str(short_run.run_dir), "--config", str(TELEMAX_CONFIG), "--out", str(out)]
@@ -408,6 +409,7 @@ def with_other_input(argv: list, folder: Path) -> list:
     return [*argv[:i], copy, *argv[i + 1:]]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["simulate", "map", "compare", "demo", "ablate", "inject"])
 def test_out_rule_for_every_command(command, commands, tmp_path, capsys):
     argv = commands[command]
@@ -485,6 +487,7 @@ def test_inspect_config_out(short_run, tmp_path, capsys):
     assert target.read_text() == "mine\n"
 
 
+@pytest.mark.slow
 def test_calibrate_out_rule(short_run, tmp_path, capsys):
     """calibrate's --out is one file: new, or an earlier calibrate result
     (its first line), replaced; a result of another gslam command only with

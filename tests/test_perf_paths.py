@@ -5,12 +5,11 @@ import gtsam
 import numpy as np
 import pytest
 
-from slam.backend import optimise
+from slam.graph.backend import optimise
 from slam.config import BackendConfig, PipelineConfig
-from slam.frontend import ScanProjector, scan_points
-from slam.io.pointcloud import voxel_downsample
-from slam.measurements import BetweenMeasurement, Measurements
-from slam.pipeline import MappingPipeline
+from slam.frontend.kiss import ScanProjector, scan_points
+from slam.outputs.pointcloud import map_points, voxel_downsample
+from slam.graph.measurements import BetweenMeasurement, Measurements
 from slam.recording import Recording, Scans, Trajectory
 
 
@@ -57,31 +56,29 @@ def test_voxel_downsample_keeps_the_first_point_of_each_cell(voxel):
     assert np.array_equal(voxel_downsample(small, 0.1), small[[0, 2, 3]])
 
 
-def _pipeline_with_map(rng, n_scans=30, beams=61):
+def _keyframes_with_map(rng, n_scans=30, beams=61):
     angles = np.linspace(-1.5, 1.5, beams)
     scans = Scans(t=np.arange(n_scans) * 0.1, ranges=_ranges(rng, n_scans, beams), angles=angles,
                   range_min=0.1, range_max=11.0)
     rec = Recording(name="synthetic", t0=0.0, scans=scans)
-    pipe = MappingPipeline("synthetic", PipelineConfig(), "unused", recording=rec)
     idx = np.arange(0, n_scans, 3)
-    pipe.measurements = Measurements(t=scans.t[idx], scan_index=idx)
     pose = rng.normal(0.0, 2.0, size=(len(idx), 3))
     traj = Trajectory(t=scans.t[idx], x=pose[:, 0], y=pose[:, 1], yaw=pose[:, 2])
-    pipe.backend = type("Backend", (), {"trajectory": traj})()
-    return pipe, traj
+    return rec, idx, traj
 
 
 def test_map_points_equal_the_per_keyframe_loop_for_any_chunk_size():
-    pipe, traj = _pipeline_with_map(np.random.default_rng(2))
-    rec, fe = pipe.recording, pipe.config.frontend
+    rec, index, traj = _keyframes_with_map(np.random.default_rng(2))
+    config = PipelineConfig()
+    fe = config.frontend
     chunks = []
-    for k, i in enumerate(pipe.measurements.scan_index):
+    for k, i in enumerate(index):
         p = scan_points(rec.scans.ranges[i], rec.scans.angles, fe.min_range_m, min(fe.max_range_m, rec.scans.range_max))
         c, s = np.cos(traj.yaw[k]), np.sin(traj.yaw[k])
         chunks.append(np.column_stack([traj.x[k] + c * p[:, 0] - s * p[:, 1], traj.y[k] + s * p[:, 0] + c * p[:, 1]]))
-    expected = _reference_voxel(np.concatenate(chunks), pipe.config.output.map_voxel_m)
+    expected = _reference_voxel(np.concatenate(chunks), config.output.map_voxel_m)
     for chunk in (1, 3, 4, 2048):
-        assert np.array_equal(pipe.map_points(chunk=chunk), expected)
+        assert np.array_equal(map_points(rec, index, traj, fe, config.output.map_voxel_m, chunk=chunk), expected)
 
 
 def _odometry_chain(n):
@@ -113,7 +110,7 @@ def test_isam2_relinearisation_settings_reach_the_same_chain():
     assert every.yaw[-1] == pytest.approx(29 * 0.05, abs=1e-9)
 
 
-# --- bulk CDR decoding (slam.io.cdr) and the reader's two paths ----------------
+# --- bulk CDR decoding (slam.readers.cdr) and the reader's two paths ----------------
 
 
 def _header(types, sec, frame):
@@ -150,7 +147,7 @@ def _scan(types, k, frame="laser", beams=5):
 def test_bulk_decoding_equals_message_by_message(frame):
     from rosbags.typesys import Stores, get_typestore
 
-    from slam.io import cdr
+    from slam.readers import cdr
 
     store = get_typestore(Stores.LATEST)
     types = store.types
@@ -178,7 +175,7 @@ def test_bulk_decoding_equals_message_by_message(frame):
 def test_bulk_decoding_refuses_changing_layouts_and_other_encodings():
     from rosbags.typesys import Stores, get_typestore
 
-    from slam.io import cdr
+    from slam.readers import cdr
 
     store = get_typestore(Stores.LATEST)
     types = store.types
@@ -202,7 +199,7 @@ def test_reader_falls_back_when_a_frame_id_changes(tmp_path, monkeypatch, caplog
     from bagfactory import BagBuilder
 
     from slam.config import InputConfig
-    from slam.io import rosbag
+    from slam.readers import rosbag
 
     def bag_with(frames):
         bag = BagBuilder(ros=2)
@@ -213,7 +210,7 @@ def test_reader_falls_back_when_a_frame_id_changes(tmp_path, monkeypatch, caplog
     cfg = InputConfig.model_validate({"topics": {"scan": None, "compass": None, "odometry": None, "gps": None,
                                                  "groundtruth": None, "gyro": "/imu/data"}})
     monkeypatch.setattr(rosbag, "BULK_CHUNK", 2)
-    caplog.set_level("INFO", logger="slam.io.rosbag")
+    caplog.set_level("INFO", logger="slam.readers.rosbag")
     same = rosbag.read_rosbag(bag_with(["imu"] * 5), cfg).gyro
     assert "message by message" not in caplog.text
     changed = rosbag.read_rosbag(bag_with(["imu"] * 3 + ["imu_link"] * 2), cfg).gyro
@@ -236,7 +233,7 @@ def test_bulk_and_message_by_message_reading_fail_alike(tmp_path, monkeypatch, c
     from bagfactory import BagBuilder
 
     from slam.config import InputConfig
-    from slam.io import rosbag
+    from slam.readers import rosbag
 
     monkeypatch.setattr(rosbag, "BULK_CHUNK", chunk)
     none = {"scan": None, "gyro": None, "compass": None, "odometry": None, "gps": None, "groundtruth": None}
@@ -271,9 +268,9 @@ def test_every_stream_of_a_ros2_bag_is_read_in_bulk_and_equals_ros1(tmp_path, ca
     from bagfactory import driving_bag
 
     from slam.config import InputConfig
-    from slam.io.rosbag import read_rosbag
+    from slam.readers.rosbag import read_rosbag
 
-    caplog.set_level("INFO", logger="slam.io.rosbag")
+    caplog.set_level("INFO", logger="slam.readers.rosbag")
     recs = []
     for ros in (1, 2):
         (tmp_path / f"ros{ros}").mkdir()
@@ -290,7 +287,7 @@ def test_every_stream_of_a_ros2_bag_is_read_in_bulk_and_equals_ros1(tmp_path, ca
 def test_layout_cross_check_against_rosbags():
     from rosbags.typesys import Stores, get_typestore
 
-    from slam.io import cdr
+    from slam.readers import cdr
 
     store = get_typestore(Stores.LATEST)
     fixes = [_fix(store.types, k, "gps") for k in range(3)]

@@ -11,10 +11,10 @@ import pytest
 
 from slam.config import load_config
 from slam.errors import GslamError
-from slam.io.pointcloud import import_open3d
-from slam.io.tum import read_tum
-from slam.measurements import FACTOR_DOFS
-from slam.pipeline import run_map
+from slam.outputs.pointcloud import import_open3d
+from slam.outputs.tum import read_tum
+from slam.graph.measurements import FACTOR_DOFS
+from slam.pipeline.folder import run_map
 from slam.sim import simulate_scenario
 from slam.sim.world import World, distance_to_segments
 from tests.conftest import TELEMAX_CONFIG, short_scenario
@@ -109,6 +109,7 @@ def test_map_ply_is_the_lab_seen_from_the_estimate(mapped):
 # --- accuracy and gating --------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_short_run_accuracy(mapped):
     # Measured: ATE 0.016 m (off), 0.010 m (on), 0.013 m (oracle), 0.010 m
     # (interval oracle); RPE 0.4-0.6 %, final error 0.02-0.04 m. Bounds with
@@ -206,6 +207,7 @@ def test_tight_oracle_excludes_exactly_the_wrong_measurements(mapped):
 # --- optimisers and determinism ---------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["off", "on"])
 def test_batch_and_isam2_agree(mapped, mode):
     batch = mapped(mode)
@@ -219,6 +221,7 @@ def test_batch_and_isam2_agree(mapped, mode):
     assert abs(batch.metrics["ate_rmse_m"] - isam2.metrics["ate_rmse_m"]) < 0.005
 
 
+@pytest.mark.slow
 def test_same_seed_same_results(mapped, short_run, tmp_path):
     first = mapped("on")
     again_run = simulate_scenario(short_scenario(), tmp_path / "again")
@@ -253,40 +256,42 @@ def quick_config():
     return load_config(TELEMAX_CONFIG, ["output.plots=false"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("error", [RuntimeError("disk full"), KeyboardInterrupt()])
 def test_run_dying_while_writing_leaves_no_folder(short_run, tmp_path, monkeypatch, error):
-    import slam.io.pointcloud
+    import slam.outputs.pointcloud
 
     def die(*args, **kwargs):
         raise error
 
-    monkeypatch.setattr(slam.io.pointcloud, "write_ply", die)
+    monkeypatch.setattr(slam.outputs.pointcloud, "write_ply", die)
     out = tmp_path / "map"
     with pytest.raises(type(error)):
         run_map(short_run.run_dir, quick_config(), out)
     assert listing(tmp_path) == set()  # neither the folder nor its temporary sibling
 
 
+@pytest.mark.slow
 def test_failed_rerun_keeps_the_old_folder_and_a_rerun_replaces_it(short_run, tmp_path, monkeypatch):
-    import slam.io.pointcloud
+    import slam.outputs.pointcloud
 
     out = tmp_path / "map"
     run_map(short_run.run_dir, quick_config(), out)
     (out / "notes.txt").write_text("the user's\n")
     before = listing(out)
 
-    real = slam.io.pointcloud.write_ply
+    real = slam.outputs.pointcloud.write_ply
 
     def die(*args, **kwargs):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(slam.io.pointcloud, "write_ply", die)
+    monkeypatch.setattr(slam.outputs.pointcloud, "write_ply", die)
     with pytest.raises(RuntimeError):
         run_map(short_run.run_dir, quick_config(), out)
     assert listing(out) == before  # the earlier result, untouched
     assert listing(tmp_path) == {"map"}  # and no temporary folder left
 
-    monkeypatch.setattr(slam.io.pointcloud, "write_ply", real)
+    monkeypatch.setattr(slam.outputs.pointcloud, "write_ply", real)
     run_map(short_run.run_dir, quick_config(), out)
     assert listing(out) == MAP_FILES - {"trajectory.png", "map.png"} | {"notes.txt"}  # the map's files replaced
     assert (out / "notes.txt").read_text() == "the user's\n"

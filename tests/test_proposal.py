@@ -1,6 +1,6 @@
 """The system model proposed from physics (validation/proposal/) and the
-starter config gslam inspect writes with it (slam/starter.py,
-slam/topic_choice.py), on sensor sets of their own and on the shipped ones."""
+starter config gslam inspect writes with it (slam/commands/inspect/starter.py,
+slam/commands/inspect/topic_choice.py), on sensor sets of their own and on the shipped ones."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import yaml
 from bagfactory import sensor_bag
 from slam.cli import main
 from slam.config import load_config, validation_sections
-from slam.inspection import inspect_recording
+from slam.commands.inspect.inspection import inspect_recording
 from validation.diagnosis.model import load_model
 from validation.proposal import Source, propose_model
 

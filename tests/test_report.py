@@ -1,4 +1,4 @@
-"""report.html (slam.report) of gslam compare: one file that holds the
+"""report.html (slam.outputs.report) of gslam compare: one file that holds the
 table and every figure, checked as text and in a real headless browser."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from slam.compare import run_compare
-from slam.report import Figure, Section, Table, render
+from slam.commands.compare import run_compare
+from slam.outputs.report import Figure, Section, Table, render
 from tests.conftest import TELEMAX_CONFIG
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -40,6 +40,7 @@ def test_render_embeds_figures_and_escapes_text(tmp_path):
     assert "<script" not in page and "http" not in page  # nothing to fetch, nothing to run
 
 
+@pytest.mark.slow
 def test_compare_report_holds_the_table_and_every_figure(compared):
     folder = compared.out_dir
     page = (folder / "report.html").read_text()
@@ -62,6 +63,7 @@ def test_compare_report_holds_the_table_and_every_figure(compared):
     assert compared.report_s > 0
 
 
+@pytest.mark.slow
 def test_report_can_be_turned_off(short_run, tmp_path):
     res = run_compare(short_run.run_dir, TELEMAX_CONFIG, tmp_path / "c", only=["ungated"],
                       overrides=["output.report=false", "output.mcap=false", "output.plots=false"])

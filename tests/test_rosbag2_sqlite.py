@@ -1,4 +1,4 @@
-"""The plain sqlite3 path of the ROS 2 bag reader (slam.io.rosbag2_sqlite)
+"""The plain sqlite3 path of the ROS 2 bag reader (slam.readers.rosbag2_sqlite)
 reads the same recording as rosbags, and hands over to rosbags wherever it
 cannot be sure."""
 
@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
 
-import slam.io.rosbag as rosbag
+import slam.readers.rosbag as rosbag
 from bagfactory import driving_bag
 from slam.config import InputConfig
 from slam.errors import GslamError
-from slam.io.rosbag2_sqlite import STANDARD_HASHES, open_plain
+from slam.readers.rosbag2_sqlite import STANDARD_HASHES, open_plain
 
 
 @pytest.mark.parametrize("store", [Stores.ROS2_IRON, Stores.ROS2_JAZZY, Stores.LATEST])

@@ -14,9 +14,9 @@ from bagfactory import IMU, BagBuilder, driving_bag
 from conftest import real_data
 from slam.config import InputConfig
 from slam.errors import GslamError
-from slam.geometry import geodetic_from_enu, wrap_angle
-from slam.io.readers import guess_format, read_recording
-from slam.io.rosbag import read_rosbag
+from validation.base.geometry import geodetic_from_enu, wrap_angle
+from slam.readers.read import guess_format, read_recording
+from slam.readers.rosbag import read_rosbag
 
 T0 = 1_700_000_000.0
 NONE = {k: None for k in ("scan", "gyro", "compass", "odometry", "gps", "groundtruth")}
@@ -161,7 +161,7 @@ def test_gps_about_configured_datum_drops_no_fix(tmp_path, ros, caplog):
     bag.fix("/fix", T0 + 3.0, lat[2], lon[2], status=2, covariance_type=0)
     bag.fix("/fix", T0 + 4.0, lat[3], lon[3], status=0, variance_m2=(0.25, 0.25))
     cfg = config(only(gps="/fix"), gps={"datum_lat_deg": lat0, "datum_lon_deg": lon0})
-    with caplog.at_level(logging.INFO, logger="slam.io.rosbag"):
+    with caplog.at_level(logging.INFO, logger="slam.readers.rosbag"):
         rec = read_rosbag(bag.write_in(tmp_path), cfg)
     assert "dropped 2 fixes" in caplog.text
     gps = rec.gps

@@ -1,4 +1,4 @@
-"""run.mcap (slam.io.run_mcap) read back as Foxglove and ROS read it: with
+"""run.mcap (slam.outputs.run_mcap) read back as Foxglove and ROS read it: with
 rosbags, and with the ``mcap`` package decoding through the message
 definitions the file carries (mcap-ros2-support)."""
 
@@ -13,10 +13,10 @@ import pytest
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
-from slam.io.map_server import read_map
-from slam.io.run_mcap import TOPICS, _Messages
-from slam.io.tum import read_tum
-from slam.validation_status import Level, Status, StepStatuses
+from slam.outputs.map_server import read_map
+from slam.outputs.run_mcap import TOPICS, _Messages
+from slam.outputs.tum import read_tum
+from slam.outputs.validation_status import Level, Status, StepStatuses
 
 mcap_reader = pytest.importorskip("mcap.reader", reason="the test extra installs mcap")
 mcap_ros2 = pytest.importorskip("mcap_ros2.decoder", reason="the test extra installs mcap-ros2-support")
@@ -156,6 +156,7 @@ def test_without_the_validator_there_is_no_validation_topic(mapped, mode):
     assert res.metrics["mcap_messages"]["/tf"] == res.metrics["n_poses"]
 
 
+@pytest.mark.slow
 def test_outputs_can_be_turned_off(mapped):
     res = mapped("off", "output.grid=false", "output.mcap=false")
     names = {p.name for p in res.out_dir.iterdir()}

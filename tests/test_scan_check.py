@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 
 from slam.config import FrontendConfig, load_config
-from slam.frontend import scan_quality
-from slam.inject import inject
-from slam.inject import physics
-from slam.inject.spec import parse_fault
-from slam.pipeline import run_map
+from slam.frontend.kiss import scan_quality
+from slam.commands.inject import inject
+from slam.commands.inject import physics
+from slam.commands.inject.spec import parse_fault
+from slam.pipeline.folder import run_map
 from slam.recording import Scans
 from tests.conftest import TELEMAX_CONFIG
 from tests.synthetic import wall_ranges
 from validation.diagnosis.model import Plausibility
-from validation.errors import ValidationError
+from validation.base.errors import ValidationError
 from validation.observers import ObserversConfig, observe_steps
 from validation.observers.checks import ScanDegeneracyCheck, scan_streams, unary_checks
 from validation.observers.config import observers_config
@@ -81,6 +81,7 @@ def test_without_scans_the_check_has_no_stream_and_names_stay_unique():
         observers_config({"gps": {"name": "scan_degenerate_dist"}, "scan": {"enabled": True}})
 
 
+@pytest.mark.slow
 def test_the_check_blames_scan_matching_where_the_laser_is_cut(short_run, tmp_path):
     cfg = load_config(TELEMAX_CONFIG, ["validation.mode=on", "validation.observers.relations=[]",
                                        "validation.observers.magnetometer.enabled=false",

@@ -9,8 +9,10 @@ import pytest
 
 from conftest import CONFIGS, TELEMAX_CONFIG
 from slam.config import load_config
-from slam.pipeline import MappingPipeline
+from slam.pipeline.folder import MappingPipeline
 from slam.sim import load_scenario, simulate_scenario
+
+pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
 
 # scenario: (waypoints kept, the modality whose fault the cut holds)
 CUTS = {

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from slam.errors import GslamError
-from slam.geometry import enu_from_geodetic
+from validation.base.geometry import enu_from_geodetic
 from slam.sim import load_scenario, simulate, simulate_scenario
 from slam.sim.faults import compass_heading_error, intervals_from_mask
 from slam.sim.world import scan_constraint

@@ -1,4 +1,4 @@
-"""Score grids and the branch-and-bound search (slam.submaps.grid, .search):
+"""Score grids and the branch-and-bound search (slam.matching.grid, .search):
 against brute force and the obvious reference versions."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import distance_transform_edt
 
-from slam.submaps.grid import likelihood_field, max_pool_levels, score_pyramid
-from slam.submaps.search import CorrelativeSearch, angular_step, branch_and_bound
+from slam.matching.grid import likelihood_field, max_pool_levels, score_pyramid
+from slam.matching.search import CorrelativeSearch, angular_step, branch_and_bound
 
 
 def walls(spacing: float = 0.02) -> np.ndarray:
@@ -50,6 +50,7 @@ def test_max_pool_levels_hold_the_maximum_of_each_block():
             assert level[x, y] == field[x : x + size, y : y + size].max()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_branch_and_bound_finds_the_brute_force_optimum(seed):
     rng = np.random.default_rng(seed)

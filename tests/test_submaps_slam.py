@@ -6,13 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slam.geometry import between, compose
+from validation.base.geometry import between, compose
 from slam.recording import Scans
 from slam.sim.scenario import Region, RegionKind
 from slam.sim.world import World
 from slam.submaps.build import build_submap_constraints, select_nodes
-from slam.submaps.config import SubmapsConfig
-from slam.submaps.refine import point_map, pose_uncertainty, refine
+from slam.config.submaps import SubmapsConfig
+from slam.matching.icp import pose_uncertainty, refine
+from slam.matching.points import point_map
 from slam.config import FrontendConfig
 from validation.loops.chain import integrate
 from validation.loops.gating import pinned_error
@@ -113,6 +114,7 @@ def test_refinement_recovers_an_offset_and_leaves_a_corridor_axis_free():
     assert len(free) == 1 and abs(free[0][0]) > 0.99  # free along x only
 
 
+@pytest.mark.slow
 def test_local_slam_is_more_accurate_than_its_odometry(run):
     truth, steps, result = run
     odometry = integrate(truth[0], steps)
@@ -147,6 +149,7 @@ def test_nodes_are_taken_by_motion():
     assert list(nodes) == [0, 3, 5, 8]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("overrides, from_submaps", [
     ((), True),
     (("backend.robust_kernel=dcs", "backend.robust_param=2.0"), False),
@@ -154,26 +157,27 @@ def test_nodes_are_taken_by_motion():
 ])
 def test_the_submaps_estimate_starts_the_graph_unless_a_robust_kernel_judges_it(short_run, tmp_path, monkeypatch,
                                                                                  overrides, from_submaps):
-    import slam.backend
+    import slam.graph.backend
     from slam.config import load_config
-    from slam.pipeline import MappingPipeline
+    from slam.pipeline.folder import MappingPipeline
     from tests.conftest import TELEMAX_CONFIG
 
     starts = []
-    real = slam.backend.optimise
+    real = slam.graph.backend.optimise
 
     def spy(*args, **kwargs):
         starts.append(kwargs.get("initial_poses"))
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(slam.backend, "optimise", spy)
+    monkeypatch.setattr(slam.graph.backend, "optimise", spy)
     config = load_config(TELEMAX_CONFIG, ["output.plots=false", *overrides])
     pipe = MappingPipeline(short_run.run_dir, config, tmp_path / "out", concurrent=False)
     pipe.run()
-    assert pipe.submaps is not None and len(starts) == 1
+    assert pipe.core.submaps is not None and len(starts) == 1
     assert (starts[0] is not None) == from_submaps
 
 
+@pytest.mark.slow
 def test_a_loop_is_made_only_where_the_carriers_scans_confirm_the_submap(monkeypatch):
     import slam.submaps.graph as graph
     from slam.submaps.local import Match
@@ -207,6 +211,7 @@ def test_agreement_needs_the_carriers_refinement():
     SubmapsConfig.model_validate({"constraints": {"refine_near": False}})
 
 
+@pytest.mark.slow
 def test_a_place_beyond_the_windows_is_recognised_and_its_loops_are_right():
     # No submap is near enough the estimate to be searched: only recognition can close the loops.
     rng = np.random.default_rng(11)

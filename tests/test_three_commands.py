@@ -10,13 +10,15 @@ import numpy as np
 import pytest
 
 from bagfactory import sensor_bag
-from slam.calibrate import calibrate
-from slam.calibrate.runs import CalibrationRun
-from slam.calibrate.select import held_out
+from slam.commands.calibrate import calibrate
+from slam.commands.calibrate.runs import CalibrationRun
+from slam.commands.calibrate.select import held_out
 from slam.cli import main
 from slam.config import load_config, validation_sections
-from slam.inspection import inspect_recording
-from slam.pipeline import run_map
+from slam.commands.inspect.inspection import inspect_recording
+from slam.pipeline.folder import run_map
+
+pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
 
 FAULT = (60.0, 80.0)
 
@@ -118,7 +120,7 @@ def test_held_out_folds():
     t = np.arange(0.0, 10.0, 0.1)
 
     def run(clean) -> CalibrationRun:
-        from slam.calibrate.runs import StepStreams
+        from slam.commands.calibrate.runs import StepStreams
 
         return CalibrationRun("r", {}, StepStreams(t, {}, {}, {}), [], clean, False)
 

@@ -1,5 +1,5 @@
 """Per-stream time offsets: ``input.time_offsets_s`` applied when a recording
-is read, and learnt by ``gslam calibrate`` (slam/calibrate/lags.py)."""
+is read, and learnt by ``gslam calibrate`` (slam/commands/calibrate/lags.py)."""
 
 from __future__ import annotations
 
@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from conftest import TELEMAX_CONFIG
-from slam.calibrate import calibrate
-from slam.calibrate.lags import estimate_lag, learn_lags
-from slam.calibrate.runs import CalibrationRun
+from slam.commands.calibrate import calibrate
+from slam.commands.calibrate.lags import estimate_lag, learn_lags
+from slam.commands.calibrate.runs import CalibrationRun
 from slam.config import load_config
 from slam.errors import GslamError
-from slam.io.readers import read_recording
+from slam.readers.read import read_recording
 from validation.streams import Stream, fixed_rate_steps, resample_streams
 
 
@@ -113,6 +113,7 @@ def test_reader_moves_each_stream_by_its_offset(short_run):
     assert moved.t0 == plain.t0 and moved.faults == plain.faults
 
 
+@pytest.mark.slow
 def test_calibrate_finds_an_odometry_read_early_and_learns_with_it(short_run, tmp_path):
     # Read 0.1 s early, the simulated odometry is a recording stamped 0.1 s early.
     out = tmp_path / "learnt.yaml"

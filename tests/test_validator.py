@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from slam.config import load_config, validation_sections
-from slam.geometry import wrap_angle
-from slam.measurements import FACTOR_DOFS
+from validation.base.geometry import wrap_angle
+from slam.graph.measurements import FACTOR_DOFS
 from slam.recording import Compass, Gyro, MagneticReference, Recording, Trajectory
 from tests.synthetic import DEFAULT_TURNS, bump_error, field_body, sample_times, true_yaw, yaw_rate
 from validation.diagnosis.model import Observation

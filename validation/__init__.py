@@ -47,6 +47,6 @@ Layout:
 - :mod:`validation.config`: the ``validation`` and ``gating`` config sections.
 """
 
-from validation.errors import ValidationError
+from validation.base.errors import ValidationError
 
 __all__ = ["ValidationError"]

@@ -36,9 +36,9 @@ from validation.diagnosis.model import SystemModel
 from validation.gating import GatingConfig, check_components
 from validation.observers.config import ObserversConfig, observers_config
 from validation.trends import Window
-from validation.yamlio import StrictFrozen, load_yaml, validate_mapping
+from validation.base.modes import GatingMode
+from validation.base.yamlio import StrictFrozen, load_yaml, validate_mapping
 
-GatingMode = Literal["off", "on", "oracle", "interval_oracle"]
 Pass = Literal["offline", "causal"]
 
 
@@ -48,7 +48,7 @@ class ValidationConfig(StrictFrozen):
 
     model_config = ConfigDict(populate_by_name=True)
 
-    mode: GatingMode = "off"
+    mode: GatingMode = GatingMode.OFF
     pass_: Pass = Field("offline", alias="pass")
     rate_hz: float = Field(10.0, gt=0.0)
     oracle_k_sigma: float = Field(3.0, gt=0.0)
@@ -90,9 +90,9 @@ def parse_sections(validation: Mapping[str, Any], gating: Mapping[str, Any]) -> 
     cfg = validate_mapping(ValidationConfig, data, "validation")
     cfg = cfg.model_copy(update={"observers": observers})
     gate = GatingConfig.from_mapping(dict(gating), "gating")
-    from validation.errors import ValidationError
+    from validation.base.errors import ValidationError
 
-    if cfg.mode in ("on", "interval_oracle") and cfg.model is None:
+    if cfg.mode.needs_model and cfg.model is None:
         raise ValidationError("validation.model: a system model is needed when validation.mode is on or interval_oracle")
     if not cfg.offline and cfg.observers.window == "centred":
         raise ValidationError(
@@ -106,7 +106,7 @@ def parse_sections(validation: Mapping[str, Any], gating: Mapping[str, Any]) -> 
 def _check_names(cfg: ValidationConfig, gate: GatingConfig) -> None:
     """Every observer must be a relation or check of the model, and every
     gated component one of its components."""
-    from validation.errors import ValidationError
+    from validation.base.errors import ValidationError
 
     if cfg.model is None:
         return

@@ -36,8 +36,8 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from validation.diagnosis.model import SystemModel
-from validation.errors import ValidationError
-from validation.yamlio import StrictFrozen, validate_mapping
+from validation.base.errors import ValidationError
+from validation.base.yamlio import StrictFrozen, validate_mapping
 
 if TYPE_CHECKING:  # the solver behind the diagnosis loads once there is one to make
     from validation.diagnosis.reiter import DiagnosisResult

@@ -3,7 +3,7 @@
 The truth is ``faults``: for each component whose truth is known, its true
 fault intervals (an empty list: known to be fault-free). A simulated run
 knows every component; a BROAD trial the compass; a recording with ground
-truth scan matching (``slam.truth``); a plain bag none. A metric that needs
+truth scan matching (``slam.gating.truth``); a plain bag none. A metric that needs
 the truth of a component it cannot have is null (JSON ``null``), never 0:
 without any truth, everything below but ``alarm_fraction`` is null.
 

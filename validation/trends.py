@@ -40,7 +40,7 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from validation.errors import ValidationError
+from validation.base.errors import ValidationError
 
 logger = logging.getLogger(__name__)
 

@@ -24,6 +24,7 @@ from functools import cached_property
 
 import numpy as np
 
+from validation.base.modes import GatingMode
 from validation.config import GatingConfig, ValidationConfig
 from validation.diagnosis.model import SystemModel
 from validation.diagnosis.reiter import Diagnoser, DiagnosisResult
@@ -234,7 +235,7 @@ def run_validation(
     faults = dict(faults or {})
     step_t = fixed_rate_steps(float(keyframe_t[0]), float(keyframe_t[-1]), config.rate_hz)
     observer_log, results, coverage = None, None, None
-    if config.mode == "interval_oracle":
+    if config.mode is GatingMode.INTERVAL_ORACLE:
         actions = oracle_actions(gating, step_t, faults)
     else:
         obs = config.observers
@@ -271,7 +272,7 @@ def run_validation(
             actions = [gate.step(float(t), r) for t, r in zip(step_t, results)]
     # The oracle knows each onset exactly and offline alarms are dated by
     # their evidence: the look-back is for causal validation only.
-    causal = config.mode == "on" and not config.offline
+    causal = config.mode is GatingMode.ON and not config.offline
     lookback = gating.lookback_s if causal else 0.0
     dofs = {f: tuple(d) for f, d in factor_dofs.items()}
     scales = step_scales(step_t, actions, gating, dofs, lookback)

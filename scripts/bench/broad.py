@@ -10,7 +10,7 @@ window w, threshold th) and the magnetometer check ``mag_plausible`` (field
 strength and dip against the trial's first seconds, tolerances dB and ddip,
 deviant for at least ``hold``). Against the reader's label "compass really
 wrong" (the magnetometer's heading off the optical heading by more than
-20 deg; :mod:`slam.io.broad`), per validation step (10 Hz):
+20 deg; :mod:`slam.readers.broad`), per validation step (10 Hz):
 
 * **alarm fraction** and **false-alarm fraction** (alarms outside the
   label), as ``metrics.json`` defines them (:mod:`validation.metrics`). On
@@ -53,11 +53,11 @@ import numpy as np
 
 from scripts.bench.common import csv_text, publish
 from slam.config import PipelineConfig, load_config
-from slam.io.atomic import write_text
-from slam.io.datasets import data_root
-from slam.io.readers import read_recording
-from slam.measurements import FACTOR_DOFS
-from slam.pipeline import MappingPipeline
+from slam.results.atomic import write_text
+from slam.readers.datasets import data_root
+from slam.readers.read import read_recording
+from slam.graph.measurements import FACTOR_DOFS
+from slam.pipeline.folder import MappingPipeline
 from slam.recording import Recording
 from validation.config import parse_sections
 from validation.validator import run_validation

@@ -8,11 +8,11 @@ For each observer set of ``SETS`` (the shipped trend relation,
 magnetometer check and field-gyro check; the same without the field-gyro
 check; the same with an offset or a cusum relation of compass against gyro
 beside them) and each of the 13 shared trials, the
-observers are calibrated (:func:`slam.calibrate.learn`: whole runs, robust
+observers are calibrated (:func:`slam.commands.calibrate.learn`: whole runs, robust
 statistics, ``--false-alarm`` of the steps) on the *other twelve* trials,
 magnet trials included, and the held-out trial is mapped with them, gating
 on. Reported per trial, against the reader's label (the magnetometer's
-heading more than 20 deg off the optical heading; :mod:`slam.io.broad`):
+heading more than 20 deg off the optical heading; :mod:`slam.readers.broad`):
 the alarm fraction, the false-alarm fraction and the per-step recall of
 ``metrics.json``; and the recall against the label of the magnetometer as
 recorded, 12 ms late (``mag_lag_s`` 0), which the lag's own error in fast
@@ -33,13 +33,13 @@ import time
 from pathlib import Path
 
 
-from scripts.bench.common import base_config, csv_text, publish
-from slam.calibrate import learn, load_run
+from scripts.bench.common import base_config, csv_text, publish, quiet_logging
+from slam.commands.calibrate import learn, load_run
 from slam.config import load_config, validation_sections
-from slam.io.atomic import write_text
-from slam.io.broad import MAG_LAG_S, read_broad
-from slam.io.datasets import data_root
-from slam.pipeline import run_map
+from slam.results.atomic import write_text
+from slam.readers.broad import MAG_LAG_S, read_broad
+from slam.readers.datasets import data_root
+from slam.pipeline.folder import run_map
 from validation.metrics import validation_metrics
 
 log = logging.getLogger(__name__)
@@ -155,9 +155,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", default=None, help="comma-separated observer sets")
     ap.add_argument("--out", type=Path, default=ROOT / "runs/bench_broad_loto")
     args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
-    for noisy in ("slam", "validation"):
-        logging.getLogger(noisy).setLevel(logging.ERROR)
+    quiet_logging()
     trials = sorted((args.data or data_root()).joinpath("broad").glob("*.mat"))
     if not trials:
         sys.exit("no BROAD trials found")

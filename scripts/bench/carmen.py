@@ -56,14 +56,14 @@ import numpy as np
 from scripts.bench.common import CONFIGS, REPO, include_in_readme, publish, simulated, table
 from scripts.bench.peers import PeerRun, export_scans, kiss_slam
 from slam.config import load_config
-from slam.evaluation import ate, rpe
-from slam.frontend import run_frontend
-from slam.geometry import between, wrap_angle
-from slam.io.atomic import atomic_path
-from slam.io.datasets import data_root
-from slam.io.readers import read_recording
-from slam.io.tum import read_tum
-from slam.measurements import interpolate_poses, relative_poses
+from slam.outputs.evaluation import ate, rpe
+from slam.frontend.kiss import run_frontend
+from validation.base.geometry import between, wrap_angle
+from slam.results.atomic import atomic_path
+from slam.readers.datasets import data_root
+from slam.readers.read import read_recording
+from slam.outputs.tum import read_tum
+from slam.recording import interpolate_poses, relative_poses
 from slam.recording import Recording, Trajectory
 
 log = logging.getLogger(__name__)
@@ -152,7 +152,8 @@ def trajectories(out: Path) -> tuple[Trajectory, Trajectory]:
 
 def judge_loops(out: Path, rec: Recording, config) -> Loops:
     """The kept loops of a map result against the reference; see the module docstring."""
-    from slam.submaps.refine import point_map, refine
+    from slam.matching.icp import refine
+    from slam.matching.points import point_map
     from slam.submaps.scans import ScanPoints
 
     path = out / "loops.csv"

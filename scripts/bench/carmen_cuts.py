@@ -4,7 +4,7 @@ gated against ungated, the robust kernels and two oracles.
     python -m scripts.bench carmen_cuts [--data DIR] [--logs intel freiburg-079 aces]
                                         [--config configs/datasets/carmen.yaml] [--out runs/bench_carmen_cuts]
 
-1. The observers of ``--config`` are calibrated (:func:`slam.calibrate.calibrate`,
+1. The observers of ``--config`` are calibrated (:func:`slam.commands.calibrate.calibrate`,
    whole runs, robust statistics) on the four tuning logs (fhw,
    freiburg-101, seattle, belgioioso), untouched. The scan check's
    thresholds are physical (the simulator's fault definition); on the
@@ -20,7 +20,7 @@ gated against ungated, the robust kernels and two oracles.
    with the calibrated ones, with the scan check alone and with the
    calibrated observers plus the scan check. The *interval oracle* gates
    scan matching on the pipeline's true intervals (the labels, plus where
-   KISS-ICP's motion is off the reference, ``slam.truth``); the *label
+   KISS-ICP's motion is off the reference, ``slam.gating.truth``); the *label
    oracle* excludes exactly the scan-matching motions that start or end at
    a labelled scan.
 
@@ -45,17 +45,17 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import KERNELS, csv_text, publish
-from slam.calibrate import calibrate
-from slam.compare import load_variants
+from scripts.bench.common import KERNELS, csv_text, publish, quiet_logging
+from slam.commands.calibrate import calibrate
+from slam.commands.compare import load_variants
 from slam.config import load_config, validation_sections
-from slam.frontend import scan_quality
-from slam.inject import inject
-from slam.io.atomic import write_text
-from slam.io.datasets import data_root
-from slam.io.readers import read_recording
-from slam.measurements import interpolate_poses, relative_poses
-from slam.pipeline import MappingPipeline
+from slam.frontend.kiss import scan_quality
+from slam.commands.inject import inject
+from slam.results.atomic import write_text
+from slam.readers.datasets import data_root
+from slam.readers.read import read_recording
+from slam.recording import interpolate_poses, relative_poses
+from slam.pipeline.folder import MappingPipeline
 from validation.observers.checks import ScanDegeneracyCheck, unary_checks
 
 log = logging.getLogger(__name__)
@@ -165,9 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--config", type=Path, default=ROOT / "configs/datasets/carmen.yaml")
     ap.add_argument("--out", type=Path, default=ROOT / "runs/bench_carmen_cuts")
     args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
-    for noisy in ("slam", "validation"):
-        logging.getLogger(noisy).setLevel(logging.ERROR)
+    quiet_logging()
     root = (args.data or data_root()) / "carmen"
     args.out.mkdir(parents=True, exist_ok=True)
     variants = load_variants(ROOT / "configs/variants.yaml")

@@ -8,6 +8,7 @@ import copy
 import csv
 import datetime
 import io
+import logging
 import os
 import platform
 import shlex
@@ -18,7 +19,7 @@ from pathlib import Path
 
 import yaml
 
-from slam.io.atomic import write_text
+from slam.results.atomic import write_text
 
 REPO = Path(__file__).resolve().parents[2]
 RESULTS = REPO / "docs" / "results"
@@ -26,6 +27,13 @@ CONFIGS = REPO / "configs"
 KERNELS = ("huber", "cauchy", "dcs", "gnc_tls", "gnc_gm")
 """The robust-kernel variants of ``configs/variants.yaml`` (all ungated)."""
 PACKAGES = ("numpy", "gtsam", "kiss-icp", "rosbags", "python-sat")
+
+
+def quiet_logging(fmt: str = "%(message)s") -> None:
+    """The bench's own progress on stderr; the pipeline's INFO lines left out."""
+    logging.basicConfig(level=logging.INFO, format=fmt)
+    for noisy in ("slam", "validation"):
+        logging.getLogger(noisy).setLevel(logging.ERROR)
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:

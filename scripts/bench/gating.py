@@ -5,7 +5,7 @@ scenario and its fault-free twin.
                                    [--variants NAME ...] [--variants-file configs/variants.yaml]
                                    [--config configs/telemax.yaml] [--workers 2] [--out DIR] [--set KEY=VALUE ...]
 
-The sweep runs through ``gslam ablate``'s library (:mod:`slam.ablate`):
+The sweep runs through ``gslam ablate``'s library (:mod:`slam.commands.ablate`):
 each (scenario, seed) is simulated once and mapped with every variant of
 ``--variants-file``, the jobs of one input sharing its reading and scan
 matching; ``--out`` keeps the sweep folder (a later run into it skips the
@@ -34,10 +34,10 @@ import numpy as np
 import yaml
 
 from scripts.bench.common import KERNELS, include_in_readme, publish
-from slam.ablate import AblationSpec, run_ablation
-from slam.compare import load_variants
+from slam.commands.ablate import AblationSpec, run_ablation
+from slam.commands.compare import load_variants
 from slam.errors import GslamError
-from slam.config import load_yaml
+from validation.base.yamlio import load_yaml
 
 REPO = Path(__file__).resolve().parents[2]
 SCENARIOS = REPO / "configs" / "scenarios"
@@ -189,7 +189,7 @@ def sweep_spec(scenarios: list[str], seeds: list[int], variants_file: str, only:
                overrides: list[str]) -> AblationSpec:
     """The bench as an ablation: every scenario and seed, every variant."""
     load_variants(variants_file, only)  # unknown names: one line naming the file
-    variants = load_yaml(variants_file)
+    variants = load_yaml(variants_file, "config")
     fixed = {}
     for item in overrides:
         key, sep, value = item.partition("=")

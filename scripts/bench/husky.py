@@ -43,12 +43,12 @@ import numpy as np
 
 from scripts.bench.common import KERNELS, publish
 from scripts.bench.judges import COURSE_LAG, MIN_SPEED_M_S, WRONG_DEG, Course, ate_vs_gps, gps_course, yaw_at
-from slam.compare import load_variants
+from slam.commands.compare import load_variants
 from slam.config import PipelineConfig, load_config
-from slam.geometry import wrap_angle
-from slam.io.datasets import data_root
-from slam.io.readers import read_recording
-from slam.pipeline import MappingPipeline
+from validation.base.geometry import wrap_angle
+from slam.readers.datasets import data_root
+from slam.readers.read import read_recording
+from slam.pipeline.folder import MappingPipeline
 from slam.recording import Recording
 
 log = logging.getLogger(__name__)

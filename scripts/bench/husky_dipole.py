@@ -7,7 +7,7 @@ found, and does the validator stay quiet elsewhere?
 
 The bag's compass is the IMU's orientation estimate, so a dipole is
 injected as the heading error it causes (``dipole@T0:T1,target=heading``,
-500 A m^2 two metres beside the path: :mod:`slam.inject.physics`), twice,
+500 A m^2 two metres beside the path: :mod:`slam.commands.inject.physics`), twice,
 over ``DIPOLES``. For each observer set of ``SETS`` (the config's trend
 relations, the same with an offset, a cusum or a residual relation of
 compass against gyro, and the config as shipped), each validation pass and each way of learning of
@@ -64,7 +64,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from scripts.bench.common import base_config, csv_text, publish
+from scripts.bench.common import base_config, csv_text, publish, quiet_logging
 from scripts.bench.judges import (
     AFTER_LABEL_S,
     REAL_DRIFT,
@@ -73,14 +73,14 @@ from scripts.bench.judges import (
     false_alarms,
     gps_wanders,
 )
-from slam.calibrate import learn, load_run
+from slam.commands.calibrate import learn, load_run
 from slam.config import load_config, validation_sections
-from slam.geometry import wrap_angle
-from slam.inject import inject
-from slam.io.atomic import write_text
-from slam.io.datasets import data_root
-from slam.io.readers import read_recording
-from slam.pipeline import run_map
+from validation.base.geometry import wrap_angle
+from slam.commands.inject import inject
+from slam.results.atomic import write_text
+from slam.readers.datasets import data_root
+from slam.readers.read import read_recording
+from slam.pipeline.folder import run_map
 
 log = logging.getLogger(__name__)
 ROOT = Path(__file__).resolve().parents[2]
@@ -170,9 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--passes", nargs="+", choices=PASSES, default=list(PASSES))
     ap.add_argument("--no-folds", action="store_true", help="only the dipoles of --faults, without the two clean-stretch folds")
     args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
-    for noisy in ("slam", "validation"):
-        logging.getLogger(noisy).setLevel(logging.ERROR)
+    quiet_logging()
     bag = (args.data or data_root()) / "rosbag/test1_husky_2015.bag"
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []

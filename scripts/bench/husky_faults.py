@@ -45,16 +45,16 @@ import time
 from pathlib import Path
 
 
-from scripts.bench.common import KERNELS, publish
+from scripts.bench.common import KERNELS, publish, quiet_logging
 from scripts.bench.judges import AFTER_LABEL_S, REAL_DRIFT, ate_vs_gps, false_alarms, gps_wanders
-from slam.compare import load_variants
+from slam.commands.compare import load_variants
 from slam.config import load_config
-from slam.inject import inject
-from slam.inject.spec import parse_fault
-from slam.io.atomic import write_text
-from slam.io.datasets import data_root
-from slam.io.readers import read_recording
-from slam.pipeline import run_map
+from slam.commands.inject import inject
+from slam.commands.inject.spec import parse_fault
+from slam.results.atomic import write_text
+from slam.readers.datasets import data_root
+from slam.readers.read import read_recording
+from slam.pipeline.folder import run_map
 
 log = logging.getLogger(__name__)
 ROOT = Path(__file__).resolve().parents[2]
@@ -90,9 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "runs/bench_husky_faults")
     ap.add_argument("--faults", nargs="+", default=list(FAULTS))
     args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
-    for noisy in ("slam", "validation"):
-        logging.getLogger(noisy).setLevel(logging.ERROR)
+    quiet_logging()
     for fault in args.faults:  # every spec checked before any work
         parse_fault(fault)
     bag = (args.data or data_root()) / "rosbag/test1_husky_2015.bag"

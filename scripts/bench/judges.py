@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slam.evaluation import ate
-from slam.geometry import wrap_angle
-from slam.measurements import interpolate_poses
+from slam.outputs.evaluation import ate
+from validation.base.geometry import wrap_angle
+from slam.recording import interpolate_poses
 from slam.recording import Gps, Trajectory
 from validation.streams import validation_streams
 

@@ -80,7 +80,7 @@ def kiss_only(path: Path, topic: str, threads: int = 0) -> tuple[np.ndarray, np.
             icp.register_frame(points, np.zeros(0))
             # Over a long blind stretch (the yard: no returns, prediction only)
             # KISS-ICP's 4x4 float products drift off a rotation and Sophus
-            # aborts the process; keep them planar, as slam/frontend.py does.
+            # aborts the process; keep them planar, as slam/frontend/kiss.py does.
             icp.last_pose, icp.last_delta = planar(icp.last_pose), planar(icp.last_delta)
             stamps.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
             poses.append(icp.last_pose.copy())

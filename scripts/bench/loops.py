@@ -47,12 +47,15 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import publish
-from slam.compare import load_variants
+from scripts.bench.common import publish, quiet_logging
+from slam.commands.compare import load_variants
 from slam.config import load_config
-from slam.io.atomic import write_text
-from slam.io.datasets import data_root
-from slam.pipeline import MappingPipeline
+from slam.results.atomic import write_text
+from slam.readers.datasets import data_root
+from slam.pipeline.config_fit import check_fit
+from slam.pipeline.core import Mapping
+from slam.pipeline.folder import MappingPipeline
+from slam.readers.read import read_recording
 
 log = logging.getLogger(__name__)
 
@@ -87,65 +90,40 @@ def simulated(cache: Path, seed: int) -> Path:
 
 
 def mapped(path: Path, config_path: Path, overrides: list[str], shared: dict, wrong_fraction: float = 0.0,
-           seed: int = 0) -> MappingPipeline:
-    """One variant mapped in-process (no result folder), reusing the
+           seed: int = 0) -> Mapping:
+    """One variant mapped in memory (no result folder), reusing the
     recording and front-end in ``shared``; ``wrong_fraction``: wrong loops
-    added before the observer, as a fraction of the loops found."""
+    added before they are judged, as a fraction of the loops found: to the
+    submap graph's before its GNC where submaps close the loops, else to
+    what the loop search found."""
     cfg = load_config(config_path, ["output.plots=false", "output.progress=false", *overrides])
-    pipe = Injecting(path, cfg, Path("unused"), recording=shared.get("rec"), frontend=shared.get("fe"))
-    pipe.wrong_fraction, pipe.seed = wrong_fraction, seed
-    pipe.read()
-    pipe.match_scans()
-    shared["rec"], shared["fe"] = pipe.recording, pipe.frontend
-    pipe.build_measurements()
-    pipe.validate()
-    pipe.learn_odometry_scale()
-    pipe.recheck()
-    pipe.build_submaps()
-    pipe.close_loops()
-    pipe.optimise()
-    pipe.evaluate()
-    return pipe
+    if "rec" not in shared:
+        shared["rec"] = read_recording(path, cfg.input)
+    check_fit(shared["rec"], cfg, path)
+    core = Mapping(shared["rec"], cfg, shared.get("fe"), path)
+    core.match_scans()
+    shared["fe"] = core.frontend
+    core.build_measurements()
+    core.validate()
+    core.learn_odometry_scale()
+    core.recheck()
 
+    def add_wrong(constraints: list) -> list:
+        genuine = [c for c in constraints if c.kind == "loop"]
+        count = math.ceil(wrong_fraction * len(genuine) / (1.0 - wrong_fraction)) if genuine else 0
+        return wrong_submap_loops(genuine, count, seed)
 
-class Injecting(MappingPipeline):
-    """The pipeline with wrong loops added to the ones found."""
-
-    wrong_fraction = 0.0
-    seed = 0
-    injected = 0
-
-    def build_submaps(self) -> None:
-        """The submaps, with wrong loop constraints among the genuine ones
-        when GNC judges them (marked by a score of -1)."""
-        from slam.submaps import graph
-
-        if self.wrong_fraction <= 0 or not self.config.submaps.enabled:
-            return super().build_submaps()
-        judge, pipe = graph.GlobalSlam._gnc_outliers, self
-
-        def with_wrong(slam, est, n):
-            genuine = [c for c in slam.constraints if c.kind == "loop"]
-            count = math.ceil(pipe.wrong_fraction * len(genuine) / (1.0 - pipe.wrong_fraction)) if genuine else 0
-            slam.constraints.extend(wrong_submap_loops(genuine, count, pipe.seed))
-            pipe.injected = count
-            return judge(slam, est, n)
-
-        graph.GlobalSlam._gnc_outliers = with_wrong
-        try:
-            super().build_submaps()
-        finally:
-            graph.GlobalSlam._gnc_outliers = judge
-
-    def find_loops(self):
+    core.build_submaps(add_wrong if wrong_fraction > 0 else None)
+    search = core.find_loops()
+    if wrong_fraction > 0 and search is not None and search.loops and not cfg.submaps.enabled:
         from slam.loops.inject import wrong_loops
 
-        search = super().find_loops()
-        if self.wrong_fraction > 0 and search.loops and not self.config.submaps.enabled:
-            count = math.ceil(self.wrong_fraction * len(search.loops) / (1.0 - self.wrong_fraction))
-            search.loops = search.loops + wrong_loops(search.chain, search.loops, count, self.seed)
-            self.injected = count
-        return search
+        count = math.ceil(wrong_fraction * len(search.loops) / (1.0 - wrong_fraction))
+        search.loops = search.loops + wrong_loops(search.chain, search.loops, count, seed)
+    core.judge_loops(search)
+    core.optimise()
+    core.evaluate()
+    return core
 
 
 def wrong_submap_loops(genuine: list, count: int, seed: int) -> list:
@@ -155,7 +133,7 @@ def wrong_submap_loops(genuine: list, count: int, seed: int) -> list:
     information; score -1 marks them."""
     from dataclasses import replace
 
-    from slam.loops.chain import compose
+    from validation.base.geometry import compose
     from slam.loops.inject import wrong_shift
 
     rng = np.random.default_rng(seed)
@@ -301,7 +279,7 @@ def bench_runtime(report: Report, cache: Path, root: Path, repeats: int) -> None
                     result = pipe.run()
                     runs[with_loops].append(result.metrics["runtime_s"])
                     if with_loops:
-                        stage.append(pipe.timings.loops_s)
+                        stage.append(pipe.core.timings.loops_s)
             off, on, st = statistics.median(runs[False]), statistics.median(runs[True]), statistics.median(stage)
             rows.append([label, f"{off:.2f}", f"{on:.2f}", f"{100 * (on - off) / off:+.0f} %", f"{st:.2f}",
                          f"{100 * st / off:.0f} %"])
@@ -323,9 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--false-fraction", type=float, default=0.25)
     ap.add_argument("--root", type=Path, default=None, help="data root (default: $GSLAM_DATA or ../shared/data)")
     args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
-    for noisy in ("slam", "validation"):
-        logging.getLogger(noisy).setLevel(logging.ERROR)
+    quiet_logging("%(name)s: %(message)s")
     root = data_root() if args.root is None else args.root
     args.cache.mkdir(parents=True, exist_ok=True)
     report = Report(["## Loop closing benchmark", ""])

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from slam.frontend import ScanProjector
-from slam.io.pointcloud import import_open3d
+from slam.frontend.kiss import ScanProjector
+from slam.outputs.pointcloud import import_open3d
 from slam.recording import Scans, Trajectory
 
 INDOOR = """\

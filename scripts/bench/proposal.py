@@ -66,18 +66,18 @@ from pathlib import Path
 import numpy as np
 
 from scripts.bench.carmen_cuts import TUNING, cut_spans, cuts
-from scripts.bench.common import csv_text, publish, simulated, table
+from scripts.bench.common import csv_text, publish, quiet_logging, simulated, table
 from scripts.bench.gating import parse_seeds
 from scripts.bench.husky_faults import FAULTS, judged_alarms
 from scripts.bench.judges import gps_wanders
-from slam.calibrate import calibrate
+from slam.commands.calibrate import calibrate
 from slam.config import load_config
-from slam.inject import inject
-from slam.inspection import inspect_recording
-from slam.io.atomic import write_text
-from slam.io.datasets import data_root
-from slam.io.readers import read_recording
-from slam.pipeline import run_map
+from slam.commands.inject import inject
+from slam.commands.inspect.inspection import inspect_recording
+from slam.results.atomic import write_text
+from slam.readers.datasets import data_root
+from slam.readers.read import read_recording
+from slam.pipeline.folder import run_map
 
 log = logging.getLogger(__name__)
 ROOT = Path(__file__).resolve().parents[2]
@@ -200,7 +200,7 @@ def carmen(data: Path, logs: tuple[str, ...], tmp: Path, rows: list[Row], notes:
             for model, config in (("shipped", CONFIGS["carmen"]), ("proposed", learnt)):
                 t = time.perf_counter()
                 m = _map(run, config, tmp, f"map_{name}_{kind}_{model}").metrics
-                # Only scan matching has a truth on a log (slam.truth): alarms are judged on the uncut ones.
+                # Only scan matching has a truth on a log (slam.gating.truth): alarms are judged on the uncut ones.
                 alarms = None if kind == "fault" else m.get("alarm_fraction")
                 rows.append(Row("carmen", f"{name} {'cut' if kind == 'fault' else 'uncut'}", model, kind, alarms,
                                 m.get("isolation_recall") if kind == "fault" else None, time.perf_counter() - t))
@@ -278,9 +278,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "runs/bench_proposal",
                     help="rows.csv (and choice.md with --choice; else docs/results/proposal.md)")
     args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
-    for noisy in ("slam", "validation"):
-        logging.getLogger(noisy).setLevel(logging.ERROR)
+    quiet_logging()
     data = args.data or data_root()
     seeds = parse_seeds(CHOICE_SEEDS if args.choice else args.seeds)
     rows: list[Row] = []

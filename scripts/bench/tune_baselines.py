@@ -24,8 +24,8 @@ import numpy as np
 
 from slam.config import load_config
 from slam.errors import GslamError
-from slam.io.atomic import write_text
-from slam.pipeline import MappingPipeline
+from slam.results.atomic import write_text
+from slam.pipeline.folder import MappingPipeline
 from slam.resources import shipped_config
 from slam.sim import simulate
 

@@ -23,23 +23,23 @@ from pathlib import Path
 import numpy as np
 
 from slam.config import load_config
-from slam.evaluation import ate, rpe
-from slam.io.datasets import data_root
-from slam.loops.chain import between
-from slam.measurements import interpolate_poses
-from slam.pipeline import MappingPipeline
+from slam.outputs.evaluation import ate, rpe
+from slam.readers.datasets import data_root
+from validation.base.geometry import between
+from slam.recording import interpolate_poses
+from slam.pipeline.core import Mapping
+from slam.readers.read import read_recording
 
 TUNING_LOGS = ["fhw", "freiburg-101", "seattle", "belgioioso"]
 
 
 def tune_log(path: Path, config_path: Path, overrides: list[str]) -> str:
     cfg = load_config(config_path, ["output.plots=false", "output.progress=false", "loops.enabled=true", *overrides])
-    p = MappingPipeline(path, cfg, Path("unused"))
-    p.read()
+    p = Mapping(read_recording(path, cfg.input), cfg, source=path)
     p.match_scans()
     p.build_measurements()
     p.validate()
-    p.close_loops()
+    p.judge_loops(p.find_loops())
     p.optimise()
     ref = interpolate_poses(p.recording.groundtruth, p.measurements.t)
     errors, nees, kept = [], [], []

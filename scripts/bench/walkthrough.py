@@ -30,12 +30,12 @@ import numpy as np
 from scripts.bench.common import commit, machine
 from scripts.bench.judges import ate_vs_gps
 from slam.config import load_config, validation_sections
-from slam.io.atomic import write_text
-from slam.io.datasets import data_root
-from slam.io.readers import read_recording
-from slam.pipeline import run_map
-from slam.plots import plot_trajectories
-from slam.validation_figures import plot_observer_alarms, plot_system_model
+from slam.results.atomic import write_text
+from slam.readers.datasets import data_root
+from slam.readers.read import read_recording
+from slam.pipeline.folder import run_map
+from slam.outputs.plots import plot_trajectories
+from slam.outputs.validation_figures import plot_observer_alarms, plot_system_model
 
 log = logging.getLogger(__name__)
 ROOT = Path(__file__).resolve().parents[2]

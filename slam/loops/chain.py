@@ -1,50 +1,19 @@
-"""The dead-reckoning chain between keyframes and its uncertainty.
-
-Loop closing needs an estimate of every keyframe before any loop is known,
-and the uncertainty of the motion between any two keyframes to judge a loop.
-Both come from the between-measurements of the graph (odometry, scan
-matching, the gyro's yaw increment) with the validator's weights: per step,
-the measurements are fused by their information (a chain without loops or
-priors has exactly this maximum-likelihood solution), and the fused
-covariance is the step's uncertainty.
-
+"""The dead-reckoning chain between keyframes, from the graph's
+measurements: per step, the between-measurements (odometry, scan matching,
+the gyro's yaw increment) fused by their information with the gating's
+weights (:func:`fuse_steps`), and the chain they make (:func:`build_chain`).
 A step's covariance is the fused one, plus the disagreement of its sources
-when they disagree more than their sigmas say: two measurements of one motion
-that differ by ``d`` mean at least one is off by about ``d / 2``, so the
-chain does not claim to be surer than its own sources are consistent.
-
-**Uncertainty between keyframes.** Errors of step k (``eps_k``, in the frame
-of keyframe k-1) move every later pose. In world axes, with rotation about
-the world origin (the left-invariant form), the error of keyframe m relative
-to keyframe i is the sum over the steps in (i, m] of ``G_k eps_k`` with
-``G_k = [[R_{k-1}, -J p_k], [0, 1]]`` (``R_{k-1}``: rotation of keyframe
-k-1, in whose frame the step is measured; ``p_k``: position of keyframe k,
-which a yaw error of step k does not move; ``J`` the 90 deg rotation),
-independent of m. So the covariance
-of any interval is a difference of cumulative sums (:meth:`Chain.covariance`),
-and the error of a loop's disagreement with the chain, in the same form
-(:func:`world_discrepancy`), can be tested in O(1) per loop or per pair of
-loops. Positions are taken about the chain's mean position to keep the
-lever arms short.
-"""
+when they disagree more than their sigmas say. The chain's algebra and its
+uncertainty between keyframes are :mod:`validation.loops.chain`'s."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from slam.backend import dof_weights
-from slam.geometry import wrap_angle
-from slam.measurements import Measurements
-from validation.loops.chain import (  # noqa: F401  (the chain's algebra, used through this module too)
-    J,
-    Chain,
-    between,
-    chain_from_steps,
-    compose,
-    integrate,
-    world_covariance,
-    world_discrepancy,
-)
+from slam.graph.backend import dof_weights
+from validation.base.geometry import wrap_angle
+from slam.graph.measurements import Measurements
+from validation.loops.chain import Chain, chain_from_steps
 
 
 def fuse_steps(meas: Measurements, weights: dict[str, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:

@@ -17,10 +17,11 @@ descriptor, and it looks for loop candidates among earlier places at least
 
 At most ``max_candidates`` are tried per query, until one is verified. An
 accepted geometric loop re-anchors the estimate; a recognised place does not
-(it may be a look-alike: the loop observer judges it). Verification: a coarse
-correlative search over the uncertainty window (slam.loops.correlative),
-then point-to-line ICP of the query's local map against the candidate's
-(slam.loops.registration); accepted with enough overlap and a low residual.
+(it may be a look-alike: the loop observer judges it). Verification: a
+branch-and-bound search of the candidate's likelihood field over the
+uncertainty window (:mod:`slam.matching.search`), then point-to-line ICP of
+the query's local map against the candidate's (:mod:`slam.matching.icp`),
+the submaps' own toolbox; accepted with enough overlap and a low residual.
 Directions the registration barely constrains (a corridor's axis) are taken
 out of the loop's information, so it does not pin them; a loop with fewer
 than ``acceptance.min_pinned`` directions left is rejected.
@@ -34,13 +35,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from slam.loops.chain import Chain, between, compose
-from slam.loops.config import LoopsConfig
-from slam.loops.constraints import LoopConstraint
-from slam.loops.correlative import correlative_search
-from slam.loops.descriptor import context_distance, ring_key, scan_context
+from slam.loops.chain import Chain
+from validation.base.geometry import between, compose
+from slam.config.loops import LoopsConfig
+from validation.loops.constraint import LoopConstraint
+from slam.matching.icp import Refinement, refine
+from slam.matching.search import branch_and_bound
+from slam.matching.descriptor import context_distance, ring_key, scan_context
 from slam.loops.local_maps import KeyframePoints, LocalMaps, window
-from slam.loops.registration import Registration, register
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +74,7 @@ class _Candidate:
     geometric: bool  # guess from the estimate (else from the descriptor)
 
 
-def pinned_information(reg: Registration, length_m: float, min_relative: float) -> tuple[np.ndarray | None, int]:
+def pinned_information(reg: Refinement, length_m: float, min_relative: float) -> tuple[np.ndarray | None, int]:
     """The registration's information in the loop's convention (frame of the
     query), without the directions it barely constrains, and how many
     directions are kept.
@@ -198,19 +200,19 @@ class LoopDetector:
             # window: ICP refines what the coarse grid leaves.
             resolution = max(cor.resolution_m, cand.linear_m / 5.0)
             angular_step = max(np.radians(cor.angular_step_deg), cand.angular_rad / 7.0)
-            guess, _ = correlative_search(
-                query[::step], self.maps.score_grid(cand.place, est, resolution), guess, cand.linear_m,
-                cand.angular_rad, angular_step,
-            )
+            pyr = self.maps.score_pyramid(cand.place, est, resolution, cand.linear_m)
+            found = branch_and_bound(pyr, query[::step], guess, cand.linear_m, cand.angular_rad,
+                                     angular_step_rad=angular_step, tie_tolerance=cor.tie_tolerance)
+            if found is not None:
+                guess = found.pose
         pm = self.maps.point_map(cand.place, est)
-        reg = register(
-            query, pm, guess, reg_cfg.max_distance_m, reg_cfg.inlier_distance_m, reg_cfg.kernel_m, reg_cfg.max_iterations
-        )
+        reg = refine(query, pm, guess, reg_cfg.max_distance_m, reg_cfg.inlier_distance_m, reg_cfg.kernel_m,
+                     reg_cfg.max_iterations)
 
         def reject(reason: str) -> None:
             det.rejected[reason] = det.rejected.get(reason, 0) + 1
 
-        if reg.n_matched == 0 or reg.overlap < acc.min_overlap:
+        if reg.inliers < acc.min_overlap:
             reject("overlap")
             return None
         if reg.rms_m > acc.max_rms_m:
@@ -226,7 +228,7 @@ class LoopDetector:
             reject("degenerate")
             return None
         quality = {
-            "overlap": round(reg.overlap, 3),
+            "overlap": round(reg.inliers, 3),
             "rms_m": round(reg.rms_m, 4),
             "descriptor_distance": round(cand.descriptor_distance, 3),
             "pinned_dims": dims,

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from slam.loops.config import FileLoopsConfig
-from slam.loops.constraints import LoopConstraint
+from slam.config.loops import FileLoopsConfig
+from validation.loops.constraint import LoopConstraint
 from slam.recording import PlaceMatches
 
 

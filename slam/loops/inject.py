@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from slam.loops.chain import Chain, between, compose
-from slam.loops.constraints import LoopConstraint
+from slam.loops.chain import Chain
+from validation.base.geometry import between, compose
+from validation.loops.constraint import LoopConstraint
 
 
 def wrong_loops(chain: Chain, genuine: list[LoopConstraint], count: int, seed: int, min_separation_m: float = 10.0) -> list[LoopConstraint]:

@@ -3,7 +3,7 @@
 A local map is the union of the scans of the keyframes within a stretch of
 path around a keyframe, each placed by the current estimate and expressed
 in the frame of the centre keyframe, thinned to one point per voxel. Its
-point map (points, normals, k-d tree) and score grid are cached: a keyframe
+point map (points, normals, k-d tree) and likelihood field are cached: a keyframe
 far enough back to be a loop candidate has all its neighbours' estimates
 fixed.
 """
@@ -12,27 +12,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from slam.loops.chain import between
-from slam.loops.config import RegistrationConfig
-from slam.loops.correlative import ScoreGrid, score_grid
-from slam.loops.registration import PointMap, build_point_map, scan_normals
+from validation.base.geometry import between
+from slam.config.loops import RegistrationConfig
+from slam.matching.grid import ScorePyramid, score_pyramid
+from slam.matching.points import PointMap, point_map, scan_normals, voxel_first
 from slam.recording import Scans
-
-
-def voxel_first(points: np.ndarray, voxel_m: float) -> np.ndarray:
-    """Indices (sorted) of the first point in each occupied voxel."""
-    if len(points) == 0:
-        return np.zeros(0, dtype=np.int64)
-    cells = np.floor(points / voxel_m).astype(np.int64)
-    cells -= cells.min(axis=0)
-    key = cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1]
-    _, first = np.unique(key, return_index=True)
-    return np.sort(first)
 
 
 class KeyframePoints:
     """Planar points (in the laser frame) of every keyframe's scan, with a
-    normal and a linearity each (slam.loops.registration.scan_normals).
+    normal and a linearity each (slam.matching.points.scan_normals).
 
     ``scan_index`` (K,): the scan of each keyframe; beams outside
     [``min_range``, ``max_range``) are dropped; normals come from the
@@ -41,7 +30,7 @@ class KeyframePoints:
 
     def __init__(self, scans: Scans, scan_index: np.ndarray, min_range: float, max_range: float, voxel_m: float,
                  registration: RegistrationConfig):
-        from slam.frontend import ScanProjector
+        from slam.frontend.kiss import ScanProjector
 
         project = ScanProjector(scans.angles, min_range, min(max_range, scans.range_max))
         pts, row = project.planar_points(scans.ranges[scan_index])
@@ -107,7 +96,7 @@ class LocalMaps:
         self.registration = registration
         self.grid_margin_m = grid_margin_m
         self._maps: dict[int, PointMap] = {}
-        self._grids: dict[tuple[int, float], ScoreGrid] = {}
+        self._grids: dict[tuple[int, float, float], ScorePyramid] = {}
         self._points: dict[int, np.ndarray] = {}
 
     def _window(self, k: int) -> np.ndarray:
@@ -126,15 +115,18 @@ class LocalMaps:
         pm = self._maps.get(k)
         if pm is None:
             pts, nrm = self.points.gather(k, self._window(k), poses, lines_only=True)
-            reg = self.registration
-            pm = self._maps[k] = build_point_map(pts, nrm, self.points.voxel_m, reg.max_distance_m)
+            pm = self._maps[k] = point_map(pts, nrm)
         return pm
 
-    def score_grid(self, k: int, poses: np.ndarray, resolution_m: float) -> ScoreGrid:
-        """The correlative score grid around keyframe ``k``, in its frame,
-        with cells of ``resolution_m`` (one grid per keyframe and resolution)."""
-        key = (k, round(resolution_m, 6))
+    def score_pyramid(self, k: int, poses: np.ndarray, resolution_m: float, window_m: float) -> ScorePyramid:
+        """The likelihood field around keyframe ``k``, in its frame, on cells
+        of ``resolution_m``, with the pyramid a branch-and-bound search of
+        ``window_m`` needs (one per keyframe, resolution and window)."""
+        key = (k, round(resolution_m, 6), round(window_m, 6))
         grid = self._grids.get(key)
         if grid is None:
-            grid = self._grids[key] = score_grid(self.local_points(k, poses), resolution_m, self.grid_margin_m)
+            w = int(np.ceil(window_m / resolution_m))
+            depth = max(int(np.ceil(np.log2(2 * w + 1))), 0)
+            grid = self._grids[key] = score_pyramid(self.local_points(k, poses), resolution_m, resolution_m, depth,
+                                                    self.grid_margin_m, 2 * w)
         return grid

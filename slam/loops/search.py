@@ -12,11 +12,11 @@ import numpy as np
 from slam.config import PipelineConfig
 from slam.errors import GslamError
 from slam.loops.chain import Chain, build_chain
-from slam.loops.constraints import LoopConstraint
+from validation.loops.constraint import LoopConstraint
 from slam.loops.detector import Detection, LoopDetector
 from slam.loops.file_loops import file_loops
 from slam.loops.local_maps import KeyframePoints
-from slam.measurements import Measurements
+from slam.graph.measurements import Measurements
 from slam.recording import Recording
 
 log = logging.getLogger(__name__)

@@ -1,5 +1,6 @@
-"""Physics-based simulator of a tracked robot with laser, gyro, magnetometer,
-track odometry and GPS; writes a ROS 2 bag plus the true fault intervals.
+"""Physics-based simulator of a tracked robot: a ROS 2 bag and the true fault intervals.
+
+A tracked robot with laser, gyro, magnetometer, track odometry and GPS.
 
 Faults are never switched on by flags: they arise from the world (open
 areas without structure for the laser, steel near the compass, slippery

@@ -26,7 +26,7 @@ import numpy as np
 from rosbags.rosbag2 import Writer
 from rosbags.typesys import Stores, get_typestore
 
-from slam.geometry import quaternion_from_yaw
+from validation.base.geometry import quaternion_from_yaw
 from slam.sim.robot import Motion
 from slam.sim.sensors import GpsData, GyroData, LaserData, MagData, OdomData
 

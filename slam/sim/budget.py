@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from slam.errors import GslamError
-from slam.geometry import wrap_angle
+from validation.base.geometry import wrap_angle
 from slam.sim.route import check_route
 from slam.sim.scenario import RobotConfig, Scenario
 

@@ -5,7 +5,7 @@ nominal noise. Nothing here is switched on by a flag; each definition looks
 at the noise-free quantity the sensor model produced:
 
 * ``IMU_YAW`` (compass): the heading computed by
-  :func:`slam.geometry.heading_from_magnetometer` from the noise-free body
+  :func:`validation.base.geometry.heading_from_magnetometer` from the noise-free body
   field (Earth + steel dipoles) differs from the true yaw by more than
   ``faults.compass_error_deg``. Evaluated at the truth rate.
 * ``SM_DIST``, ``SM_LAT``, ``SM_YAW`` (scan matching's motion along the
@@ -46,11 +46,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from slam.geometry import heading_from_magnetometer, wrap_angle
+from validation.base.geometry import heading_from_magnetometer, wrap_angle
 from slam.recording import Interval
 from slam.sim.magnetics import body_field, reference
 from slam.sim.robot import Motion
-from slam.truth import intervals_from_mask
+from slam.recording import intervals_from_mask
 from slam.sim.scenario import Scenario
 from slam.sim.world import World
 

@@ -10,7 +10,7 @@ dipole of moment m (A m^2) whose field at offset r from it is
 evaluated in 3D with the sensor at its mounting height and the dipole at
 its own height. The body frame (REP-103) of a level robot with yaw psi is the
 world frame rotated by psi about z, so ``B_body = R_z(-psi) B_world``.
-Near steel the heading from :func:`slam.geometry.heading_from_magnetometer`,
+Near steel the heading from :func:`validation.base.geometry.heading_from_magnetometer`,
 the field strength and the dip all move away from the reference by physics.
 """
 

@@ -19,10 +19,11 @@ import yaml
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from slam.config import describe_validation_error
-from slam.io.records import PLAIN_NAME, PLAIN_NAME_RULE
-from slam.io.yamlfile import check_finite, load_yaml
+from slam.results.records import PLAIN_NAME, PLAIN_NAME_RULE
+from slam.config.trees import check_finite
+from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
-from validation.yamlio import Strict
+from validation.base.yamlio import Strict
 
 Point = tuple[float, float]
 Polyline = Annotated[list[Point], Field(min_length=2)]

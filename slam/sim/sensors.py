@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from slam.geometry import geodetic_from_enu
+from validation.base.geometry import geodetic_from_enu
 from slam.recording import MagneticReference
 from slam.sim.magnetics import body_field
 from slam.sim.robot import Motion

@@ -8,7 +8,7 @@ Layout of the run folder ``OUT``:
   to ``t0``), the ``magnetic_reference`` and the ``gps_datum``
 * ``OUT/scenario.yaml`` the scenario actually used, every default spelled out
 
-``OUT`` follows the rule of :mod:`slam.io.outdir`: new, or an earlier
+``OUT`` follows the rule of :mod:`slam.results.outdir`: new, or an earlier
 simulate result (replaced), checked before any work; the folder is built
 beside ``OUT`` and renamed at the end, so a killed run leaves a complete
 folder or none.
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from slam.io.outdir import result_folder
+from slam.results.outdir import result_folder
 from slam.recording import Interval
 from slam.sim.budget import bag_bytes, check_bounded
 from slam.sim.bagwriter import Streams, write_bag
@@ -91,7 +91,7 @@ def simulate(
 ) -> SimulationResult:
     """Simulate the scenario YAML ``scenario_path`` into the run folder
     ``out_dir`` (new, or an earlier simulate result; ``force``: see
-    :mod:`slam.io.outdir`). ``seed`` overrides the scenario's seed; the same
+    :mod:`slam.results.outdir`). ``seed`` overrides the scenario's seed; the same
     seed gives identical messages and stamps."""
     started = time.perf_counter()
     scenario = load_scenario(scenario_path)

@@ -5,9 +5,9 @@ Closure in 2D LIDAR SLAM", ICRA 2016), written here in numpy and GTSAM:
 
 1. *Local SLAM* (:mod:`slam.submaps.local`): the keyframes' scans, in
    order, are each found in the submap being built (a few metres of scans)
-   by a correlative branch-and-bound search (:mod:`slam.submaps.search`
-   over :mod:`slam.submaps.grid`) around the dead-reckoning step, refined
-   by point-to-line ICP (:mod:`slam.submaps.refine`), and inserted.
+   by a correlative branch-and-bound search (:mod:`slam.matching.search`
+   over :mod:`slam.matching.grid`) around the dead-reckoning step, refined
+   by point-to-line ICP (:mod:`slam.matching.icp`), and inserted.
 2. *Global SLAM* (:mod:`slam.submaps.graph`): each scan is also searched
    for in the finished submaps near its current estimate; matches close
    along the path undo local drift, matches far along it close loops. A

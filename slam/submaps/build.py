@@ -3,17 +3,19 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from slam.config import FrontendConfig
 from slam.recording import Scans
-from slam.submaps.config import SubmapsConfig
+from slam.config.submaps import SubmapsConfig
 from slam.submaps.graph import Constraint, GlobalResult, GlobalSlam
 from slam.submaps.local import LocalResult, run_local_slam
 from slam.submaps.scans import ScanPoints
-from validation.loops.chain import between, compose, integrate
+from validation.loops.chain import integrate
+from validation.base.geometry import between, compose
 
 @dataclass
 class SubmapResult:
@@ -62,12 +64,13 @@ def build_submap_constraints(
     step_cov: np.ndarray,
     frontend: FrontendConfig,
     config: SubmapsConfig,
+    before_judging: Callable[[list[Constraint]], list[Constraint]] | None = None,
 ) -> SubmapResult:
     """Scan-to-submap constraints over the keyframes whose scans are
     ``scans[scan_index]`` (K,); ``steps`` (K, 3) and ``step_cov`` (K, 3, 3):
     the dead-reckoning chain between them (row 0 unused). Submaps are built
     over the keyframes :func:`select_nodes` keeps; the others keep their
-    chain steps."""
+    chain steps. ``before_judging``: see :class:`slam.submaps.graph.GlobalSlam`."""
     start = time.perf_counter()
     nodes = select_nodes(steps, config.node_spacing_m, np.radians(config.node_turn_deg))
     chain = integrate(np.zeros(3), steps)
@@ -79,7 +82,7 @@ def build_submap_constraints(
     points = ScanPoints(scans, frontend.min_range_m, frontend.max_range_m, config.voxel_m, index=scan_index[nodes],
                         search_voxel_m=config.resolution_m)
     local = run_local_slam(points, node_steps, node_cov, config)
-    found: GlobalResult = GlobalSlam(points, local, config, node_steps, node_cov).run()
+    found: GlobalResult = GlobalSlam(points, local, config, node_steps, node_cov, before_judging).run()
     # Back to keyframes: every keyframe hangs off the node before it by the chain.
     owner = np.searchsorted(nodes, np.arange(len(steps)), side="right") - 1
     estimate = compose(found.poses[owner], between(chain[nodes[owner]], chain))

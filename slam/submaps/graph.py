@@ -24,14 +24,15 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from slam.geometry import between, compose, wrap_angle
-from slam.loops.descriptor import context_distance, ring_key, scan_context
-from slam.loops.factors import loop_noise
-from slam.submaps.config import SubmapsConfig
+from validation.base.geometry import between, compose, wrap_angle
+from slam.matching.descriptor import context_distance, ring_key, scan_context
+from slam.graph.loop_factors import loop_noise
+from slam.config.submaps import SubmapsConfig
 from slam.submaps.local import LocalResult, Match, match_scan, refine_near
 from slam.submaps.scans import ScanPoints
 
@@ -81,11 +82,15 @@ def _noise(sigmas, robust=None):
 class GlobalSlam:
     """See the module docstring. ``steps`` (n, 3) and ``step_cov`` (n, 3, 3):
     the dead-reckoning chain between the scans, which the graph keeps
-    beside the scan-to-submap constraints."""
+    beside the scan-to-submap constraints. ``before_judging``: given the
+    constraints found, before GNC judges them, returns more to judge (a
+    bench's wrong loops)."""
 
     def __init__(self, points: ScanPoints, local: LocalResult, cfg: SubmapsConfig,
-                 steps: np.ndarray, step_cov: np.ndarray):
+                 steps: np.ndarray, step_cov: np.ndarray,
+                 before_judging: Callable[[list[Constraint]], list[Constraint]] | None = None):
         self.points, self.local, self.cfg = points, local, cfg
+        self.before_judging = before_judging
         self.steps, self.step_cov = steps, step_cov
         steps = np.hypot(*np.diff(local.poses[:, :2], axis=0).T)
         self.path = np.concatenate([[0.0], np.cumsum(steps)])
@@ -174,6 +179,8 @@ class GlobalSlam:
                 est[: i + 1] = self._optimise(est[: i + 1], i + 1)
                 last_opt, pending = i, 0
         est = self._optimise(est, n)
+        if self.before_judging is not None:
+            self.constraints.extend(self.before_judging(list(self.constraints)))
         bad = self._gnc_outliers(est, n)
         rejected = [self.constraints[k] for k in bad]
         if bad:
@@ -309,7 +316,7 @@ class GlobalSlam:
         gives a weight below one half, every other factor a known inlier."""
         import gtsam
 
-        from slam.factors import pose_key
+        from slam.graph.factors import pose_key
 
         g, index = self._graph(n, robust_inter=False)
         inter = [pos for pos, k in index if self.constraints[k].kind != "intra"]
@@ -334,7 +341,7 @@ class GlobalSlam:
         kernel when ``robust_inter``, except those indexed in ``plain``."""
         import gtsam
 
-        from slam.factors import pose_key
+        from slam.graph.factors import pose_key
 
         g = gtsam.NonlinearFactorGraph()
         g.add(gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(*self.local.poses[0]), _noise([1e-3, 1e-3, 1e-4])))
@@ -364,7 +371,7 @@ class GlobalSlam:
     def _optimise(self, est: np.ndarray, n: int, plain: set[int] = frozenset()) -> np.ndarray:
         import gtsam
 
-        from slam.factors import pose_key
+        from slam.graph.factors import pose_key
 
         g, _ = self._graph(n, plain=plain)
         values = gtsam.Values()

@@ -3,8 +3,8 @@
 The scans are taken in order, as on the robot. A scan's pose is predicted
 from the one before by a motion guess (the odometry's step, else the
 sequential scan matcher's, fused: the dead-reckoning chain), searched for in
-the *matching submap* by branch and bound (:mod:`slam.submaps.search`)
-within a window that covers the step's uncertainty, and refined by point-to-line ICP (:mod:`slam.submaps.refine`).
+the *matching submap* by branch and bound (:mod:`slam.matching.search`)
+within a window that covers the step's uncertainty, and refined by point-to-line ICP (:mod:`slam.matching.icp`).
 Directions the submap does not pin (a corridor's axis) keep the guess. The
 scan is then inserted into the active submaps.
 
@@ -26,13 +26,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from slam.submaps.config import SubmapsConfig
-from slam.submaps.grid import ScorePyramid, score_pyramid
-from slam.submaps.refine import PointMap, point_map, pose_uncertainty, refine
-from slam.loops.local_maps import voxel_first
+from slam.config.submaps import SubmapsConfig
+from slam.matching.grid import ScorePyramid, score_pyramid
+from slam.matching.icp import pose_uncertainty, refine
+from slam.matching.points import PointMap, point_map
+from slam.matching.points import voxel_first
 from slam.submaps.scans import ScanPoints
-from slam.submaps.search import CorrelativeSearch
-from slam.geometry import between, compose, transform_points, wrap_angle
+from slam.matching.search import CorrelativeSearch
+from validation.base.geometry import between, compose, transform_points, wrap_angle
 
 log = logging.getLogger(__name__)
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from slam.loops.local_maps import voxel_first
-from slam.loops.registration import scan_normals
+from slam.matching.points import voxel_first
+from slam.matching.points import scan_normals
 from slam.recording import Scans
 
 
@@ -26,7 +26,7 @@ class ScanPoints:
     def __init__(self, scans: Scans, min_range: float, max_range: float, voxel_m: float,
                  half_window: int = 2, max_gap_m: float = 0.3, min_linearity: float = 0.8,
                  index: np.ndarray | None = None, search_voxel_m: float | None = None):
-        from slam.frontend import ScanProjector
+        from slam.frontend.kiss import ScanProjector
 
         index = np.arange(len(scans)) if index is None else np.asarray(index)
         project = ScanProjector(scans.angles, min_range, min(max_range, scans.range_max))

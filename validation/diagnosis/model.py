@@ -44,7 +44,7 @@ from pathlib import Path
 
 from pydantic import Field, field_validator, model_validator
 
-from validation.yamlio import StrictFrozen, load_yaml, validate_mapping
+from validation.base.yamlio import StrictFrozen, load_yaml, validate_mapping
 
 DEFAULT_PRIOR = 0.01
 """Fault probability of a component the model gives no prior for."""

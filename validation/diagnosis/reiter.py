@@ -37,7 +37,7 @@ from pysat.formula import IDPool
 from pysat.solvers import Solver
 
 from validation.diagnosis.model import Observation, Plausibility, SystemModel
-from validation.errors import ValidationError
+from validation.base.errors import ValidationError
 
 log = logging.getLogger(__name__)
 

@@ -27,32 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from validation.base.geometry import between, wrap_angle
+
 J = np.array([[0.0, -1.0], [1.0, 0.0]])
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    """Angles wrapped to (-pi, pi]."""
-    w = np.mod(np.asarray(a, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
-    return np.where(w == -np.pi, np.pi, w)
-
-
-def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Planar poses ``a * b`` row by row ((n, 3) or (3,))."""
-    a2, b2 = np.atleast_2d(a), np.atleast_2d(b)
-    c, s = np.cos(a2[:, 2]), np.sin(a2[:, 2])
-    out = np.column_stack(
-        [a2[:, 0] + c * b2[:, 0] - s * b2[:, 1], a2[:, 1] + s * b2[:, 0] + c * b2[:, 1], _wrap(a2[:, 2] + b2[:, 2])]
-    )
-    return out[0] if np.ndim(a) == 1 and np.ndim(b) == 1 else out
-
-
-def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``inverse(a) * b`` row by row ((n, 3) or (3,))."""
-    a2, b2 = np.atleast_2d(a), np.atleast_2d(b)
-    c, s = np.cos(a2[:, 2]), np.sin(a2[:, 2])
-    dx, dy = b2[:, 0] - a2[:, 0], b2[:, 1] - a2[:, 1]
-    out = np.column_stack([c * dx + s * dy, -s * dx + c * dy, _wrap(b2[:, 2] - a2[:, 2])])
-    return out[0] if np.ndim(a) == 1 and np.ndim(b) == 1 else out
 
 
 def integrate(start: np.ndarray, deltas: np.ndarray) -> np.ndarray:
@@ -64,7 +41,7 @@ def integrate(start: np.ndarray, deltas: np.ndarray) -> np.ndarray:
     c, s = np.cos(heading), np.sin(heading)
     steps = np.column_stack([c * deltas[1:, 0] - s * deltas[1:, 1], s * deltas[1:, 0] + c * deltas[1:, 1]])
     xy = start[:2] + np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
-    return np.column_stack([xy[:n], _wrap(yaw[:n])])
+    return np.column_stack([xy[:n], wrap_angle(yaw[:n])])
 
 
 @dataclass

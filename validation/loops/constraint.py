@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydantic import Field
-from validation.yamlio import StrictFrozen
+from validation.base.yamlio import StrictFrozen
 
 
 @dataclass

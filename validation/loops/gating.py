@@ -46,7 +46,7 @@ class LoopGating:
 
 def check_model(model) -> None:
     """Loops under validation need LOOP and its check in the model."""
-    from validation.errors import ValidationError
+    from validation.base.errors import ValidationError
 
     if model is None or LOOP_COMPONENT not in model.components or model.unary_checks.get(LOOP_CHECK) != LOOP_COMPONENT:
         raise ValidationError(
@@ -126,7 +126,7 @@ def loop_is_true(loop: LoopConstraint, truth: np.ndarray, max_trans_m: float, ma
     (:func:`pinned_error`); a position-only loop, whose stated
     sigma is usually larger, within three of its sigmas (at least
     ``max_trans_m``)."""
-    from validation.loops.chain import between
+    from validation.base.geometry import between
 
     if position_only(loop):
         sigma = 1.0 / np.sqrt(max(loop.information[0, 0], 1e-12))

@@ -20,10 +20,10 @@ import numpy as np
 import pydantic
 from pydantic import Field, field_validator, model_validator
 
-from validation.errors import ValidationError
+from validation.base.errors import ValidationError
 from validation.streams import is_stream_name, stream_component
 from validation.trends import Rule, Window
-from validation.yamlio import StrictFrozen, load_yaml, validate_mapping
+from validation.base.yamlio import StrictFrozen, load_yaml, validate_mapping
 
 Component = str
 """A component of the system model (checked against the model's list)."""
@@ -245,7 +245,7 @@ class ScanCheckConfig(StrictFrozen):
     ``min_returns`` returns, and for a modality when the smallest eigenvalue
     of its point-to-line information is below ``min_eigenvalue`` and that
     eigenvector's forward, left or turn part exceeds ``min_share`` in size
-    (:mod:`slam.scan_geometry`); the defaults are the simulator's fault
+    (:mod:`slam.frontend.scan_geometry`); the defaults are the simulator's fault
     definition (:mod:`slam.sim.faults`). Off unless enabled: the front-end
     then computes the figures."""
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from validation.errors import ValidationError
+from validation.base.errors import ValidationError
 from validation.observers.config import RelationConfig
 from validation.observers.log import ObserverLog
 from validation.streams import StepStreams, Stream

@@ -74,11 +74,6 @@ def window_changes(t: np.ndarray, v: np.ndarray, valid: np.ndarray, window_s: fl
     return change, whole
 
 
-def wrap_angle(x: np.ndarray | float) -> np.ndarray:
-    """Angles (rad) wrapped to (-pi, pi]."""
-    return np.angle(np.exp(1j * np.asarray(x, dtype=float)))
-
-
 def residual_test(rel: RelationConfig, da: np.ndarray, db: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(z, mismatch)``: the normalised residual of each step and whether it
     exceeds ``k_sigma``."""

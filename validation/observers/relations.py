@@ -54,15 +54,8 @@ from validation.observers.config import (
     RelationConfig,
 )
 from validation.observers.log import ObserverLog, RelationTrace, UnaryTrace
-from validation.observers.quantitative import (
-    RunningLevel,
-    WindowChange,
-    offset_test,
-    residual_test,
-    running_level,
-    window_changes,
-    wrap_angle,
-)
+from validation.observers.quantitative import RunningLevel, WindowChange, offset_test, residual_test, running_level, window_changes
+from validation.base.geometry import wrap_angle
 from validation.observers.sequential import Cusum, cusum
 from validation.streams import StepStreams, Stream, is_angular, resample_streams
 from validation.trends import Rule, Trend, TrendEstimator, TrendSample, Window, abstract_stream

@@ -60,7 +60,7 @@ from typing import Protocol
 
 import numpy as np
 
-from validation.errors import ValidationError
+from validation.base.errors import ValidationError
 from validation.streams.course import gps_course
 from validation.streams.field_gyro import field_change
 from validation.streams.names import (ANGULAR_STREAMS, INTEGRATED_STREAMS, STREAM_COMPONENT, STREAM_NAMES,  # noqa: F401

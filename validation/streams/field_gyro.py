@@ -28,7 +28,7 @@ The gyro's bias turns ``w`` slowly (0.5 deg/s turns a 15 uT horizontal
 field by 0.13 uT a second) and the magnetometer's calibration error moves
 it as the sensor turns; both set the tolerance, which ``gslam calibrate``
 learns. The two sensors' samples must be on one clock: a 12 ms lag turns a
-40 uT field by 5 uT at 10 rad/s (:mod:`slam.io.broad`).
+40 uT field by 5 uT at 10 rad/s (:mod:`slam.readers.broad`).
 """
 
 from __future__ import annotations

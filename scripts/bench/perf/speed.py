@@ -50,7 +50,7 @@ from pathlib import Path
 
 from scripts.bench.common import simulated, table
 from slam.errors import GslamError
-from slam.io.atomic import write_text
+from slam.results.atomic import write_text
 
 ROOT = Path(__file__).resolve().parents[3]
 SEED = 5

@@ -3,9 +3,9 @@
 Sections (every figure is the median of ``--repeats`` runs unless stated):
 
 * ``ratio``: on ``telemax_lab`` (seed 1), the full gated pipeline
-  (:func:`slam.pipeline.run_map` with ``--gating on``: read, KISS-ICP,
+  (:func:`slam.pipeline.folder.run_map` with ``--gating on``: read, KISS-ICP,
   validation, graph, optimisation, evaluation, writing with plots) against
-  KISS-ICP alone (:class:`slam.frontend.ScanMatcher` over the same scans,
+  KISS-ICP alone (:class:`slam.frontend.kiss.ScanMatcher` over the same scans,
   points prepared the same way), taking turns in this one process, with
   and without plots; the real-time factor (data seconds per wall second) and
   the pipeline's split into reading, front-end, validation, graph building,
@@ -96,7 +96,7 @@ class Report:
 def kiss_icp_alone(scans, config) -> float:
     """Wall time (s) of KISS-ICP over every scan, points prepared as the
     pipeline prepares them."""
-    from slam.frontend import ScanMatcher, ScanProjector
+    from slam.frontend.kiss import ScanMatcher, ScanProjector
 
     start = time.perf_counter()
     matcher = ScanMatcher(config, scans.range_max)
@@ -110,8 +110,8 @@ RATIO_VARIANTS = {"gating on": ["validation.mode=on"], "gating on, no plots": ["
 
 
 def bench_ratio(report: Report, cache: Path, out: Path, repeats: int) -> None:
-    from slam.io.readers import read_recording
-    from slam.pipeline import run_map
+    from slam.readers.read import read_recording
+    from slam.pipeline.folder import run_map
 
     run = simulated(cache, "telemax_lab", SEED)
     configs = {name: load_config(CONFIG, sets) for name, sets in RATIO_VARIANTS.items()}
@@ -184,7 +184,7 @@ def bench_cli(report: Report, cache: Path, out: Path, repeats: int) -> None:
 
 def _child_map(run: str, out: str) -> None:
     """In a fresh process: map one run and print its metrics as JSON."""
-    from slam.pipeline import run_map
+    from slam.pipeline.folder import run_map
 
     t = time.perf_counter()
     result = run_map(run, load_config(CONFIG, ["validation.mode=on"]), out)
@@ -261,20 +261,21 @@ def bench_growth(report: Report, cache: Path, out: Path, laps: list[int], repeat
 def bench_isam2(report: Report, cache: Path, out: Path, laps: int, repeats: int) -> None:
     import gtsam
 
-    from slam.backend import optimise
-    from slam.evaluation import evaluate
-    from slam.pipeline import MappingPipeline
+    from slam.graph.backend import optimise
+    from slam.outputs.evaluation import evaluate
+    from slam.outputs.loops import loop_metrics
+    from slam.pipeline.core import Mapping
+    from slam.readers.read import read_recording
 
     run = simulated(cache, "telemax_loop", SEED, laps)
     cfg = load_config(CONFIG, ["validation.mode=on", "backend.optimizer=isam2", "keyframes.period_s=0.5",
                               "loops.enabled=true"])
-    pipe = MappingPipeline(run, cfg, out / "isam2")
-    pipe.read()
+    pipe = Mapping(read_recording(run, cfg.input), cfg, source=run)
     pipe.match_scans()
     pipe.build_measurements()
     pipe.validate()
     meas, n = pipe.measurements, len(pipe.measurements)
-    pose0 = pipe._initial_pose()
+    pose0 = pipe.initial_pose()
     batch = optimise(meas, pose0, cfg.backend.model_copy(update={"optimizer": "batch"}), pipe.weights).trajectory
     gt, ev = pipe.recording.groundtruth, cfg.evaluation
 
@@ -283,9 +284,9 @@ def bench_isam2(report: Report, cache: Path, out: Path, laps: int, repeats: int)
 
     report.add("isam2", "batch", "ate_rmse", ate(batch), "m")
     start = time.perf_counter()
-    pipe.close_loops()
+    pipe.judge_loops(pipe.find_loops())
     loops_s = time.perf_counter() - start
-    lm = pipe._loop_metrics()
+    lm = loop_metrics(pipe.loop_search, pipe.loop_observation, pipe.keyframe_truth(), cfg.evaluation)
     batch_loops = optimise(meas, pose0, cfg.backend.model_copy(update={"optimizer": "batch"}), pipe.weights,
                            loops=pipe.loop_factors).trajectory
     rows = []
@@ -384,7 +385,7 @@ def time_diagnosis(model, patterns: list[dict], repeats: int) -> tuple[float, fl
 
 def bench_diagnosis(report: Report, cache: Path, out: Path, repeats: int) -> None:
     from slam.config import validation_sections
-    from slam.pipeline import run_map
+    from slam.pipeline.folder import run_map
 
     rows = []
     cfg = load_config(CONFIG, ["validation.mode=on", "output.plots=false"])

@@ -1,0 +1,1 @@
+"""The commands behind gslam: compare, demo, inspect, calibrate, ablate, inject."""

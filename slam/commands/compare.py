@@ -1,0 +1,243 @@
+"""Several variants of the pipeline on the same run: ungated, gated, oracle
+and robust-kernel baselines (``gslam compare``).
+
+The run is read and scan-matched once; each variant is a normal result
+folder ``OUT/<variant>/`` as ``gslam map`` writes it. ``OUT`` follows the
+rule of :mod:`slam.results.outdir` and is built whole beside its place. Beside
+the variants:
+``comparison.csv`` and ``comparison.md`` (one row per variant; the runtime
+counts reading and scan matching for every variant, though they run once),
+the figures a reader of the paper expects (trajectories over ground truth,
+compass-yaw trends, observer alarms over the true fault intervals), and
+``report.html``, all of it and each variant's map on one page
+(``output.report``; :mod:`slam.outputs.report`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from slam.config import PipelineConfig, config_files, load_config
+from validation.base.yamlio import load_yaml
+from slam.errors import GslamError
+from validation.base.errors import InputError
+from slam.results.outdir import result_folder
+from slam.results.records import PLAIN_NAME, PLAIN_NAME_RULE
+from slam.pipeline.folder import RESULT_FILES, MapResult, MappingPipeline
+from slam.outputs.report import Figure, Section, Table, write_report
+from slam.resources import shipped_config
+
+log = logging.getLogger(__name__)
+
+COMPARE_FILES = ("comparison.csv", "comparison.md", "report.html", "trajectories.png", "trajectories_full.png",
+                 "compass_trends.png", "observer_alarms.png")
+"""The files of a comparison beside its variants' folders."""
+
+COLUMNS: tuple[tuple[str, str, str], ...] = (
+    # (metric key, column header, format)
+    ("ate_rmse_m", "ATE RMSE [m]", "{:.3f}"),
+    ("ate_rmse_unaligned_m", "ATE unaligned [m]", "{:.3f}"),
+    ("rpe_trans_pct", "RPE trans [%]", "{:.2f}"),
+    ("rpe_rot_deg_per_m", "RPE rot [deg/m]", "{:.4f}"),
+    ("final_error_m", "final error [m]", "{:.3f}"),
+    ("yaw_rmse_deg", "yaw RMSE [deg]", "{:.2f}"),
+    ("runtime_with_shared_s", "runtime [s]", "{:.2f}"),
+    ("alarm_fraction", "alarm fraction", "{:.3f}"),
+    ("isolation_precision", "isolation precision", "{:.3f}"),
+    ("isolation_recall", "isolation recall", "{:.3f}"),
+)
+
+
+@dataclass
+class CompareResult:
+    """The comparison folder, each variant's result, and the seconds
+    ``report.html`` took (0 without one)."""
+
+    out_dir: Path
+    results: dict[str, MapResult]
+    report_s: float = 0.0
+
+    def table(self) -> list[dict[str, Any]]:
+        rows = []
+        for name, res in self.results.items():
+            row = {"variant": name}
+            row.update({key: res.metrics.get(key) for key, _, _ in COLUMNS})
+            rows.append(row)
+        return rows
+
+
+def load_variants(path: str | Path, only: list[str] | None = None) -> dict[str, list[str]]:
+    """Variants from YAML: name -> mapping of dotted overrides."""
+    data = load_yaml(path, "config")
+    variants: dict[str, list[str]] = {}
+    for key, overrides in data.items():
+        name = str(key)
+        if not PLAIN_NAME.fullmatch(name) or name in COMPARE_FILES:
+            raise GslamError(f"{path}: variant {name!r}: a variant's name names its result folder: {PLAIN_NAME_RULE}, "
+                             f"other than {', '.join(COMPARE_FILES)}")
+        if not isinstance(overrides, dict):
+            raise GslamError(f"{path}: variant '{name}': expected a mapping of dotted.key: value")
+        variants[name] = [f"{k}={_yaml_scalar(v)}" for k, v in overrides.items()]
+    if only:
+        unknown = [n for n in only if n not in variants]
+        if unknown:
+            raise GslamError(f"{path}: unknown variant '{unknown[0]}' (known: {', '.join(variants)})")
+        variants = {n: variants[n] for n in only}
+    if not variants:
+        raise GslamError(f"{path}: no variants")
+    return variants
+
+
+def _yaml_scalar(value: Any) -> str:
+    """``value`` as YAML text that parses back to it (for a ``--set``)."""
+    if isinstance(value, str):
+        return value
+    return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
+
+
+def _table(rows: list[dict[str, Any]]) -> Table:
+    """The comparison table's headers and formatted cells."""
+    headers = ["variant"] + [h for _, h, _ in COLUMNS]
+    cells = [[row["variant"]] + ["–" if row.get(k) is None else fmt.format(row[k]) for k, _, fmt in COLUMNS]
+             for row in rows]
+    return Table(headers, cells)
+
+
+def _markdown(rows: list[dict[str, Any]], title: str) -> str:
+    table = _table(rows)
+    lines = [f"# {title}", "", "| " + " | ".join(table.headers) + " |", "|" + "---|" * len(table.headers)]
+    lines += ["| " + " | ".join(cells) + " |" for cells in table.rows]
+    return "\n".join(lines) + "\n"
+
+
+def _csv(rows: list[dict[str, Any]]) -> str:
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=["variant"] + [k for k, _, _ in COLUMNS], lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return out.getvalue()
+
+
+def run_compare(
+    input_path: str | Path,
+    config_path: str | Path,
+    out_dir: str | Path,
+    variants_path: str | Path | None = None,
+    only: list[str] | None = None,
+    overrides: list[str] | None = None,
+    progress: bool = False,
+    force: bool = False,
+) -> CompareResult:
+    """Run every variant on ``input_path``; see the module docstring.
+    ``variants_path``: default the shipped ``configs/variants.yaml``;
+    ``force``: see :mod:`slam.results.outdir`."""
+    out_dir = Path(out_dir)
+    variants_path = Path(variants_path) if variants_path is not None else shipped_config("variants.yaml")
+    variants = load_variants(variants_path, only)
+    base = load_config(config_path, overrides or [])  # errors of the config and --set first
+    configs = {name: _variant_config(config_path, overrides or [], variants_path, name, ov) for name, ov in variants.items()}
+    names = [*COMPARE_FILES, *(f"{v}/{f}" for v in variants for f in RESULT_FILES)]
+    inputs = [input_path, *config_files(config_path), variants_path]
+    with result_folder(out_dir, "compare", inputs, force, names) as tmp:
+        results, recording = _run_variants(input_path, configs, tmp, progress)
+        result = CompareResult(tmp, results)
+        rows = result.table()
+        (tmp / "comparison.csv").write_text(_csv(rows))
+        (tmp / "comparison.md").write_text(_markdown(rows, f"{recording.name}: variants compared"))
+        _figures(tmp, results, recording)
+        report_s = _report(tmp, rows, recording.name) if base.output.report else 0.0
+    for name, res in results.items():
+        res.out_dir = out_dir / name
+    return CompareResult(out_dir, results, report_s)
+
+
+def _variant_config(config_path, overrides: list[str], variants_path: Path, name: str, ov: list[str]) -> PipelineConfig:
+    try:
+        return load_config(config_path, [*overrides, *ov])
+    except InputError as e:
+        message = str(e)
+        for text in ov:  # the variant's own keys: blame the variants file
+            message = message.replace(f"--set {text}: ", f"{text}: ")
+        raise GslamError(f"{variants_path}: variant '{name}': {message}") from None
+
+
+def _run_variants(
+    input_path: str | Path, configs: dict[str, PipelineConfig], folder: Path, progress: bool
+) -> tuple[dict[str, MapResult], object]:
+    """Each variant into ``folder/<name>``, sharing reading and scan matching.
+
+    matplotlib is imported here once: the comparison's figures need it, and
+    each variant's figures are drawn by a process forked from this one
+    (slam.outputs.result_writer), which then starts with it loaded."""
+    import slam.outputs.plots  # noqa: F401
+
+    recording, frontend, frontend_cfg = None, None, None
+    shared_s = 0.0
+    results: dict[str, MapResult] = {}
+    for name, cfg in configs.items():
+        if frontend_cfg is not None and cfg.frontend != frontend_cfg:
+            frontend = None  # this variant changes the front-end: match again
+        pipe = MappingPipeline(input_path, cfg, folder / name, progress=progress, recording=recording, frontend=frontend)
+        results[name] = res = pipe.run()
+        timings = res.metrics.get("timings_s", {})
+        if recording is None or frontend is None:
+            shared_s = timings.get("read", 0.0) + timings.get("frontend", 0.0)
+            res.metrics["runtime_with_shared_s"] = res.metrics["runtime_s"]
+        else:  # reading and scan matching were reused: count them in
+            res.metrics["runtime_with_shared_s"] = round(res.metrics["runtime_s"] + shared_s, 4)
+        recording, frontend, frontend_cfg = pipe.recording, pipe.frontend, cfg.frontend
+        log.info("%s: ATE %s m", name, results[name].metrics.get("ate_rmse_m"))
+    return results, recording
+
+
+def _report(folder: Path, rows: list[dict[str, Any]], name: str) -> float:
+    """``report.html``: the table, the comparison's figures and each
+    variant's map; the seconds it took."""
+    t = time.perf_counter()
+    variants = [row["variant"] for row in rows]
+    sections = [
+        Section("Variants compared", "Runtime counts reading and scan matching for every variant, though they "
+                "run once. Each variant's result folder holds its files (trajectory.tum, metrics.json, map.pgm, "
+                "run.mcap).", tables=[_table(rows)]),
+        Section("Trajectories", figures=[
+            Figure(folder / "trajectories.png", "every variant over the reference, around it"),
+            Figure(folder / "trajectories_full.png", "every variant over the reference, whole"),
+        ]),
+        Section("Yaw trends (the paper's Fig. 2)", "The gated variant's yaw streams and their trend symbols.",
+                figures=[Figure(folder / "compass_trends.png", "yaw streams and trends")]),
+        Section("Observer timelines (the paper's Fig. 3)", "The gated variant's observer alarms and blamed "
+                "sensors over the true faults.", figures=[Figure(folder / "observer_alarms.png", "observers")]),
+        Section("Maps", "Each variant's occupancy grid and trajectory (map.png).", small=True,
+                figures=[Figure(folder / v / "map.png", v) for v in variants]),
+    ]
+    write_report(folder / "report.html", f"{name}: variants compared", sections)
+    elapsed = time.perf_counter() - t
+    log.info("report.html in %.2f s", elapsed)
+    return elapsed
+
+
+def _figures(out: Path, results: dict[str, MapResult], recording) -> None:
+    from slam.outputs.plots import fault_shading, plot_trajectories
+    from slam.outputs.validation_figures import plot_observer_alarms, plot_yaw_trends
+
+    shaded = fault_shading(recording.faults)
+    trajectories = {name: r.trajectory for name, r in results.items()}
+    title = f"{recording.name}: variants over the reference"
+    on_top = [name for name in ("oracle", "gated") if name in trajectories]
+    plot_trajectories(out / "trajectories.png", trajectories, recording.groundtruth, title, shaded,
+                      zoom_margin=0.25, highlight=on_top)
+    plot_trajectories(out / "trajectories_full.png", trajectories, recording.groundtruth, title, shaded,
+                      highlight=on_top)
+    gated = results.get("gated")
+    validation = gated.validation if gated is not None else None
+    if validation is not None and validation.observer_log is not None:
+        plot_yaw_trends(out / "compass_trends.png", recording, validation)
+        plot_observer_alarms(out / "observer_alarms.png", recording, validation)

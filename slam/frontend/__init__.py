@@ -1,0 +1,1 @@
+"""Laser front-end: scans prepared and registered by KISS-ICP, in a second process beside reading."""

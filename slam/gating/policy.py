@@ -1,0 +1,170 @@
+"""One gating policy per ``validation.mode``, chosen in one place.
+
+Every step of a run that depends on the mode asks its policy
+(:func:`gating_policy`); no other code compares the mode:
+
+* :meth:`Gating.weigh`: the weight of every factor's degrees of freedom per
+  keyframe (1 kept, > 1 inflated, inf excluded), with what the validator
+  logged;
+* :attr:`Gating.learns_scale`: whether the odometry's distance scale is
+  learnt where validation keeps the scan matcher (:mod:`slam.gating.odometry_scale`);
+* :meth:`Gating.recheck`: offline validation's recheck of the blamed
+  measurements (:mod:`slam.gating.recheck`);
+* :meth:`Gating.gate_loops`: how the loops' verdicts are gated (LOOP in the
+  diagnosis, or ground truth for the tight oracle).
+
+The four policies: :class:`Ungated` (``off``), :class:`Validated` (``on``),
+:class:`TightOracle` (``oracle``, from ground truth) and
+:class:`IntervalOracle` (``interval_oracle``, from the true fault intervals).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from slam.config import PipelineConfig, validation_sections
+from slam.errors import GslamError
+from slam.graph.measurements import FACTOR_DOFS, Measurements
+from slam.recording import Recording, Trajectory
+from validation.base.modes import GatingMode
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Weighing:
+    """What a policy decided for a run: the weights per factor type
+    (keyframes, degrees of freedom), the validator's outcome where it ran,
+    metrics, and ``validation.csv`` (text, or a function that writes it)."""
+
+    weights: dict[str, np.ndarray]
+    validation: Any = None
+    metrics: dict[str, Any] = field(default_factory=dict)
+    csv: str | Callable[[], str] | None = None
+
+
+class Gating:
+    """The ungated policy, and the interface of every other."""
+
+    mode = GatingMode.OFF
+    learns_scale = False
+
+    def __init__(self, config: PipelineConfig):
+        self.config = config
+        self.validation, self.gating = validation_sections(config)
+
+    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path) -> Weighing:
+        from slam.graph.backend import unit_weights
+
+        return Weighing(unit_weights(len(meas)))
+
+    def recheck(self, meas: Measurements, weights: dict[str, np.ndarray], pose0: np.ndarray):
+        """The recheck's result (:class:`slam.gating.recheck.Recheck`), or
+        None where the policy does not recheck."""
+        return None
+
+    def gate_loops(self, obs, weighing: Weighing, keyframe_t: np.ndarray, truth: np.ndarray | None) -> None:
+        """Gate the loops' verdicts ``obs`` in place."""
+
+
+class Ungated(Gating):
+    """``off``: every factor enters with its configured noise."""
+
+
+class _ByValidator(Gating):
+    """The policies whose weights the validator computes."""
+
+    learns_scale = True
+
+    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path) -> Weighing:
+        from validation.validator import run_validation
+
+        outcome = run_validation(rec, scan_poses, meas.t, self.validation, self.gating, FACTOR_DOFS, rec.faults,
+                                 rec.magnetic_reference, self.scan_quality(rec, scan_poses))
+        return Weighing(outcome.weights, outcome, csv=outcome.csv_text)
+
+    def scan_quality(self, rec: Recording, scan_poses: Trajectory | None):
+        return None
+
+
+class Validated(_ByValidator):
+    """``on``: sensor validation gates the factors (offline or causal)."""
+
+    mode = GatingMode.ON
+
+    def scan_quality(self, rec: Recording, scan_poses: Trajectory | None):
+        if not self.validation.observers.scan.enabled or scan_poses is None:
+            return None
+        from slam.frontend.kiss import scan_quality
+
+        return scan_quality(rec.scans, self.config.frontend)
+
+    def recheck(self, meas: Measurements, weights: dict[str, np.ndarray], pose0: np.ndarray):
+        if not self.validation.offline:
+            return None
+        from slam.gating.recheck import recheck
+
+        return recheck(meas, weights, pose0, self.config.backend, self.gating)
+
+    def gate_loops(self, obs, weighing: Weighing, keyframe_t: np.ndarray, truth: np.ndarray | None) -> None:
+        from validation.loops.gating import gate_loops
+
+        outcome = weighing.validation
+        gated = gate_loops(obs, outcome.step_t, keyframe_t, self.validation.model, self.gating, self.validation.offline)
+        outcome.extra_columns.update(gated.columns())
+
+
+class IntervalOracle(_ByValidator):
+    """``interval_oracle``: each component's factors gated over its true
+    fault intervals, right or wrong."""
+
+    mode = GatingMode.INTERVAL_ORACLE
+
+    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path) -> Weighing:
+        if not any(rec.faults.values()):
+            log.info("oracle gating without true fault intervals: nothing will be gated")
+        return super().weigh(rec, scan_poses, meas, source)
+
+
+class TightOracle(Gating):
+    """``oracle``: exactly the measurements (per degree of freedom) wrong by
+    more than ``oracle_k_sigma`` sigmas against the ground truth are
+    excluded; loops are judged against it too."""
+
+    mode = GatingMode.ORACLE
+    learns_scale = True
+
+    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path) -> Weighing:
+        from slam.gating.truth import tight_oracle_weights
+
+        if rec.groundtruth is None:
+            raise GslamError(f"{source}: validation.mode oracle needs ground truth; the input has none")
+        oracle = tight_oracle_weights(meas, rec.groundtruth, self.validation.oracle_k_sigma)
+        return Weighing(oracle.weights, None, oracle.metrics(), oracle.csv_text())
+
+    def gate_loops(self, obs, weighing: Weighing, keyframe_t: np.ndarray, truth: np.ndarray | None) -> None:
+        from validation.loops.gating import oracle_loops
+
+        if truth is None:
+            log.info("oracle gating without ground truth: loops are kept as the loop observer decided")
+            return
+        ev = self.config.evaluation
+        oracle_loops(obs, truth, ev.sm_fault_trans_m, np.radians(ev.sm_fault_yaw_deg))
+
+
+POLICIES: dict[GatingMode, type[Gating]] = {
+    GatingMode.OFF: Ungated,
+    GatingMode.ON: Validated,
+    GatingMode.ORACLE: TightOracle,
+    GatingMode.INTERVAL_ORACLE: IntervalOracle,
+}
+
+
+def gating_policy(config: PipelineConfig) -> Gating:
+    """The policy of ``config``'s ``validation.mode``."""
+    return POLICIES[validation_sections(config)[0].mode](config)

@@ -1,1 +1,0 @@
-"""Reading recorded runs and writing results."""

@@ -1,0 +1,1 @@
+"""One run end to end: the in-memory core and the result folder around it."""

@@ -1,0 +1,21 @@
+"""Reading a recording's text logs: one-line errors for what is not text."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from slam.errors import GslamError
+
+
+def decode_log(data: bytes, source: str | Path, what: str) -> str:
+    """The text of a log whose fields are ASCII numbers and words (CARMEN,
+    libRSF): a byte-order mark dropped, a stray byte that is not UTF-8 (a
+    Latin-1 host name or comment) kept as U+FFFD, so that only a field that
+    is read can fail, at its line. NUL bytes, or mostly undecodable bytes,
+    are binary content."""
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    text = data.decode("utf-8", errors="replace")
+    if "\0" in text or text.count("\ufffd") > 0.1 * max(len(text), 1):
+        raise GslamError(f"{source}: cannot read: not a {what} (binary content)")
+    return text

@@ -1,0 +1,118 @@
+"""A ROS 2 sqlite3 bag read with the standard library, where that is exact.
+
+Opening a bag with rosbags costs a fifth of a second before the first
+message: importing it, building a type store and parsing the bag's
+metadata. For the common case, a rosbag2 folder of one uncompressed
+``.db3`` file whose topics carry the standard message definitions, the
+raw CDR bytes of a topic are one SQL query away, and :mod:`slam.readers.cdr`
+decodes them in bulk. :func:`open_plain` says whether a bag is that case;
+:meth:`PlainBag.raw` returns a topic's messages in the order rosbags
+gives them (by receive time, ties in the order written).
+
+A topic qualifies only if its type's RIHS01 hash (REP-2011, stored by
+rosbag2 since ROS 2 Iron) is the hash of the standard definition
+(:data:`STANDARD_HASHES`): the definition the bulk decoder assumes, so no
+cross-check with rosbags is needed. Bags without hashes (Humble and
+older), compressed, split or MCAP bags, and foreign types are read with
+rosbags. The file is opened read-only.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from slam.errors import GslamError
+from validation.base.yamlio import SAFE_LOADER
+
+# RIHS01 hashes of the standard definitions (ROS 2 Iron, Jazzy and later;
+# tests/test_rosbag2_sqlite.py checks them against rosbags' type stores).
+STANDARD_HASHES = {
+    "sensor_msgs/msg/LaserScan": "RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828",
+    "sensor_msgs/msg/Imu": "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b",
+    "sensor_msgs/msg/MagneticField": "RIHS01_e80f32f56a20486c9923008fc1a1db07bbb273cbbf6a5b3bfa00835ee00e4dff",
+    "nav_msgs/msg/Odometry": "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0",
+    "geometry_msgs/msg/PoseStamped": "RIHS01_10f3786d7d40fd2b54367835614bff85d4ad3b5dab62bf8bca0cc232d73b4cd8",
+    "sensor_msgs/msg/NavSatFix": "RIHS01_62223ab3fe210a15976021da7afddc9e200dc9ec75231c1b6a557fc598a65404",
+}
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One topic of a plain bag: its id in the file and its message type."""
+
+    id: int
+    msgtype: str
+
+
+class PlainBag:
+    """An open plain bag (see :func:`open_plain`); close it after use."""
+
+    def __init__(self, db: Path, conn: sqlite3.Connection, topics: dict[str, Topic]):
+        self.db = db
+        self.topics = topics
+        self._conn = conn
+
+    def raw(self, topic: str) -> list[bytes]:
+        """The CDR bytes of every message on ``topic``, in rosbags' order."""
+        query = "SELECT data FROM messages WHERE topic_id = ? ORDER BY timestamp, id"
+        try:
+            return [bytes(data) for (data,) in self._conn.execute(query, (self.topics[topic].id,))]
+        except sqlite3.Error as err:
+            raise GslamError(f"{self.db}: corrupt bag ({err})") from None
+
+    def close(self) -> None:
+        self._conn.close()
+
+
+def open_plain(path: Path) -> PlainBag | None:
+    """``path`` (a rosbag2 folder) as a :class:`PlainBag`, or None when
+    rosbags must read it (see the module docstring). Never raises for a
+    bag rosbags may still read: anything unexpected means None."""
+    try:
+        return _open_plain(path)
+    except (OSError, sqlite3.Error, yaml.YAMLError, KeyError, TypeError, ValueError, AttributeError):
+        return None
+
+
+def _open_plain(path: Path) -> PlainBag | None:
+    meta_file = path / "metadata.yaml"
+    if not path.is_dir() or not meta_file.is_file():
+        return None
+    info = yaml.load(meta_file.read_text(), Loader=SAFE_LOADER)["rosbag2_bagfile_information"]
+    files = info.get("relative_file_paths") or []
+    if info.get("storage_identifier") != "sqlite3" or info.get("compression_mode") or len(files) != 1:
+        return None
+    db = path / files[0]
+    if db.suffix != ".db3" or not db.is_file():
+        return None
+    conn = sqlite3.connect(f"{db.resolve().as_uri()}?mode=ro", uri=True)
+    try:
+        topics = _standard_topics(conn)
+    except BaseException:
+        conn.close()
+        raise
+    if topics is None:
+        conn.close()
+        return None
+    return PlainBag(db, conn, topics)
+
+
+def _standard_topics(conn: sqlite3.Connection) -> dict[str, Topic] | None:
+    """The topics of the bag open on ``conn`` that carry a standard
+    definition, or None when rosbags must read the bag."""
+    columns = {row[1] for row in conn.execute("PRAGMA table_info(topics)")}
+    if "type_description_hash" not in columns:
+        return None
+    rows = conn.execute("SELECT id, name, type, serialization_format, type_description_hash FROM topics").fetchall()
+    names = [row[1] for row in rows]
+    if len(set(names)) != len(names):  # a topic with two types or connections: rosbags sorts that out
+        return None
+    return {
+        name: Topic(int(topic_id), msgtype)
+        for topic_id, name, msgtype, fmt, type_hash in rows
+        if fmt == "cdr" and STANDARD_HASHES.get(msgtype) == type_hash
+    }

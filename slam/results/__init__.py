@@ -1,0 +1,1 @@
+"""Where results go: the --out rule, result markers, temporary folders and atomic writes."""

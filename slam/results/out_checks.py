@@ -1,0 +1,175 @@
+"""The checks of the output rule (:mod:`slam.results.outdir`), made before
+anything is written: the path itself, the command's inputs, what stands at
+``--out`` and at the names the command writes, and the free space."""
+
+from __future__ import annotations
+
+import errno
+import os
+import stat
+from collections.abc import Iterable
+from enum import Enum
+from pathlib import Path
+
+from slam.errors import GslamError
+from slam.results.records import MARKERS, RESULT_MARKER, Record, in_the_way, result_command, result_input
+from validation.base.yamlio import special_file
+
+_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+class Existing(Enum):
+    """What ``--out`` is before the command runs."""
+
+    NEW = "new"  # nothing there, or an empty folder
+    SAME = "same"  # an earlier result of this command
+    FORCED = "forced"  # a folder that is not such a result, with force
+
+
+# --- checks shared by every output -------------------------------------------------
+
+
+def refuse(out: Path | str, why: str, flag: str = "--out") -> GslamError:
+    return GslamError(f"{out}: {flag} {why}")
+
+
+def check_out_path(out: str | Path, flag: str = "--out") -> Path:
+    """The checks that need no command: not empty, not a symbolic link, a
+    device, a pipe or a socket, not the root. Returns ``out`` as a path."""
+    if isinstance(out, str) and not out.strip():
+        raise GslamError(f"{flag} is empty; give a path (an unset shell variable?)")
+    out = Path(out)
+    try:
+        mode = out.lstat().st_mode
+    except OSError:
+        mode = None
+    if mode is not None and stat.S_ISLNK(mode):
+        raise refuse(out, "is a symbolic link; give the place it points to, or a new name", flag)
+    if mode is not None and special_file(mode):
+        raise refuse(out, f"is {special_file(mode)}, not a regular file or folder; give a new name", flag)
+    if out.resolve().parent == out.resolve():
+        raise refuse(out, "is the file system root; give a new folder name", flag)
+    return out
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_inputs(out: Path, target: Path, inputs: Iterable[str | Path], flag: str = "--out") -> None:
+    """``target`` must not be an input, hold one, or lie inside an input folder."""
+    for given in inputs:
+        if given is None or str(given) == "":
+            continue
+        path = Path(given)
+        if not path.exists():
+            continue
+        p = path.resolve()
+        if p == target or _same_file(p, target):
+            raise refuse(out, f"is the input {given}; give a new name", flag)
+        if target in p.parents:
+            raise refuse(out, f"holds the input {given}; give a new folder name", flag)
+        if p.is_dir() and (p in target.parents or any(_same_file(p, a) for a in target.parents)):
+            raise refuse(out, f"is inside the input folder {given}; give a place elsewhere", flag)
+
+
+def classify(out: str | Path, command: str, inputs: Iterable[str | Path] = (), force: bool = False) -> Existing:
+    """Check a result folder ``out`` against the rule of the module
+    docstring, without writing anything; a one-line :class:`GslamError` if
+    it is refused."""
+    inputs = list(inputs)
+    out = check_out_path(out)
+    target = out.resolve()
+    check_inputs(out, target, inputs)
+    if not out.exists():
+        return Existing.NEW
+    if not out.is_dir():
+        raise refuse(out, "exists and is not a folder; give a new folder name")
+    found = result_command(out)
+    if found == command:
+        earlier, now = result_input(out), source_of(inputs)
+        if earlier is not None and now is not None and earlier != now and not force:
+            raise refuse(out, f"holds the gslam {command} result of {earlier}, not of {now}; give a new folder "
+                               "name, or --force to replace it")
+        return Existing.SAME
+    if not any(out.iterdir()):
+        return Existing.NEW
+    if force:
+        return Existing.FORCED
+    what = f"a gslam {found} result, not a {command} result" if found else f"not a gslam {command} result (no {RESULT_MARKER})"
+    raise refuse(
+        out, f"is a folder that is {what}; give a new folder name, or --force to add the {command} files "
+        "to it (nothing of yours there is replaced)"
+    )
+
+
+def source_of(inputs: Iterable[str | Path]) -> str | None:
+    """The input a result is made from, as its marker records it: the
+    first of a command's inputs, as an absolute path."""
+    for given in inputs:
+        if given is None or str(given) == "":
+            return None
+        return str(Path(given).resolve())
+    return None
+
+
+def check_free(out: Path, folder: Path, need_bytes: int | None) -> None:
+    if not need_bytes:
+        return
+    try:
+        st = os.statvfs(folder)
+    except OSError:
+        return
+    if st.f_blocks == 0:  # a file system that does not say (proc, some network ones)
+        return
+    free = st.f_bavail * st.f_frsize
+    if free < need_bytes:
+        raise refuse(out, f"needs about {_mb(need_bytes)} and {folder} has {_mb(free)} free; free some space "
+                           "or give a place on another disk")
+
+
+def _mb(n: int) -> str:
+    return f"{n / 2**20:.1f} MB" if n < 2**30 else f"{n / 2**30:.1f} GB"
+
+
+def disk_full(e: OSError) -> bool:
+    """The error of a full disk or quota (or a file size limit)."""
+    return e.errno in _FULL
+
+
+def make_parents(out: Path, folder: Path) -> list[Path]:
+    """Create the missing ancestors of ``folder``; the created ones, deepest first."""
+    missing = []
+    p = folder
+    while not p.exists():
+        missing.append(p)
+        p = p.parent
+    for p in reversed(missing):
+        try:
+            p.mkdir()
+        except FileExistsError:
+            pass
+        except OSError as e:
+            remove_empty(missing)
+            raise refuse(out, f"cannot be created: {p} ({e.strerror})") from None
+    return missing
+
+
+def remove_empty(folders: list[Path]) -> None:
+    for p in folders:  # deepest first
+        try:
+            p.rmdir()
+        except OSError:
+            pass
+
+
+def check_names(out: Path, target: Path, command: str, names: Iterable[str], record: Record | None,
+                 what: str = "may write") -> None:
+    names = [n for n in names if n not in MARKERS]
+    blocked = in_the_way(target, names, record)
+    if blocked is not None:
+        raise refuse(out, f"holds {blocked}, which gslam {command} {what} and did not write; nothing was "
+                           "written: move it, or give another folder")

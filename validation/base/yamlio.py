@@ -1,0 +1,196 @@
+"""Reading the validation package's YAML files (models, observer configs)
+into typed models.
+
+The one loader of the package: a file that is not readable text or not a
+YAML mapping is a one-line :class:`ValidationError` naming the file and,
+where the parser knows it, the line.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+from typing import Any, TypeVar
+
+import pydantic
+import yaml
+from pydantic import BaseModel, ConfigDict
+
+from validation.base.errors import ValidationError
+
+# libyaml's parser where PyYAML was built with it (ten times faster), the same safe constructor.
+SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+MAX_TEXT_BYTES = 64 * 2**20
+"""Largest text file read whole (a config, a scenario, a sidecar): far
+above any real one, far below what would exhaust the memory."""
+MAX_YAML_VALUES = 1_000_000
+"""Most values a YAML file may expand to: aliases can make a few lines
+expand to billions (a "billion laughs" file), which no config needs."""
+_BOM = b"\xef\xbb\xbf"
+
+
+def special_file(mode: int) -> str | None:
+    """What a file that is neither a regular file nor a folder is (``a
+    named pipe``, ``a device``, ``a socket``), else None."""
+    for test, name in ((stat.S_ISFIFO, "a named pipe"), (stat.S_ISCHR, "a device"), (stat.S_ISBLK, "a device"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return None
+
+
+def check_regular_file(path: str | Path, what: str = "file") -> int:
+    """The size of ``path`` (bytes) if it is a regular file (or a link to
+    one); a one-line :class:`ValidationError` for anything else, before it
+    is opened (reading a named pipe would wait forever)."""
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        raise ValidationError(f"{path}: cannot read {what} ({e.strerror})") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise ValidationError(f"{path}: cannot read {what} (a folder; expected a file)")
+    special = special_file(st.st_mode)
+    if special is not None:
+        raise ValidationError(f"{path}: cannot read {what}: it is {special}, not a regular file")
+    return st.st_size
+
+
+def decode_text(data: bytes, source: str, what: str = "file", kind: str = "text") -> str:
+    """UTF-8 text (a leading byte-order mark dropped), with a one-line
+    error that says what the bytes are: binary, UTF-16, or text with a byte
+    that is not UTF-8 (Latin-1?) at a line."""
+    if data.startswith(_BOM):
+        data = data[len(_BOM):]
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise ValidationError(f"{source}: UTF-16 text; expected a {kind} {what} in UTF-8 (save it as UTF-8)")
+    if b"\0" in data:
+        raise ValidationError(f"{source}: binary content; expected a {kind} {what} (text)")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        byte = data[e.start]
+        raise ValidationError(f"{source}: line {line}: byte 0x{byte:02X} is not UTF-8 text (a Latin-1 character?); "
+                              f"expected a {kind} {what} in UTF-8") from None
+
+
+def read_text(path: str | Path, what: str = "file", kind: str = "YAML") -> str:
+    """The text of a UTF-8 file, with a one-line :class:`ValidationError`
+    for a missing, unreadable, special, huge, binary or non-UTF-8 file;
+    ``what`` and ``kind`` name what was expected (a YAML config)."""
+    size = check_regular_file(path, what)
+    if size > MAX_TEXT_BYTES:
+        raise ValidationError(f"{path}: {size / 2**20:.0f} MB; a {kind} {what} is text of at most "
+                              f"{MAX_TEXT_BYTES // 2**20} MB")
+    try:
+        data = Path(path).read_bytes()
+    except OSError as e:
+        raise ValidationError(f"{path}: cannot read {what} ({e.strerror})") from None
+    return decode_text(data, str(path), what, kind)
+
+
+class UniqueKeyLoader(SAFE_LOADER):  # type: ignore[misc, valid-type]
+    """The safe loader, refusing a key given twice in one mapping (YAML
+    would keep the second silently)."""
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen: dict[Any, int] = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    first = seen.setdefault(key, key_node.start_mark.line + 1)
+                except TypeError:  # an unhashable key: the constructor says so
+                    continue
+                if first != key_node.start_mark.line + 1:
+                    raise DuplicateKey(key, first, key_node.start_mark.line + 1)
+        return super().construct_mapping(node, deep=deep)
+
+
+class DuplicateKey(yaml.YAMLError):
+    def __init__(self, key: Any, first: int, second: int):
+        super().__init__(f"key {key!r} given twice")
+        self.key, self.first, self.second = key, first, second
+
+
+def parse_yaml(text: str, source: str, what: str = "file") -> Any:
+    """The YAML document in ``text``; one-line :class:`ValidationError` for
+    invalid YAML (with the line), a key given twice (both lines), nesting
+    too deep or aliases that expand beyond :data:`MAX_YAML_VALUES`."""
+    try:
+        data = yaml.load(text, Loader=UniqueKeyLoader)
+    except DuplicateKey as e:
+        raise ValidationError(f"{source}: line {e.second}: key '{e.key}' given twice (first on line {e.first}); "
+                              "the second would silently replace the first") from None
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" line {mark.line + 1}:" if mark else ""
+        problem = getattr(e, "problem", None) or "not YAML"
+        raise ValidationError(f"{source}:{where} invalid YAML ({problem})") from None
+    except RecursionError:
+        raise ValidationError(f"{source}: YAML nested too deeply") from None
+    if expanded_size(data, {}) > MAX_YAML_VALUES:
+        raise ValidationError(f"{source}: expands to more than {MAX_YAML_VALUES:,} values (YAML aliases); "
+                              f"expected a {what}")
+    return data
+
+
+def expanded_size(node: Any, memo: dict[int, int]) -> int:
+    """Values in ``node`` with every alias expanded, counted once per
+    distinct container (linear time, however often a container is shared)."""
+    if not isinstance(node, (dict, list)):
+        return 1
+    if id(node) not in memo:
+        memo[id(node)] = 0  # a cycle counts as small; PyYAML's safe loader makes none
+        children = node.values() if isinstance(node, dict) else node
+        memo[id(node)] = 1 + sum(expanded_size(c, memo) for c in children)
+    return memo[id(node)]
+
+
+def load_yaml(path: str | Path, what: str = "YAML file") -> dict[str, Any]:
+    """Read a YAML mapping from ``path`` (an empty file is an empty
+    mapping); see :func:`read_text` and :func:`parse_yaml`."""
+    data = parse_yaml(read_text(path, what), str(path), what)
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ValidationError(f"{path}: expected a YAML mapping of keys at the top level, found a {type(data).__name__}")
+    return data
+
+
+class Strict(BaseModel):
+    """The base of every config model of the project: an unknown key is an
+    error (a typo in an ablation must not silently run the default), NaN
+    and infinity are refused, and an assignment is validated as a loaded
+    value is."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
+
+
+class StrictFrozen(Strict):
+    """A :class:`Strict` model that does not change once loaded (and so can
+    be hashed): the validation sections, specs and faults."""
+
+    model_config = ConfigDict(frozen=True)
+
+
+_M = TypeVar("_M", bound=BaseModel)
+
+
+def validate_mapping(model_type: type[_M], data: Any, source: str) -> _M:
+    """Validate ``data`` as ``model_type``; bad input raises a one-line
+    :class:`ValidationError` naming ``source`` and the offending key."""
+    try:
+        return model_type.model_validate(data)
+    except pydantic.ValidationError as e:
+        first = e.errors()[0]
+        loc = ".".join(str(p) for p in first["loc"])
+        if first["type"] == "extra_forbidden":
+            raise ValidationError(f"{source}: unknown key '{loc}'") from None
+        msg = first["msg"].removeprefix("Value error, ")
+        where = f"{loc}: " if loc else ""
+        raise ValidationError(f"{source}: {where}{msg}") from None
