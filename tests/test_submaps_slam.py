@@ -236,3 +236,47 @@ def test_a_place_beyond_the_windows_is_recognised_and_its_loops_are_right():
     start = truth[0]
     est = np.array([compose(start, between(result.estimate[0], p)) for p in result.estimate])
     assert np.hypot(*(est[-1, :2] - truth[-1, :2])) < 0.3
+
+
+def _traces_of_blamed_scans(short_run, blamed_scans: str) -> tuple[int, int]:
+    """Map the short run with the scan matching of every fourth keyframe
+    (from the tenth) excluded; how many submap constraints and loops rest on
+    those keyframes' scans, and how many keyframes were blamed."""
+    from slam.config import load_config
+    from slam.pipeline.core import Mapping, blamed_scans as blamed_of
+    from slam.readers.read import read_recording
+    from tests.conftest import TELEMAX_CONFIG
+
+    config = load_config(TELEMAX_CONFIG, ["output.plots=false", f"submaps.blamed_scans={blamed_scans}"])
+    core = Mapping(read_recording(short_run.run_dir, config.input), config, source=short_run.run_dir)
+    core.match_scans()
+    core.build_measurements()
+    core.validate()
+    n = len(core.measurements)
+    sm = np.array(core.weights["scan_matching"], dtype=float)
+    sm[10::4] = np.inf
+    core.weights["scan_matching"] = sm
+    blamed = blamed_of(core.weights, n)
+    core.build_submaps()
+    core.judge_loops(core.find_loops())
+    nodes = set(core.submaps.nodes.tolist())
+    on_blamed = [k for k in np.flatnonzero(blamed) if k in nodes]
+    assert on_blamed  # the test blames scans the submaps would use
+    res = core.submaps
+    traces = sum(1 for c in [*res.constraints, *res.dropped] if blamed[c.scan])
+    traces += sum(1 for c in core.constraints if c.label == "submap" and blamed[c.j])
+    if core.loop_observation is not None:
+        traces += sum(1 for v in core.loop_observation.verdicts if v.accepted and (blamed[v.loop.i] or blamed[v.loop.j]))
+    traces += sum(1 for k, m in enumerate(res.local.matches) if m is not None and blamed[res.nodes[k]])
+    return traces, len(on_blamed)
+
+
+@pytest.mark.slow
+def test_a_blamed_scan_leaves_no_trace_in_the_submaps_when_left_out(short_run):
+    """With ``submaps.blamed_scans: leave_out``, a scan the gating excluded is
+    neither matched nor inserted: no local match, submap constraint (kept or
+    dropped), between factor or loop rests on it. With ``keep`` they do."""
+    traces, blamed = _traces_of_blamed_scans(short_run, "leave_out")
+    assert traces == 0 and blamed > 0
+    kept, _ = _traces_of_blamed_scans(short_run, "keep")
+    assert kept > 0

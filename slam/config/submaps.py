@@ -177,9 +177,14 @@ class SubmapsConfig(_Strict):
     one every half of that), anchored at their first scan; scan points
     thinned to ``voxel_m``, scans with fewer than ``min_points`` in range not
     matched; search grids of ``resolution_m`` cells with ``search_depth``
-    pooled levels (:mod:`slam.submaps`). Off unless ``enabled``."""
+    pooled levels (:mod:`slam.submaps`). Off unless ``enabled``.
+    ``blamed_scans``: ``leave_out`` keeps every scan the gating excluded
+    (in any direction) out of the submaps: not matched, not inserted, so no
+    submap, constraint or loop rests on it; ``keep`` (the default) builds the
+    submaps from every scan and gates only the constraints."""
 
     enabled: bool = False
+    blamed_scans: Literal["keep", "leave_out"] = "keep"
     node_spacing_m: float = Field(0.25, ge=0.0)
     node_turn_deg: float = Field(5.0, ge=0.0)
     length_m: float = Field(4.0, gt=0.0)

@@ -184,7 +184,8 @@ class Mapping:
     def build_submaps(self, before_judging: Callable[[list], list] | None = None) -> None:
         """Scan-to-submap constraints (:mod:`slam.submaps`) over the
         keyframes' scans, searched around the dead-reckoning chain (with the
-        gating's weights). The local and near ones join the graph as scan
+        gating's weights); with ``submaps.blamed_scans: leave_out`` a scan
+        the gating excluded is left out of them (:func:`blamed_scans`). The local and near ones join the graph as scan
         matching, gated with it (:func:`submap_factors`); the loops are
         judged in :meth:`judge_loops`. ``before_judging``: given the submap
         graph's constraints before its GNC judges them, returns more to judge
@@ -197,10 +198,11 @@ class Mapping:
 
         t = time.perf_counter()
         steps, step_cov = fuse_steps(meas, self.weights)
+        blamed = blamed_scans(self.weights, len(meas)) if cfg.blamed_scans == "leave_out" else None
         self.submaps = build_submap_constraints(
-            self.recording.scans, meas.scan_index, steps, step_cov, self.config.frontend, cfg, before_judging
+            self.recording.scans, meas.scan_index, steps, step_cov, self.config.frontend, cfg, before_judging, blamed
         )
-        self.constraints = [*self.constraints, *submap_factors(self.submaps, self.weights, len(meas))]
+        self.constraints = [*self.constraints, *submap_factors(self.submaps, self.weights, len(meas), blamed)]
         self.timings.submaps_s = time.perf_counter() - t
 
     def find_loops(self):
@@ -354,11 +356,24 @@ def keyframe_candidates(rec: Recording, on_scans: bool, source: Path) -> tuple[n
     raise GslamError(f"{source}: no odometry, gyro, compass or laser stream to map with")
 
 
-def submap_factors(submaps, weights: dict[str, np.ndarray], n: int) -> list[RelativeConstraint]:
+def blamed_scans(weights: dict[str, np.ndarray], n: int) -> np.ndarray:
+    """Keyframes (n,) bool whose scan the gating excluded in any direction:
+    its registration is wrong, so nothing may be built on it."""
+    from slam.graph.backend import dof_weights
+
+    sm = weights.get("scan_matching")
+    if sm is None:
+        return np.zeros(n, dtype=bool)
+    return np.isinf(dof_weights(sm, "scan_matching")).any(axis=1)
+
+
+def submap_factors(submaps, weights: dict[str, np.ndarray], n: int,
+                   blamed: np.ndarray | None = None) -> list[RelativeConstraint]:
     """The local and near submap constraints as between factors. A
     constraint rests on the scans of its submap and on its own: each degree
     of freedom takes the largest scan-matching weight over those keyframes
-    (an excluded one drops that degree of freedom)."""
+    (an excluded one drops that degree of freedom); a ``blamed`` keyframe's
+    scan was left out of the submaps, so the constraints do not rest on it."""
     from slam.graph.backend import dof_weights
 
     sm = weights.get("scan_matching")
@@ -366,6 +381,8 @@ def submap_factors(submaps, weights: dict[str, np.ndarray], n: int) -> list[Rela
     out = []
     for c in submaps.of_kind("intra", "near"):
         steps = [c.scan, *submaps.submap_keyframes(c.submap)]
+        if blamed is not None:
+            steps = [k for k in steps if not blamed[k]] or [c.scan]
         worst = w[steps].max(axis=0)
         if not np.all(np.isfinite(worst)) and not np.any(np.isfinite(worst)):
             continue

@@ -65,12 +65,17 @@ def build_submap_constraints(
     frontend: FrontendConfig,
     config: SubmapsConfig,
     before_judging: Callable[[list[Constraint]], list[Constraint]] | None = None,
+    blamed: np.ndarray | None = None,
 ) -> SubmapResult:
     """Scan-to-submap constraints over the keyframes whose scans are
     ``scans[scan_index]`` (K,); ``steps`` (K, 3) and ``step_cov`` (K, 3, 3):
     the dead-reckoning chain between them (row 0 unused). Submaps are built
     over the keyframes :func:`select_nodes` keeps; the others keep their
-    chain steps. ``before_judging``: see :class:`slam.submaps.graph.GlobalSlam`."""
+    chain steps. ``before_judging``: see :class:`slam.submaps.graph.GlobalSlam`.
+    ``blamed`` (K,) bool: keyframes whose scan the gating excluded; such a
+    scan leaves no trace here: it is neither matched nor inserted into a
+    submap (its node keeps the chain's pose), so no constraint, submap or
+    loop rests on it."""
     start = time.perf_counter()
     nodes = select_nodes(steps, config.node_spacing_m, np.radians(config.node_turn_deg))
     chain = integrate(np.zeros(3), steps)
@@ -81,6 +86,8 @@ def build_submap_constraints(
     node_cov[1:] = cum[nodes[1:]] - cum[nodes[:-1]]
     points = ScanPoints(scans, frontend.min_range_m, frontend.max_range_m, config.voxel_m, index=scan_index[nodes],
                         search_voxel_m=config.resolution_m)
+    if blamed is not None:
+        points.leave_out(np.flatnonzero(np.asarray(blamed)[nodes]))
     local = run_local_slam(points, node_steps, node_cov, config)
     found: GlobalResult = GlobalSlam(points, local, config, node_steps, node_cov, before_judging).run()
     # Back to keyframes: every keyframe hangs off the node before it by the chain.

@@ -44,5 +44,13 @@ class ScanPoints:
             coarse = self.points[-1] if search_voxel_m is None else pts[a + voxel_first(pts[a:b], search_voxel_m)]
             self.search.append(coarse)
 
+    def leave_out(self, scans: np.ndarray) -> None:
+        """Empty the points of ``scans`` (indices into this list): they are
+        then neither matched nor inserted anywhere."""
+        for i in scans:
+            self.points[i] = self.points[i][:0]
+            self.normals[i] = self.normals[i][:0]
+            self.search[i] = self.search[i][:0]
+
     def __len__(self) -> int:
         return len(self.points)
