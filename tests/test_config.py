@@ -342,3 +342,15 @@ def test_shipped_variants_are_valid_overrides(name):
         shipped = load_variants(REPO / "configs" / "variants.yaml")
         assert {k: variants[k] for k in shipped} == shipped
         assert set(variants) - set(shipped) == {"gated_nocal", "gated_cauchy", "gated_no_loops"}
+
+
+@pytest.mark.parametrize("override, says", [
+    ("backend.optimiser=isam2", "unknown config key 'backend.optimiser'; did you mean 'optimizer'?"),
+    ("keyframe.period_s=1", "unknown config key 'keyframe'; did you mean 'keyframes'?"),
+    ("submaps.constraints.refine_nar=true", "did you mean 'refine_near'?"),
+    ("backend.zzz=1", "unknown config key 'backend.zzz'"),
+])
+def test_an_unknown_key_names_the_nearest_known_one(override, says):
+    with pytest.raises(GslamError) as e:
+        load_config(TELEMAX, [override])
+    assert says in str(e.value) and (says.endswith("?") or "did you mean" not in str(e.value))

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
 
 from slam.errors import GslamError
 from validation.base.errors import InputError
@@ -429,17 +429,42 @@ def _loc_text(loc: tuple) -> str:
     return ".".join(str(p) for p in loc if not (isinstance(p, str) and "[" in p))
 
 
-def describe_validation_error(source: str, err: ValidationError, what: str = "config", prefix: str = "") -> str:
+def describe_validation_error(source: str, err: ValidationError, what: str = "config", prefix: str = "",
+                              model: type[BaseModel] | None = None) -> str:
     """One line for a pydantic error: the file, the key (after ``prefix``)
     and what is wrong; an unknown key first, since a typo is what the user
-    must see."""
+    must see, with the nearest known key of ``model`` at that place."""
     errors = err.errors()
     first = next((e for e in errors if e["type"] == "extra_forbidden"), errors[0])
     loc = prefix + _loc_text(first["loc"])
     if first["type"] == "extra_forbidden":
-        return f"{source}: unknown {what} key '{loc}'"
+        hint = _did_you_mean(model, first["loc"]) if model is not None else ""
+        return f"{source}: unknown {what} key '{loc}'{hint}"
     msg = first["msg"].removeprefix("Value error, ")
     return f"{source}: {loc}: {msg}" if loc else f"{source}: {msg}"
+
+
+def _did_you_mean(model: type[BaseModel], loc: tuple) -> str:
+    """``; did you mean 'x'?`` for the known key of ``model`` nearest the
+    unknown one at ``loc``, or nothing when none is near."""
+    import difflib
+    import typing
+
+    node: Any = model
+    for part in loc[:-1]:
+        field = node.model_fields.get(part) if isinstance(node, type) and issubclass(node, BaseModel) else None
+        if field is None:
+            return ""
+        kinds = [a for a in (field.annotation, *typing.get_args(field.annotation))
+                 if isinstance(a, type) and issubclass(a, BaseModel)]
+        if not kinds:
+            return ""
+        node = kinds[0]
+    if not (isinstance(node, type) and issubclass(node, BaseModel)):
+        return ""
+    known = [f.alias or name for name, f in node.model_fields.items()]
+    near = difflib.get_close_matches(str(loc[-1]), known, n=1, cutoff=0.6)
+    return f"; did you mean '{near[0]}'?" if near else ""
 
 
 def set_dotted(tree: dict[str, Any], dotted: str, value: Any) -> None:
@@ -539,7 +564,7 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
     except ValidationError as e:
         first = next((x for x in e.errors() if x["type"] == "extra_forbidden"), e.errors()[0])
         who = _blame(source, applied, _loc_text(first["loc"]))
-        raise GslamError(describe_validation_error(who, e)) from None
+        raise GslamError(describe_validation_error(who, e, model=PipelineConfig)) from None
     try:
         vcfg, gcfg = _parse_sections(config.validation, config.gating)
         if config.loops.enabled and vcfg.mode is GatingMode.ON:

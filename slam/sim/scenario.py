@@ -260,7 +260,7 @@ def validate_scenario(tree: dict, source: str) -> Scenario:
     try:
         return Scenario.model_validate(tree)
     except ValidationError as e:
-        raise GslamError(describe_validation_error(source, e, "scenario")) from None
+        raise GslamError(describe_validation_error(source, e, "scenario", model=Scenario)) from None
 
 
 def dump_scenario(scenario: Scenario) -> str:

@@ -240,7 +240,7 @@ def _scenario_tree(path: Path, pairs: list[tuple[str, Any]], where: str) -> dict
     try:
         scenario = Scenario.model_validate(tree)
     except ValidationError as e:
-        raise GslamError(describe_validation_error(where, e, "scenario", prefix="scenario.")) from None
+        raise GslamError(describe_validation_error(where, e, "scenario", prefix="scenario.", model=Scenario)) from None
     check_bounded(scenario, where)
     return scenario.model_dump(mode="json")
 

@@ -286,7 +286,7 @@ def load_spec(path: str | Path, max_seeds: int | None = None, max_jobs: int | No
     try:
         spec = AblationSpec.model_validate(tree)
     except ValidationError as e:
-        raise GslamError(describe_validation_error(str(path), e, "spec")) from None
+        raise GslamError(describe_validation_error(str(path), e, "spec", model=AblationSpec)) from None
     if max_seeds is not None:
         scenarios = [s.first_seeds(max_seeds) for s in spec.inputs.scenarios]
         spec = spec.model_copy(update={"inputs": spec.inputs.model_copy(update={"scenarios": scenarios})})
