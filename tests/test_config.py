@@ -344,13 +344,16 @@ def test_shipped_variants_are_valid_overrides(name):
         assert set(variants) - set(shipped) == {"gated_nocal", "gated_cauchy", "gated_no_loops"}
 
 
-@pytest.mark.parametrize("override, says", [
-    ("backend.optimiser=isam2", "unknown config key 'backend.optimiser'; did you mean 'optimizer'?"),
-    ("keyframe.period_s=1", "unknown config key 'keyframe'; did you mean 'keyframes'?"),
-    ("submaps.constraints.refine_nar=true", "did you mean 'refine_near'?"),
-    ("backend.zzz=1", "unknown config key 'backend.zzz'"),
-])
-def test_an_unknown_key_names_the_nearest_known_one(override, says):
-    with pytest.raises(GslamError) as e:
-        load_config(TELEMAX, [override])
-    assert says in str(e.value) and (says.endswith("?") or "did you mean" not in str(e.value))
+def test_an_unknown_key_names_the_nearest_known_one():
+    hints = {
+        "backend.optimiser=isam2": "unknown config key 'backend.optimiser'; did you mean 'optimizer'?",
+        "keyframe.period_s=1": "unknown config key 'keyframe'; did you mean 'keyframes'?",
+        "submaps.constraints.refine_nar=true": "did you mean 'refine_near'?",
+    }
+    for override, says in hints.items():
+        with pytest.raises(GslamError) as e:
+            load_config(TELEMAX, [override])
+        assert says in str(e.value)
+    with pytest.raises(GslamError) as e:  # nothing near: no guess
+        load_config(TELEMAX, ["backend.zzz=1"])
+    assert str(e.value).endswith("unknown config key 'backend.zzz'")

@@ -184,7 +184,6 @@ class SubmapsConfig(_Strict):
     submaps from every scan and gates only the constraints."""
 
     enabled: bool = False
-    blamed_scans: Literal["keep", "leave_out"] = "keep"
     node_spacing_m: float = Field(0.25, ge=0.0)
     node_turn_deg: float = Field(5.0, ge=0.0)
     length_m: float = Field(4.0, gt=0.0)
@@ -194,6 +193,7 @@ class SubmapsConfig(_Strict):
     resolution_m: float = Field(0.1, gt=0.0)
     search_depth: int = Field(6, ge=0, le=10)
     tie_tolerance: float = Field(0.01, ge=0.0)
+    blamed_scans: Literal["keep", "leave_out"] = "keep"
     local: LocalMatchConfig = LocalMatchConfig()
     refine: RefineConfig = RefineConfig()
     constraints: ConstraintSearchConfig = ConstraintSearchConfig()
