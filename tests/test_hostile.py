@@ -595,9 +595,10 @@ def test_corpus_counts():
 
 def _gslam(argv: list, cwd: Path, limit_bytes: int | None = None) -> subprocess.Popen:
     def limit() -> None:
-        # A user's gslam, not the test runner's: under nohup (SIGHUP ignored,
-        # which gslam keeps ignored) the signal cases would test nothing.
-        for s in (signal.SIGHUP, signal.SIGTERM):
+        # A user's gslam, not the test runner's: under nohup (SIGHUP ignored)
+        # or as a background job of a script (SIGINT ignored), which gslam
+        # keeps ignored, the signal cases would test nothing.
+        for s in (signal.SIGHUP, signal.SIGTERM, signal.SIGINT):
             signal.signal(s, signal.SIG_DFL)
         if limit_bytes is not None:
             resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
