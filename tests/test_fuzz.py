@@ -286,6 +286,16 @@ CASES: list[Case] = [
     Case("carmen-random", ("map", "{d}/c.log", "--config", "{cfg}", "--out", "{d}/o"), "binary", data("c.log", RANDOM)),
     Case("carmen-nan", ("map", "{d}/c.log", "--config", "{cfg}", "--out", "{d}/o"), "expected finite numbers",
          text("c.log", "ODOM 1.0 nan 0 0 0 0 1.0 host 1.0\n")),
+    Case("carmen-stamps-after-2038", ("map", "{d}/c.log", "--config", "{cfg}", "--out", "{d}/o"), "what a ROS 2 time holds",
+         text("c.log", "".join(f"ODOM 0 0 0 0 0 0 {3e9 + k} host {k}\nFLASER 3 1 2 3 0 0 0 0 0 0 {3e9 + k} host {k}\n"
+                               for k in range(200)))),
+    Case("carmen-stamps-before-1901", ("map", "{d}/c.log", "--config", "{cfg}", "--out", "{d}/o"), "what a ROS 2 time holds",
+         text("c.log", "".join(f"ODOM 0 0 0 0 0 0 {-2.2e9 + k} host {k}\nFLASER 3 1 2 3 0 0 0 0 0 0 {-2.2e9 + k} host {k}\n"
+                               for k in range(200)))),
+    Case("librsf-stamps-after-2038", ("map", "{d}/X_Input.txt", "--config", "{cfg}", "--out", "{d}/o"), "what a ROS 2 time holds",
+         text("X_Input.txt", "".join(f"odom2 {4e9 + 0.1 * k} 0.5 0 0 1 1 1\n" for k in range(50)))),
+    Case("scenario-t0-after-2038", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "environment.t0_s",
+         scenario(set_in("environment", "t0_s", 3e9))),
     Case("carmen-wrong-fields", ("map", "{d}/c.log", "--config", "{cfg}", "--out", "{d}/o"), "expected FLASER",
          text("c.log", "FLASER four 1.0\n")),
     Case("carmen-gz-truncated", ("map", "{d}/c.log.gz", "--config", "{cfg}", "--out", "{d}/o"), "truncated gzip file",

@@ -113,6 +113,22 @@ def check_rates(rec: Recording, source: object) -> None:
 
 # --- stamps ------------------------------------------------------------------------
 
+MIN_STAMP_S, MAX_STAMP_S = -(2**31), 2**31 - 1
+"""The seconds a ROS 2 time holds (its ``sec`` is an int32: 1901-12-13 to
+2038-01-19), which ``run.mcap`` and the bags gslam writes carry."""
+
+
+def check_absolute_stamps(t: np.ndarray, where: str) -> None:
+    """Absolute stamps (s since 1970) must be times a ROS 2 bag can hold."""
+    if not len(t):
+        return
+    bad = np.flatnonzero((t < MIN_STAMP_S) | (t > MAX_STAMP_S))
+    if len(bad):
+        i = int(bad[0])
+        raise GslamError(f"{where} stamp {i} is {t[i]:.6g} s since 1970; expected {MIN_STAMP_S} to {MAX_STAMP_S} s "
+                         "(1901 to 2038, what a ROS 2 time holds): a stamp in another unit, or a corrupt log?")
+
+
 
 def check_stamps(rec: Recording, source: object, offsets: dict[str, float]) -> None:
     streams = _streams(rec)
@@ -120,6 +136,7 @@ def check_stamps(rec: Recording, source: object, offsets: dict[str, float]) -> N
         t = np.asarray(s.t, dtype=np.float64)
         if not np.all(np.isfinite(t)):
             raise GslamError(f"{source}: {name} stamp {int(np.argmin(np.isfinite(t)))} is not a finite time")
+        check_absolute_stamps(rec.t0 + t, f"{source}: {name}")
         if len(t) < 2:
             continue
         steps = np.diff(t)

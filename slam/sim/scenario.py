@@ -207,7 +207,9 @@ class EnvironmentConfig(Strict):
     declination_deg: float = 3.0
     datum_lat_deg: float = Field(49.0, ge=-90.0, le=90.0)
     datum_lon_deg: float = Field(8.4, ge=-180.0, le=180.0)
-    t0_s: float = 1_700_000_000.0
+    t0_s: float = Field(1_700_000_000.0, ge=-2_000_000_000.0, le=2_000_000_000.0)
+    """Seconds since 1970, within +-2e9 (1906 to 2033), so that the mission's
+    stamps stay within what a ROS 2 time holds (1901 to 2038)."""
 
 
 class FaultsConfig(Strict):
