@@ -410,6 +410,8 @@ CASES: list[Case] = [
          spec(sweep={"grid": {"scenario.name": ["../escape"]}})),
     Case("scenario-name-dots", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "name: '..': a scenario's name",
          scenario(set_in("name", ".."))),
+    Case("ablate-ray-address-closed", ("ablate", "{spec}", "--backend", "ray", "--address", "127.0.0.1:9", "--out", "{d}/o"),
+         "no Ray cluster answers there"),
     Case("ablate-workers-zero", ("ablate", "{spec}", "--out", "{d}/o", "--workers", "0"), "expected 1 or more", code=2),
     Case("ablate-out-is-a-file", ("ablate", "{spec}", "--out", "{d}/f.txt"), "not a folder", text("f.txt", "x\n")),
     Case("ablate-out-holds-the-spec", ("ablate", "{d}/spec.yaml", "--out", "{d}"), "holds the input", spec()),

@@ -175,6 +175,27 @@ def _interrupt_workers(pool: ProcessPoolExecutor) -> None:
         process.join()
 
 
+RAY_CONNECT_TIMEOUT_S = 10.0
+"""How long a Ray cluster's address has to answer before ``--address`` is refused."""
+
+
+def check_reachable(address: str, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> None:
+    """A one-line error unless something listens at a ``host:port`` address
+    (``ray://host:port`` too) within ``timeout_s``: Ray itself would wait
+    for minutes. ``auto`` and other forms are left to Ray."""
+    import socket
+
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as e:
+        why = "no answer" if isinstance(e, TimeoutError) else (e.strerror or str(e))
+        raise GslamError(f"--address {address}: no Ray cluster answers there ({why} within {timeout_s:g} s); "
+                         "start one (ray start --head) or check the address") from None
+
+
 def _ray(groups: list[list[Job]], out_dir: Path, workers: int, address: str | None) -> Iterator[JobOutcome]:
     try:
         import ray
@@ -231,6 +252,8 @@ def run_ablation(
     t0 = time.perf_counter()
     backend = Backend(backend)
     jobs = expand_jobs(spec, source)  # validates everything before any job runs
+    if backend is Backend.RAY and address is not None:
+        check_reachable(address)
     inputs = [source, spec.config, *(s.path for s in spec.inputs.scenarios)]
     inputs += [j.input_path for j in jobs if j.input_path is not None]
     out_dir = open_container(out_dir, "ablate", inputs, force, CONTAINER_NAMES).resolve()
