@@ -422,6 +422,8 @@ def main(argv: list[str] | None = None) -> int:
         format="%(levelname)s %(name)s: %(message)s",
     )
     received: list[int] = []
+    if sys.stdout is not None and not isinstance(sys.stdout, _WatchedStdout):
+        sys.stdout = _WatchedStdout(sys.stdout)
     try:
         with as_interrupt(received):
             code = args.func(args)
@@ -435,6 +437,10 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout = open(os.devnull, "w")  # the interpreter's last flush must not fail either
         return 141  # as if killed by SIGPIPE, what a shell reports for the other commands of a pipe
     except OSError as e:  # the machine, not the input: a full disk, a vanished folder
+        if e.filename is None and getattr(sys.stdout, "failed", False):  # gslam ... > /dev/full
+            sys.stdout = open(os.devnull, "w")  # the interpreter's last flush must not fail either
+            print(f"gslam: error: standard output: {e.strerror or e}", file=sys.stderr)
+            return 1
         where = f"{e.filename}: " if e.filename else ""
         print(f"gslam: error: {where}{e.strerror or e}", file=sys.stderr)
         return 1
@@ -460,6 +466,31 @@ def _stopped(signum: int) -> int:
     return 128 + signum
 
 
+class _WatchedStdout:
+    """Standard output that remembers whether a write to it failed, so that
+    a full or vanished stdout is told apart from the machine's other errors."""
+
+    def __init__(self, stream):
+        self.stream, self.failed = stream, False
+
+    def write(self, text: str) -> int:
+        try:
+            return self.stream.write(text)
+        except OSError:
+            self.failed = True
+            raise
+
+    def flush(self) -> None:
+        try:
+            self.stream.flush()
+        except OSError:
+            self.failed = True
+            raise
+
+    def __getattr__(self, name: str):
+        return getattr(self.stream, name)
+
+
 def _one_line(text: str) -> str:
     return " ".join(text.split("\n"))
 
@@ -481,7 +512,8 @@ def run() -> None:
     logging.shutdown()
     for stream in (sys.stdout, sys.stderr):
         try:
-            stream.flush()
+            if stream is not None:  # None: started with the stream closed (gslam ... >&-)
+                stream.flush()
         except (OSError, ValueError):  # a closed pipe (gslam ... | head) or stream
             pass
     os._exit(code)

@@ -326,6 +326,23 @@ def test_a_reader_that_leaves_early_gets_no_error(short_run):
     assert stderr == ""
 
 
+def test_a_full_or_closed_standard_output_is_named_or_harmless(short_run, tmp_path):
+    """``gslam ... > /dev/full`` says that standard output failed, in one
+    line; ``gslam ... >&-`` (no standard output at all) maps as usual."""
+    import os
+
+    argv = [sys.executable, "-m", "slam.cli", "-q", "inject", str(short_run.run_dir), "--fault", "gyro_bias@2:4"]
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([*argv, "--out", str(tmp_path / "full")], cwd=REPO, stdout=full, stderr=subprocess.PIPE,
+                              text=True, timeout=120)
+    errors = [line for line in done.stderr.splitlines() if not line.startswith("WARNING ")]
+    assert done.returncode == 1 and errors == ["gslam: error: standard output: No space left on device"], done.stderr
+    done = subprocess.run([*argv, "--out", str(tmp_path / "closed")], cwd=REPO, stderr=subprocess.PIPE, text=True,
+                          timeout=120, preexec_fn=lambda: os.close(1))
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
+    assert (tmp_path / "closed" / "truth.json").is_file()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("argv", [
     ["husky_faults", "--faults", "bogus@1:2"],   # checked before any work
