@@ -23,7 +23,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -32,6 +32,9 @@ from slam.errors import GslamError
 from slam.graph.measurements import FACTOR_DOFS, Measurements
 from slam.recording import Recording, Trajectory
 from validation.base.modes import GatingMode
+
+if TYPE_CHECKING:
+    from validation.config import GatingConfig, ValidationConfig
 
 log = logging.getLogger(__name__)
 
@@ -54,9 +57,8 @@ class Gating:
     mode = GatingMode.OFF
     learns_scale = False
 
-    def __init__(self, config: PipelineConfig):
-        self.config = config
-        self.validation, self.gating = validation_sections(config)
+    def __init__(self, config: PipelineConfig, validation: ValidationConfig, gating: GatingConfig):
+        self.config, self.validation, self.gating = config, validation, gating
 
     def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path) -> Weighing:
         from slam.graph.backend import unit_weights
@@ -167,4 +169,5 @@ POLICIES: dict[GatingMode, type[Gating]] = {
 
 def gating_policy(config: PipelineConfig) -> Gating:
     """The policy of ``config``'s ``validation.mode``."""
-    return POLICIES[validation_sections(config)[0].mode](config)
+    validation, gating = validation_sections(config)
+    return POLICIES[validation.mode](config, validation, gating)
