@@ -410,6 +410,27 @@ def with_other_input(argv: list, folder: Path) -> list:
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("command", ["simulate", "map", "compare", "demo", "ablate", "inject", "calibrate", "inspect"])
+def test_every_writing_command_creates_the_missing_folders_to_its_output(command, commands, short_run, tmp_path,
+                                                                         capsys):
+    """One rule for every command that writes: the missing folders on the way
+    to ``--out`` (calibrate's file, inspect's ``--config-out``) are created,
+    and nothing beside that path is touched (docs/three_commands.md writes
+    into a runs/ folder that does not exist yet)."""
+    files = {"calibrate": ["calibrate", short_run.run_dir, "--config", TELEMAX_CONFIG, "--clean", "0:10", "--out"],
+             "inspect": ["inspect", short_run.run_dir, "--config-out"]}
+    argv = files.get(command) or commands[command]
+    root = tmp_path / "fresh"
+    root.mkdir()
+    out = root / "runs" / "new" / ("x.yaml" if command in files else "x")
+    code, err = run(capsys, *argv, out)
+    assert code == 0, err
+    assert out.is_file() if command in files else (out / RESULT_MARKER).is_file()
+    assert listing(root) == {"runs"} and listing(root / "runs") == {"new"}
+    assert listing(root / "runs" / "new") == {out.name}
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["simulate", "map", "compare", "demo", "ablate", "inject"])
 def test_out_rule_for_every_command(command, commands, tmp_path, capsys):
     argv = commands[command]
