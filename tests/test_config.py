@@ -310,6 +310,39 @@ def test_invalid_yaml_names_the_line(tmp_path, text, line):
     assert msg.startswith(str(path)) and f"line {line}" in msg and "invalid YAML" in msg
 
 
+@pytest.mark.parametrize(
+    "text, line, key, first",
+    [
+        ("backend:\n  factors:\n    gps: {sigma_xy_m: 0.03, sigma_xy_m: 300}\n", 3, "sigma_xy_m", "earlier on the same line"),
+        ("keyframes: {period_s: 0.5, min_distance_m: 0.2, period_s: 5}\n", 1, "period_s", "earlier on the same line"),
+        ("backend: {factors: {gps: {sigma_xy_m: 0.03}}, factors: {}}\n", 1, "factors", "earlier on the same line"),
+        ("backend: {optimizer: isam2,\n  optimizer: batch}\n", 2, "optimizer", "first on line 1"),
+        ("backend:\n  optimizer: isam2\n  optimizer: batch\n", 3, "optimizer", "first on line 2"),
+        ("[{a: 1, a: 2}]\n", 1, "a", "earlier on the same line"),
+    ],
+)
+def test_a_key_given_twice_is_refused_in_block_and_flow_mappings(tmp_path, text, line, key, first):
+    path = tmp_path / "twice.yaml"
+    path.write_text(text)
+    with pytest.raises(GslamError) as e:
+        load_yaml(path)
+    msg = one_line(e)
+    assert msg.startswith(f"{path}: line {line}: key '{key}' given twice ({first})"), msg
+
+
+def test_a_key_given_twice_in_a_set_value_is_refused():
+    with pytest.raises(GslamError) as e:
+        load_config(TELEMAX, ["backend.factors.gps={sigma_xy_m: 0.03, sigma_xy_m: 300}"])
+    assert one_line(e) == ("--set backend.factors.gps={sigma_xy_m: 0.03, sigma_xy_m: 300}: key 'sigma_xy_m' given "
+                           "twice; the second would silently replace the first")
+
+
+def test_keys_that_differ_and_merge_keys_are_no_duplicates(tmp_path):
+    path = tmp_path / "ok.yaml"
+    path.write_text("base: &b {x: 1, y: 2}\nother: {<<: *b, x: 3, z: [{x: 1}, {x: 2}]}\n")
+    assert load_yaml(path)["other"] == {"x": 3, "y": 2, "z": [{"x": 1}, {"x": 2}]}
+
+
 def test_top_level_must_be_a_mapping(tmp_path):
     path = tmp_path / "list.yaml"
     path.write_text("- 1\n- 2\n")

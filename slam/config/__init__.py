@@ -28,7 +28,7 @@ from validation.base.errors import InputError
 from slam.config.loops import LoopsConfig
 from slam.config.submaps import SubmapsConfig
 from slam.config.trees import check_finite, non_finite, yaml_number
-from validation.base.yamlio import UniqueKeyLoader, load_yaml
+from validation.base.yamlio import DuplicateKey, UniqueKeyLoader, load_yaml
 from validation.base.modes import GatingMode
 from validation.base.yamlio import Strict
 
@@ -492,6 +492,9 @@ def parse_override(text: str) -> tuple[str, Any]:
         raise GslamError(f"--set {text}: expected KEY=VALUE with a dotted key, e.g. backend.optimizer=isam2")
     try:
         value = yaml.load(raw, Loader=UniqueKeyLoader) if raw.strip() else None
+    except DuplicateKey as e:
+        raise GslamError(f"--set {text}: key '{e.key}' given twice; the second would silently replace the first") \
+            from None
     except yaml.YAMLError:
         value = raw
     return key, value

@@ -102,12 +102,13 @@ class UniqueKeyLoader(SAFE_LOADER):  # type: ignore[misc, valid-type]
                 if key_node.tag == "tag:yaml.org,2002:merge":
                     continue
                 key = self.construct_object(key_node, deep=True)
+                line = key_node.start_mark.line + 1
                 try:
-                    first = seen.setdefault(key, key_node.start_mark.line + 1)
+                    if key in seen:  # on another line, or the same one ({a: 1, a: 2})
+                        raise DuplicateKey(key, seen[key], line)
+                    seen[key] = line
                 except TypeError:  # an unhashable key: the constructor says so
                     continue
-                if first != key_node.start_mark.line + 1:
-                    raise DuplicateKey(key, first, key_node.start_mark.line + 1)
         return super().construct_mapping(node, deep=deep)
 
 
@@ -124,7 +125,8 @@ def parse_yaml(text: str, source: str, what: str = "file") -> Any:
     try:
         data = yaml.load(text, Loader=UniqueKeyLoader)
     except DuplicateKey as e:
-        raise ValidationError(f"{source}: line {e.second}: key '{e.key}' given twice (first on line {e.first}); "
+        first = "earlier on the same line" if e.first == e.second else f"first on line {e.first}"
+        raise ValidationError(f"{source}: line {e.second}: key '{e.key}' given twice ({first}); "
                               "the second would silently replace the first") from None
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
