@@ -77,6 +77,23 @@ def test_cli_typo_is_one_line_and_exit_code_1(tmp_path, short_scenario_yaml, cap
     assert "singel" in err and "gating" in err and len(err.splitlines()) == 1
 
 
+@pytest.mark.parametrize("config", ["spec.yaml", "./spec.yaml", "link.yaml", "other_spec.yaml"])
+def test_a_spec_whose_config_is_a_spec_says_so_in_one_line(tmp_path, short_scenario_yaml, capsys, config):
+    """config naming the spec itself (or through a link, or another spec) is
+    named for what it is, not reported as a variant's unknown key 'name'."""
+    spec_path = write_spec(tmp_path / "spec.yaml", short_scenario_yaml, config=config)
+    (tmp_path / "link.yaml").symlink_to(spec_path)
+    write_spec(tmp_path / "other_spec.yaml", short_scenario_yaml)
+    said = "is an ablation spec, not a pipeline config" if config == "other_spec.yaml" else \
+        "config names this spec file itself"
+    with pytest.raises(GslamError, match=said):
+        load_spec(spec_path)
+    assert main(["-q", "ablate", str(spec_path), "--out", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and said in err and err.startswith(f"gslam: error: {spec_path}: "), err
+    assert "unknown config key" not in err and not (tmp_path / "out").exists()
+
+
 # --- expansion -----------------------------------------------------------------
 
 

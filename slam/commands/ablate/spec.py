@@ -14,6 +14,7 @@ path segment that meets a list selects elements by index (``0``), by their
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -297,4 +298,21 @@ def load_spec(path: str | Path, max_seeds: int | None = None, max_jobs: int | No
     for p in [spec.config] + [s.path for s in spec.inputs.scenarios] + [r.path for r in spec.inputs.recorded]:
         if not p.exists():
             raise GslamError(f"{path}: {p} not found")
+    _check_base_config(spec.config, path)
     return spec
+
+
+SPEC_KEYS = frozenset({"inputs", "variants", "sweep"})
+"""Top-level keys of a spec that no pipeline config has."""
+
+
+def _check_base_config(config: Path, source: Path) -> None:
+    """``config`` must be a pipeline config: not the spec itself, nor another
+    spec (each would fail later as 'unknown config key name', in a variant)."""
+    if config.is_file() and source.is_file() and os.path.samefile(config, source):
+        raise GslamError(f"{source}: config names this spec file itself; it must name the pipeline config the jobs "
+                         "start from (e.g. config: ../telemax.yaml)")
+    tree = load_yaml(config, "config")
+    if "name" in tree and SPEC_KEYS & set(tree):
+        raise GslamError(f"{source}: config {config} is an ablation spec, not a pipeline config; it must name the "
+                         "pipeline config the jobs start from (e.g. config: ../telemax.yaml)")
