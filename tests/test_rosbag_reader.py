@@ -16,7 +16,7 @@ from slam.config import InputConfig
 from slam.errors import GslamError
 from validation.base.geometry import geodetic_from_enu, wrap_angle
 from slam.readers.read import guess_format, read_recording
-from slam.readers.rosbag import read_rosbag
+from slam.readers.rosbag import LASER_SCAN, MAGNETIC_FIELD, ODOMETRY, POSE_STAMPED, message_type_problem, read_rosbag
 
 T0 = 1_700_000_000.0
 NONE = {k: None for k in ("scan", "gyro", "compass", "odometry", "gps", "groundtruth")}
@@ -360,6 +360,49 @@ def test_wrong_message_type(tmp_path, ros):
     assert "expected nav_msgs/msg/Odometry or geometry_msgs/msg/PoseStamped" in msg
     msg = error_of(read_rosbag, path, config(only(compass="/scan")))
     assert "expected sensor_msgs/msg/MagneticField" in msg
+
+
+CUSTOM = "my_driver/msg/YawRate"
+
+
+@pytest.mark.parametrize("ros, storage", [(1, "sqlite3"), (2, "sqlite3"), (2, "mcap")], ids=["ros1", "db3", "mcap"])
+def test_a_message_type_of_another_package_is_named_with_the_one_expected(tmp_path, ros, storage):
+    """A driver's own message type on the configured topic: the error names
+    the type found and the type expected, never 'no messages'."""
+    from rosbags.typesys import get_types_from_msg
+
+    bag = BagBuilder(ros)
+    bag.typestore.register(get_types_from_msg("std_msgs/Header header\nfloat64 yaw_rate\n", CUSTOM))
+    for i in range(5):
+        bag.add("/imu/data", CUSTOM, bag.typestore.types[CUSTOM](header=bag.header(T0 + i), yaw_rate=0.1), T0 + i)
+        bag.odom("/odom", T0 + i, 0.1 * i, 0, 0)
+    path = bag.write(tmp_path / ("run.bag" if ros == 1 else "run"), storage)
+    msg = error_of(read_rosbag, path, config(only(gyro="/imu/data", odometry="/odom")))
+    assert msg == f"{path}: gyro topic '/imu/data': type is {CUSTOM}, expected {IMU}", msg
+    msg = error_of(read_rosbag, path, config(only(compass="/imu/data", odometry="/odom")))
+    assert f"type is {CUSTOM}, expected {MAGNETIC_FIELD}" in msg and "no messages" not in msg
+
+
+def test_the_decision_on_a_topics_message_types():
+    assert message_type_problem([IMU], (IMU,)) is None
+    assert message_type_problem([ODOMETRY], (ODOMETRY, POSE_STAMPED)) is None
+    assert message_type_problem([CUSTOM], (IMU,)) == f"type is {CUSTOM}, expected {IMU}"
+    assert message_type_problem([CUSTOM], (ODOMETRY, POSE_STAMPED)) == \
+        f"type is {CUSTOM}, expected {ODOMETRY} or {POSE_STAMPED}"
+    assert message_type_problem(sorted([CUSTOM, IMU]), (IMU,)) == \
+        f"carries {IMU} and also {CUSTOM} (two publishers?); expected only {IMU}"
+    assert message_type_problem(sorted([CUSTOM, LASER_SCAN]), (IMU,)) == \
+        f"type is {CUSTOM} and {LASER_SCAN}, expected {IMU}"
+
+
+def test_an_empty_topic_names_its_declared_type(tmp_path, ros):
+    bag = BagBuilder(ros)
+    bag.topic("/scan", LASER_SCAN)
+    bag.imu("/imu/data", T0)
+    path = bag.write_in(tmp_path)
+    msg = error_of(read_rosbag, path, config(only(gyro="/imu/data", scan="/scan")))
+    assert msg.endswith(f"scan topic '/scan': no messages (the bag declares the topic as {LASER_SCAN}, with none "
+                        "recorded)"), msg
 
 
 def test_scan_geometry_must_not_change(tmp_path):

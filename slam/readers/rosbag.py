@@ -165,14 +165,29 @@ def _connections(reader: Any, path: Path, streams: list[_Stream]) -> dict[str, l
             existing = ", ".join(sorted(by_topic)) or "none"
             raise GslamError(f"{stream.where}: not in the bag (topics: {existing})")
         found = sorted({c.msgtype for c in conns})
-        if len(found) > 1 or found[0] not in stream.msgtypes:
-            raise GslamError(
-                f"{stream.where}: type is {' and '.join(found)}, "
-                f"expected {' or '.join(stream.msgtypes)}"
-            )
+        problem = message_type_problem(found, stream.msgtypes)
+        if problem is not None:
+            raise GslamError(f"{stream.where}: {problem}")
         stream.msgtype = found[0]
         wanted[stream.topic] = conns
     return wanted
+
+
+def message_type_problem(found: list[str], expected: tuple[str, ...]) -> str | None:
+    """Why a topic whose connections declare the message types ``found``
+    cannot be read as a stream of ``expected`` types, or None if it can. A
+    type of another package (a driver's own message) is named as found, so
+    the user sees the topic is there but carries something else."""
+    wanted = " or ".join(expected)
+    if len(found) > 1:
+        right = [f for f in found if f in expected]
+        if right:
+            others = ", ".join(f for f in found if f not in expected)
+            return f"carries {right[0]} and also {others} (two publishers?); expected only {wanted}"
+        return f"type is {' and '.join(found)}, expected {wanted}"
+    if found[0] not in expected:
+        return f"type is {found[0]}, expected {wanted}"
+    return None
 
 
 def _read_messages(
@@ -372,7 +387,8 @@ def read_rosbag(path: str | Path, config: InputConfig, on_scans: ScansHook | Non
 
 def _finish(stream: _Stream, counts: dict[str, int]) -> None:
     if counts[stream.topic] == 0:
-        raise GslamError(f"{stream.where}: no messages")
+        raise GslamError(f"{stream.where}: no messages (the bag declares the topic as {stream.msgtype}, "
+                         "with none recorded)")
     stream.finish()
 
 
