@@ -9,6 +9,7 @@ import logging
 import math
 import os
 import platform
+import shlex
 import signal
 import sys
 from pathlib import Path
@@ -91,6 +92,7 @@ def _cmd_inject(args: argparse.Namespace) -> int:
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from slam.commands.calibrate import calibrate
+    from slam.commands.calibrate.support import uses_fitted_gain
 
     res = calibrate(args.runs, _config_path(args.config), args.out, clean=args.clean, false_alarm=args.false_alarm,
                     force=args.force, progress=not args.quiet, overrides=args.set or [],
@@ -105,8 +107,15 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         r = choice.relation
         what = f"b {r.boundary:.3g}" if r.kind == "trend" else f"sigma_floor {r.sigma_floor:.3g} x {r.k_sigma:g}"
         alarm = f"{100 * choice.alarm:.2f} %" if choice.met else "target not met"
-        print(f"  {name} ({r.kind}): gain {choice.fit.gain:.3f}, {what}, w {r.window_s:g} s, th {r.threshold}: "
-              f"alarms on {alarm} of the learning steps")
+        verdict = res.support.get(name)
+        why = f", kept: {verdict.measure} {verdict.value:.2f}" if verdict is not None and verdict.kept else ""
+        gain = choice.fit.gain if uses_fitted_gain(r) else r.gain  # the one its observer uses
+        print(f"  {name} ({r.kind}): gain {gain:.3f}, {what}, w {r.window_s:g} s, th {r.threshold}: "
+              f"alarms on {alarm} of the learning steps{why}")
+    if res.choices:
+        kept = [n for n in res.choices if n not in res.dropped]
+        gone = f", dropped {len(res.dropped)} ({', '.join(res.dropped)})" if res.dropped else ", dropped none"
+        print(f"  relations: kept {len(kept)} of {len(res.choices)}{gone}")
     for p in res.proposals:
         print(f"  proposed {p.choice.relation.name}: rates correlate {p.choice.fit.corr:.3f} (commented out in the file)")
     for lag in res.applied:
@@ -183,7 +192,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
     only = args.only.split(",") if args.only else None
     res = run_compare(args.input, _config_path(args.config), args.out, _config_path(args.variants), only,
-                      args.set or [], progress=not args.quiet, force=args.force)
+                      args.set or [], progress=not args.quiet, force=args.force, command=args.command_line)
     print((res.out_dir / "comparison.md").read_text())
     print(f"wrote {res.out_dir}" + _report_hint(res.out_dir))
     return 0
@@ -200,7 +209,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     only = args.only.split(",") if args.only else None
     res = run_demo(args.out, _config_path(args.scenario), _config_path(args.config), _config_path(args.variants),
-                   only, args.seed, progress=not args.quiet, force=args.force)
+                   only, args.seed, progress=not args.quiet, force=args.force, command=args.command_line)
     if res.simulated:
         print(f"simulated {res.run_dir} ({res.duration_s:.1f} s of the mission)")
     else:
@@ -228,7 +237,7 @@ def _cmd_ablate(args: argparse.Namespace) -> int:
 def _print_metrics(out_dir: Path, metrics: dict) -> None:
     keys = (
         "ate_rmse_m", "ate_rmse_unaligned_m", "rpe_trans_pct", "rpe_rot_deg_per_m", "final_error_m",
-        "n_poses", "runtime_s", "realtime_factor", "alarm_fraction", "detection_delay_s",
+        "n_poses", "runtime_s", "realtime_factor", "realtime_factor_unavailable", "alarm_fraction", "detection_delay_s",
         "isolation_precision", "isolation_recall", "validation_time_s",
     )
     shown = {k: metrics[k] for k in keys if k in metrics}
@@ -417,6 +426,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    args.command_line = shlex.join(["gslam", *(sys.argv[1:] if argv is None else argv)])  # as results name it
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",

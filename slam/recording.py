@@ -160,7 +160,16 @@ class Recording:
     visual odometry, a second wheel odometry), each in its own frame. ``faults`` maps a component name to the intervals (s, in
     the recording's time) where its output is physically wrong beyond its
     nominal noise; it is known only for simulated runs. ``place_matches``:
-    loop closures the recording lists, if any.
+    loop closures the recording lists, if any. ``fault_truth``: the fault
+    intervals the recording's own truth gives, as read (a run folder's
+    ``truth.json`` in the recording's time, a BROAD trial's labels); None
+    where it has no truth (a plain log or bag). ``faults`` starts as these
+    and may gain the times the pipeline finds the scan matcher wrong
+    against ground truth (:mod:`slam.gating.truth`); the figures show only
+    ``fault_truth``. ``stamps_synthesised``: why the reader made the times
+    up (a log whose stamps are unusable): they are then not physical
+    seconds, and nothing is measured against them (the real-time factor);
+    None where they are the recording's own.
     """
 
     name: str
@@ -175,6 +184,8 @@ class Recording:
     magnetic_reference: MagneticReference | None = None
     place_matches: PlaceMatches | None = None
     extra_odometry: dict[str, Trajectory] = field(default_factory=dict)
+    fault_truth: dict[str, list[Interval]] | None = None
+    stamps_synthesised: str | None = None
 
     @property
     def duration(self) -> float:

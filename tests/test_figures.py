@@ -29,7 +29,7 @@ def test_observer_alarms_colours_rows_and_legend(mapped, monkeypatch):
     res = mapped("on")
     recording = copy.copy(res.recording)
     # Two fault types, overlapping in time: each must be told apart.
-    recording.faults = {**res.recording.faults, "SM": [(12.0, 15.0)], "GPS": []}
+    recording.fault_truth = {**res.recording.fault_truth, "SM": [(12.0, 15.0)], "GPS": []}
     drawn = capture(monkeypatch)
     plot_observer_alarms("unused.png", recording, res.validation)
     (fig,) = drawn
@@ -55,7 +55,7 @@ def test_gated_and_oracle_are_drawn_on_top_and_apart(mapped, monkeypatch):
     trajectories["gated"] = mapped("on").trajectory
     recording = mapped("off").recording
     drawn = capture(monkeypatch)
-    plot_trajectories("unused.png", trajectories, recording.groundtruth, "t", fault_shading(recording.faults),
+    plot_trajectories("unused.png", trajectories, recording.groundtruth, "t", fault_shading(recording.fault_truth),
                       highlight=["oracle", "gated"])
     (fig,) = drawn
     lines = {ln.get_label(): ln for ln in fig.axes[0].get_lines() if not ln.get_label().startswith("_")}

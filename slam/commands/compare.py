@@ -5,12 +5,14 @@ The run is read and scan-matched once; each variant is a normal result
 folder ``OUT/<variant>/`` as ``gslam map`` writes it. ``OUT`` follows the
 rule of :mod:`slam.results.outdir` and is built whole beside its place. Beside
 the variants:
-``comparison.csv`` and ``comparison.md`` (one row per variant; the runtime
-counts reading and scan matching for every variant, though they run once),
+``comparison.csv`` and ``comparison.md`` (one row per variant, the columns
+defined under the table, :data:`DEFINITIONS`; every figure is one of the
+variant's ``metrics.json``),
 the figures a reader of the paper expects (trajectories over ground truth,
 compass-yaw trends, observer alarms over the true fault intervals), and
-``report.html``, all of it and each variant's map on one page
-(``output.report``; :mod:`slam.outputs.report`).
+``report.html``, all of it and each variant's map on one page, under its
+provenance (``output.report``; :mod:`slam.outputs.report`,
+:mod:`slam.outputs.provenance`).
 """
 
 from __future__ import annotations
@@ -25,13 +27,14 @@ from typing import Any
 
 import yaml
 
-from slam.config import PipelineConfig, config_files, load_config
+from slam.config import PipelineConfig, config_files, dump_config, load_config
 from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
 from validation.base.errors import InputError
 from slam.results.outdir import result_folder
 from slam.results.records import PLAIN_NAME, PLAIN_NAME_RULE
 from slam.pipeline.folder import RESULT_FILES, MapResult, MappingPipeline
+from slam.outputs.provenance import collect
 from slam.outputs.report import Figure, Section, Table, write_report
 from slam.resources import shipped_config
 
@@ -42,7 +45,7 @@ COMPARE_FILES = ("comparison.csv", "comparison.md", "report.html", "trajectories
 """The files of a comparison beside its variants' folders."""
 
 COLUMNS: tuple[tuple[str, str, str], ...] = (
-    # (metric key, column header, format)
+    # (metrics.json key, column header, format)
     ("ate_rmse_m", "ATE RMSE [m]", "{:.3f}"),
     ("ate_rmse_unaligned_m", "ATE unaligned [m]", "{:.3f}"),
     ("rpe_trans_pct", "RPE trans [%]", "{:.2f}"),
@@ -53,7 +56,28 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("alarm_fraction", "alarm fraction", "{:.3f}"),
     ("isolation_precision", "isolation precision", "{:.3f}"),
     ("isolation_recall", "isolation recall", "{:.3f}"),
+    ("faults_missed", "faults missed", "{:d}"),
+    ("false_alarm_fraction", "false alarm fraction", "{:.3f}"),
 )
+
+DEFINITIONS: dict[str, str] = {
+    "runtime [s]": "runtime_with_shared_s, the seconds from reading the input to writing metrics.json "
+                   "(runtime_s; process start and imports not counted), plus, for a variant that reused an earlier "
+                   "variant's reading and scan matching, the seconds those took there (its timings_s read and "
+                   "frontend): what the variant costs on its own",
+    "alarm fraction": "share of validation steps with an alarm (the oracle: where it gated a factor)",
+    "isolation precision, recall": "over the steps, the blamed components that were truly faulty, over those blamed "
+                                   "and over those truly faulty",
+    "faults missed": "true fault intervals no diagnosis named within their span, of all true fault intervals "
+                     "(faults_missed of faults_missed + faults_detected)",
+    "false alarm fraction": "share of validation steps with an alarm while no component was inside a true fault",
+}
+"""What each column but the errors means, printed under the table; the
+metrics are those of each variant's ``metrics.json`` (definitions in
+:mod:`validation.metrics`), "–" where the variant has none (no validation,
+no truth)."""
+
+_MISSED_OF = ("faults_missed", "faults_detected")
 
 
 @dataclass
@@ -69,9 +93,15 @@ class CompareResult:
         rows = []
         for name, res in self.results.items():
             row = {"variant": name}
-            row.update({key: res.metrics.get(key) for key, _, _ in COLUMNS})
+            row.update({key: res.metrics.get(key) for key in _csv_keys()})
             rows.append(row)
         return rows
+
+
+def _csv_keys() -> list[str]:
+    """The metrics of a row: the columns', and the detected faults beside the missed."""
+    keys = [key for key, _, _ in COLUMNS]
+    return keys + [k for k in _MISSED_OF if k not in keys]
 
 
 def load_variants(path: str | Path, only: list[str] | None = None) -> dict[str, list[str]]:
@@ -106,21 +136,35 @@ def _yaml_scalar(value: Any) -> str:
 def _table(rows: list[dict[str, Any]]) -> Table:
     """The comparison table's headers and formatted cells."""
     headers = ["variant"] + [h for _, h, _ in COLUMNS]
-    cells = [[row["variant"]] + ["–" if row.get(k) is None else fmt.format(row[k]) for k, _, fmt in COLUMNS]
-             for row in rows]
+    cells = [[row["variant"]] + [_cell(row, k, fmt) for k, _, fmt in COLUMNS] for row in rows]
     return Table(headers, cells)
+
+
+def _cell(row: dict[str, Any], key: str, fmt: str) -> str:
+    value = row.get(key)
+    if value is None:
+        return "–"
+    if key == _MISSED_OF[0] and row.get(_MISSED_OF[1]) is not None:
+        return f"{value} of {value + row[_MISSED_OF[1]]}"
+    return fmt.format(value)
+
+
+def definitions_text() -> list[str]:
+    """One line per defined column, as printed under the table."""
+    return [f"{name}: {text}." for name, text in DEFINITIONS.items()]
 
 
 def _markdown(rows: list[dict[str, Any]], title: str) -> str:
     table = _table(rows)
     lines = [f"# {title}", "", "| " + " | ".join(table.headers) + " |", "|" + "---|" * len(table.headers)]
     lines += ["| " + " | ".join(cells) + " |" for cells in table.rows]
+    lines += ["", *(f"- {line}" for line in definitions_text())]
     return "\n".join(lines) + "\n"
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:
     out = io.StringIO()
-    writer = csv.DictWriter(out, fieldnames=["variant"] + [k for k, _, _ in COLUMNS], lineterminator="\n")
+    writer = csv.DictWriter(out, fieldnames=["variant", *_csv_keys()], lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
     return out.getvalue()
@@ -135,10 +179,12 @@ def run_compare(
     overrides: list[str] | None = None,
     progress: bool = False,
     force: bool = False,
+    command: str | None = None,
 ) -> CompareResult:
     """Run every variant on ``input_path``; see the module docstring.
     ``variants_path``: default the shipped ``configs/variants.yaml``;
-    ``force``: see :mod:`slam.results.outdir`."""
+    ``force``: see :mod:`slam.results.outdir`; ``command``: the command
+    line ``report.html`` names (default: this process's)."""
     out_dir = Path(out_dir)
     variants_path = Path(variants_path) if variants_path is not None else shipped_config("variants.yaml")
     variants = load_variants(variants_path, only)
@@ -153,7 +199,11 @@ def run_compare(
         (tmp / "comparison.csv").write_text(_csv(rows))
         (tmp / "comparison.md").write_text(_markdown(rows, f"{recording.name}: variants compared"))
         _figures(tmp, results, recording)
-        report_s = _report(tmp, rows, recording.name) if base.output.report else 0.0
+        if base.output.report:
+            made = collect(input_path, config_path, dump_config(base), command)
+            report_s = _report(tmp, rows, recording.name, made.rows())
+        else:
+            report_s = 0.0
     for name, res in results.items():
         res.out_dir = out_dir / name
     return CompareResult(out_dir, results, report_s)
@@ -178,35 +228,40 @@ def _run_variants(
     each variant's figures are drawn by a process forked from this one
     (slam.outputs.result_writer), which then starts with it loaded."""
     import slam.outputs.plots  # noqa: F401
+    from tqdm import tqdm
 
     recording, frontend, frontend_cfg = None, None, None
-    shared_s = 0.0
+    read_s = frontend_s = 0.0  # what the reading and the last scan matching took, for those who reuse them
     results: dict[str, MapResult] = {}
-    for name, cfg in configs.items():
-        if frontend_cfg is not None and cfg.frontend != frontend_cfg:
-            frontend = None  # this variant changes the front-end: match again
-        pipe = MappingPipeline(input_path, cfg, folder / name, progress=progress, recording=recording, frontend=frontend)
-        results[name] = res = pipe.run()
-        timings = res.metrics.get("timings_s", {})
-        if recording is None or frontend is None:
-            shared_s = timings.get("read", 0.0) + timings.get("frontend", 0.0)
-            res.metrics["runtime_with_shared_s"] = res.metrics["runtime_s"]
-        else:  # reading and scan matching were reused: count them in
-            res.metrics["runtime_with_shared_s"] = round(res.metrics["runtime_s"] + shared_s, 4)
-        recording, frontend, frontend_cfg = pipe.recording, pipe.frontend, cfg.frontend
-        log.info("%s: ATE %s m", name, results[name].metrics.get("ate_rmse_m"))
+    # disable=None: a bar only on a terminal, never into a piped log.
+    with tqdm(total=len(configs), desc="compare", unit="variant", leave=False, disable=None if progress else True) as bar:
+        for name, cfg in configs.items():
+            bar.set_postfix_str(name)
+            if frontend_cfg is not None and cfg.frontend != frontend_cfg:
+                frontend = None  # this variant changes the front-end: match again
+            reused_s = (read_s if recording is not None else 0.0) + (frontend_s if frontend is not None else 0.0)
+            pipe = MappingPipeline(input_path, cfg, folder / name, progress=progress, recording=recording,
+                                   frontend=frontend, shared_s=reused_s)
+            results[name] = res = pipe.run()
+            timings = res.metrics.get("timings_s", {})
+            if recording is None:
+                read_s = timings.get("read", 0.0)
+            if frontend is None:
+                frontend_s = timings.get("frontend", 0.0)
+            recording, frontend, frontend_cfg = pipe.recording, pipe.frontend, cfg.frontend
+            log.info("%s: ATE %s m", name, res.metrics.get("ate_rmse_m"))
+            bar.update(1)
     return results, recording
 
 
-def _report(folder: Path, rows: list[dict[str, Any]], name: str) -> float:
-    """``report.html``: the table, the comparison's figures and each
-    variant's map; the seconds it took."""
+def _report(folder: Path, rows: list[dict[str, Any]], name: str, provenance: list[tuple[str, str]]) -> float:
+    """``report.html``: its provenance, the table, the comparison's figures
+    and each variant's map; the seconds it took."""
     t = time.perf_counter()
     variants = [row["variant"] for row in rows]
     sections = [
-        Section("Variants compared", "Runtime counts reading and scan matching for every variant, though they "
-                "run once. Each variant's result folder holds its files (trajectory.tum, metrics.json, map.pgm, "
-                "run.mcap).", tables=[_table(rows)]),
+        Section("Variants compared", " ".join(definitions_text()) + " Each variant's result folder holds its files "
+                "(trajectory.tum, metrics.json, map.pgm, run.mcap).", tables=[_table(rows)]),
         Section("Trajectories", figures=[
             Figure(folder / "trajectories.png", "every variant over the reference, around it"),
             Figure(folder / "trajectories_full.png", "every variant over the reference, whole"),
@@ -218,7 +273,7 @@ def _report(folder: Path, rows: list[dict[str, Any]], name: str) -> float:
         Section("Maps", "Each variant's occupancy grid and trajectory (map.png).", small=True,
                 figures=[Figure(folder / v / "map.png", v) for v in variants]),
     ]
-    write_report(folder / "report.html", f"{name}: variants compared", sections)
+    write_report(folder / "report.html", f"{name}: variants compared", sections, provenance=provenance)
     elapsed = time.perf_counter() - t
     log.info("report.html in %.2f s", elapsed)
     return elapsed
@@ -228,7 +283,7 @@ def _figures(out: Path, results: dict[str, MapResult], recording) -> None:
     from slam.outputs.plots import fault_shading, plot_trajectories
     from slam.outputs.validation_figures import plot_observer_alarms, plot_yaw_trends
 
-    shaded = fault_shading(recording.faults)
+    shaded = fault_shading(recording.fault_truth or {})
     trajectories = {name: r.trajectory for name, r in results.items()}
     title = f"{recording.name}: variants over the reference"
     on_top = [name for name in ("oracle", "gated") if name in trajectories]

@@ -45,8 +45,11 @@ def run_demo(
     seed: int | None = None,
     progress: bool = False,
     force: bool = False,
+    command: str | None = None,
 ) -> DemoResult:
-    """Simulate (or reuse) and compare; None for a path means the shipped file."""
+    """Simulate (or reuse) and compare; None for a path means the shipped
+    file; ``command``: the command line ``report.html`` names (default:
+    this process's)."""
     scenario = Path(scenario) if scenario is not None else shipped_config(DEFAULT_SCENARIO)
     config = Path(config) if config is not None else shipped_config(DEFAULT_CONFIG)
     variants = Path(variants) if variants is not None else shipped_config("variants.yaml")
@@ -66,7 +69,7 @@ def run_demo(
     if not reuse:
         duration = simulate(scenario, run_dir, seed=seed, progress=progress, force=force).duration_s
     compare = run_compare(run_dir, config, out / "compare", variants, list(only or DEFAULT_VARIANTS),
-                          progress=progress, force=force)
+                          progress=progress, force=force, command=command)
     return DemoResult(out, run_dir, not reuse, duration, compare)
 
 

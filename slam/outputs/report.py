@@ -6,6 +6,9 @@ Figs. 2 and 3, each variant's map) and of ``gslam ablate`` (the summary
 tables and plots), in one HTML file that needs nothing else: the PNGs are
 embedded as base64 data URIs, the style is inline, there is no script.
 It opens in any browser, from a mail or a CI artefact, without its folder.
+Under the title, where it is given, the page's provenance
+(:mod:`slam.outputs.provenance`): the command line, the version, the git
+commit, the input and the config's hash.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ figure img { max-width: 100%; border: 1px solid #eee; }
 figcaption { font-size: 0.85em; color: #555; }
 .grid figure { max-width: 380px; }
 p.note { color: #555; font-size: 0.9em; }
+table.provenance th, table.provenance td { text-align: left; } table.provenance code { word-break: break-all; }
 """.strip()
 
 
@@ -61,8 +65,10 @@ class Section:
     small: bool = False
 
 
-def render(title: str, sections: Sequence[Section], intro: str = "") -> str:
-    """The page: every figure that exists embedded, the ones missing left out."""
+def render(title: str, sections: Sequence[Section], intro: str = "",
+           provenance: Sequence[tuple[str, str]] = ()) -> str:
+    """The page: every figure that exists embedded, the ones missing left
+    out; ``provenance``: (label, value) pairs shown under the title."""
     parts = [
         "<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
         f"<title>{html.escape(title)}</title>", f"<style>\n{_STYLE}\n</style>", "</head>", "<body>",
@@ -70,6 +76,8 @@ def render(title: str, sections: Sequence[Section], intro: str = "") -> str:
     ]
     if intro:
         parts.append(f'<p class="note">{html.escape(intro)}</p>')
+    if provenance:
+        parts.append(_provenance(provenance))
     for section in sections:
         figures = [f for f in section.figures if f.path.is_file()]
         if not (section.tables or figures or section.note):
@@ -86,9 +94,16 @@ def render(title: str, sections: Sequence[Section], intro: str = "") -> str:
     return "\n".join(parts)
 
 
-def write_report(path: str | Path, title: str, sections: Sequence[Section], intro: str = "") -> None:
+def write_report(path: str | Path, title: str, sections: Sequence[Section], intro: str = "",
+                 provenance: Sequence[tuple[str, str]] = ()) -> None:
     """Write the page to ``path``, atomically."""
-    write_text(path, render(title, sections, intro))
+    write_text(path, render(title, sections, intro, provenance))
+
+
+def _provenance(rows: Sequence[tuple[str, str]]) -> str:
+    body = "\n".join(f"<tr><th>{html.escape(label)}</th><td><code>{html.escape(value)}</code></td></tr>"
+                     for label, value in rows)
+    return f'<table class="provenance">\n<tbody>\n{body}\n</tbody>\n</table>'
 
 
 def _table(table: Table) -> str:

@@ -41,7 +41,9 @@ IMPORT_NICENESS = 10  # the child's priority while it imports and waits; back to
 
 @dataclass
 class FinalEstimate:
-    """The run's final estimate and what the files made from it show."""
+    """The run's final estimate and what the files made from it show:
+    ``faults``, the recording's true fault intervals (its ``fault_truth``;
+    empty without truth: no band, no legend)."""
 
     folder: Path
     name: str
@@ -78,7 +80,7 @@ class MapOutputs:
 
 
 def draw_trajectory(run: FinalEstimate) -> None:
-    """``trajectory.png``: the estimate over the reference, true faults shaded."""
+    """``trajectory.png``: the estimate over the reference, the true faults shaded (none without truth)."""
     from slam.outputs.plots import fault_shading, plot_trajectories
 
     plot_trajectories(run.folder / "trajectory.png", {"estimate": run.estimate}, run.reference, title=run.name,

@@ -9,6 +9,10 @@
 * :func:`plot_system_model` (its Section 4): the components and the
   relations between them, as a graph.
 
+The true faults are the recording's truth (``Recording.fault_truth``: a
+run folder's ``truth.json``, a BROAD trial's labels), as read; a recording
+without truth has no bands and no "true ... fault" in any legend.
+
 Shading is drawn under everything else, so lines and bars keep the colours
 the titles name.
 """
@@ -31,7 +35,7 @@ _ALARM_COLOR, _BLAME_COLOR = "tab:blue", "tab:red"
 def _shade_faults(ax, recording: Recording, components=None, label: bool = True) -> None:
     """Each component's true fault intervals as a full-height band in its
     colour, below every line and bar; one legend entry per component."""
-    for comp, intervals in recording.faults.items():
+    for comp, intervals in (recording.fault_truth or {}).items():
         if components is not None and comp not in components:
             continue
         for k, (a, b) in enumerate(intervals):
@@ -113,7 +117,7 @@ def plot_observer_alarms(path: str | Path, recording: Recording, validation) -> 
         for c in comps:
             blamed = np.array([r.consistent and c in r.diagnoses[0] for r in validation.results])
             rows.append((f"blamed: {c}", blamed, _BLAME_COLOR))
-    truth = [(c, iv) for c, iv in recording.faults.items() if iv]
+    truth = [(c, iv) for c, iv in (recording.fault_truth or {}).items() if iv]
     fig = Figure(figsize=(10, 1.2 + 0.45 * (len(rows) + len(truth))))
     ax = fig.add_subplot()
     dt = np.median(np.diff(t)) if len(t) > 1 else 0.1
@@ -137,8 +141,8 @@ def plot_observer_alarms(path: str | Path, recording: Recording, validation) -> 
     ax.set_xlabel("time [s]")
     ax.set_xlim(t[0], t[-1] + dt)
     ax.set_ylim(-0.7, n_rows - 0.3)
-    ax.set_title(f"{recording.name}: observer alarms (blue), blamed sensors (red), true faults (grey; a row per sensor)",
-                 fontsize="medium")
+    faults = ", true faults (grey; a row per sensor)" if truth else ""
+    ax.set_title(f"{recording.name}: observer alarms (blue), blamed sensors (red){faults}", fontsize="medium")
     ax.grid(True, axis="x", linewidth=0.5, alpha=0.5)
     if truth:
         ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")

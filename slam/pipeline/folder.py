@@ -62,7 +62,10 @@ class MappingPipeline:
     ``inputs``: other files the run reads (the config), which ``out_dir``
     must not be or hold; ``force``: write into a folder that is not a map
     result (see :mod:`slam.results.outdir`); ``concurrent``: match scans and
-    draw figures in a second process (see the module docstring). After
+    draw figures in a second process (see the module docstring);
+    ``shared_s``: the seconds another variant took to read and match what
+    this one reuses, which ``metrics.json`` adds to this run's
+    ``runtime_s`` as ``runtime_with_shared_s`` (None: no such figure). After
     :meth:`run`, :attr:`core` holds the run in memory.
     """
 
@@ -77,6 +80,7 @@ class MappingPipeline:
         inputs: Sequence[str | Path] = (),
         force: bool = False,
         concurrent: bool = True,
+        shared_s: float | None = None,
     ):
         self.input_path = Path(input_path)
         self.config = config
@@ -87,6 +91,7 @@ class MappingPipeline:
         self.inputs = [self.input_path, *map(Path, inputs)]
         self.force = force
         self.concurrent = concurrent
+        self.shared_s = shared_s
         self.scan_matching: BackgroundScanMatching | None = None
         self.outputs: ResultWriter | None = None
         self.core: Mapping | None = None
@@ -184,7 +189,8 @@ class MappingPipeline:
         t = time.perf_counter()
         if self.outputs is not None:
             rec = self.recording
-            self.outputs.submit(FinalEstimate(folder, rec.name, core.backend.trajectory, rec.groundtruth, rec.faults))
+            self.outputs.submit(FinalEstimate(folder, rec.name, core.backend.trajectory, rec.groundtruth,
+                                              rec.fault_truth or {}))
         self.points = map_points(core.recording, core.measurements.scan_index, core.backend.trajectory,
                                  self.config.frontend, self.config.output.map_voxel_m)
         if self.outputs is not None:
@@ -250,10 +256,21 @@ class MappingPipeline:
                 metrics["mcap_messages"] = made.mcap_messages
         # Everything but renaming the folder into place and writing this file.
         metrics["runtime_s"] = round(time.perf_counter() - self._start, 4)
+        if self.shared_s is not None:
+            metrics["runtime_with_shared_s"] = round(metrics["runtime_s"] + self.shared_s, 4)
         metrics["timings_s"] = {name.removesuffix("_s"): round(value, 4) for name, value in vars(tm).items()}
-        if metrics["runtime_s"]:
-            metrics["realtime_factor"] = round(self.recording.duration / metrics["runtime_s"], 2)
+        metrics.update(realtime_factor(self.recording, metrics.get("runtime_with_shared_s", metrics["runtime_s"])))
         (folder / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+
+
+def realtime_factor(rec: Recording, runtime_s: float) -> dict[str, Any]:
+    """``realtime_factor``: the recording's duration over ``runtime_s``;
+    where the reader synthesised the times (they are not seconds), null and
+    ``realtime_factor_unavailable`` says why; nothing for a zero runtime."""
+    if rec.stamps_synthesised is not None:
+        return {"realtime_factor": None,
+                "realtime_factor_unavailable": f"the recording's stamps are unusable: {rec.stamps_synthesised}"}
+    return {"realtime_factor": round(rec.duration / runtime_s, 2)} if runtime_s else {}
 
 
 def import_next_steps() -> None:

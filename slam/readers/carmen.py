@@ -292,12 +292,9 @@ def scan_times(path: Path, stamps: np.ndarray, lines: list[int] | None = None) -
         return float(stamps[0]), np.zeros(n)
     steps = np.diff(stamps)
     bad = int(np.sum(steps <= 0.0))
-    if bad > MAX_BAD_STEP_FRACTION * (n - 1):
-        log.warning(
-            "%s: %d of %d scan stamps do not increase (zero or low-resolution stamps); "
-            "times synthesised at one scan per %.1f s",
-            path, bad, n - 1, NOMINAL_SCAN_PERIOD_S,
-        )
+    unusable = unusable_stamps(stamps)
+    if unusable is not None:
+        log.warning("%s: %s", path, unusable)
         return 0.0, NOMINAL_SCAN_PERIOD_S * np.arange(n)
     back = int(np.argmin(steps))
     if -steps[back] > MAX_STEP_BACK_S:
@@ -312,6 +309,17 @@ def scan_times(path: Path, stamps: np.ndarray, lines: list[int] | None = None) -
         log.warning("%s: %d scan stamps step back; %d stamps moved to %g s after their predecessor",
                     path, bad, moved, MIN_STAMP_STEP_S)
     return float(t[0]), t - t[0]
+
+
+def unusable_stamps(stamps: np.ndarray) -> str | None:
+    """Why :func:`scan_times` synthesises the times of these scan stamps
+    (too many do not increase), or None where it keeps them."""
+    n = len(stamps)
+    bad = int(np.sum(np.diff(stamps) <= 0.0)) if n > 1 else 0
+    if bad <= MAX_BAD_STEP_FRACTION * (n - 1):
+        return None
+    return (f"{bad} of {n - 1} scan stamps do not increase (zero or low-resolution stamps); "
+            f"times synthesised at one scan per {NOMINAL_SCAN_PERIOD_S:.1f} s")
 
 
 def _check_angles(path: Path, d: _Log) -> None:
@@ -365,6 +373,7 @@ def read_carmen(path: str | Path, config: InputConfig | None = None) -> Recordin
         scans=scans,
         odometry=_odometry(path, d, t),
         groundtruth=groundtruth,
+        stamps_synthesised=unusable_stamps(np.asarray(d.stamps)),
     )
     log.info("%s: %d scans of %d beams over %.1f s", path, len(scans), ranges.shape[1], rec.duration)
     return rec

@@ -232,7 +232,9 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
         raise GslamError(f"input.extra_odometry: a {fmt} recording has no topics; further odometry sources are "
                          "read from ROS bags")
     if not is_run_folder(path):
-        return _checked(_read(fmt, path, config, on_scans), fmt, path, config, on_scans)
+        rec = _checked(_read(fmt, path, config, on_scans), fmt, path, config, on_scans)
+        rec.fault_truth = _as_read(rec.faults) if rec.faults else None  # a reader's own labels (BROAD)
+        return rec
 
     sidecar = load_sidecar(path / SIDECAR)
     unset = config.gps.datum_lat_deg is None and config.gps.datum_lon_deg is None
@@ -243,8 +245,14 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
     rec = _checked(_read(fmt, run_recording(path), config, on_scans), fmt, path, config, on_scans)
     rec.name = path.name
     attach_sidecar(rec, sidecar)
+    rec.fault_truth = _as_read(rec.faults)
     log.info("%s: run '%s' with faults in %s", path, sidecar.scenario, ", ".join(rec.faults) or "none")
     return rec
+
+
+def _as_read(faults: dict[str, list]) -> dict[str, list]:
+    """A copy of the fault intervals, which later additions to ``faults`` leave as they are."""
+    return {name: list(intervals) for name, intervals in faults.items()}
 
 
 def _read(fmt: str, path: Path, config: InputConfig, on_scans: ScansHook | None) -> Recording:

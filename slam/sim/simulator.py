@@ -131,7 +131,9 @@ def _simulate_into(scenario: Scenario, tmp: Path, progress: bool) -> SimulationR
     # 2. Sensors, each from its own random stream.
     n_scans = len(sample_times(motion.duration, sensors.laser.rate_hz))
     desc = f"{scenario.name}, {motion.duration:.0f} s: ray casting"
-    with tqdm(total=n_scans, unit="scan", desc=desc, disable=not progress) as bar:
+    # disable=None: a bar only on a terminal, never into a piped log.
+    shown = None if progress else True
+    with tqdm(total=n_scans, unit="scan", desc=desc, disable=shown) as bar:
         laser = simulate_laser(motion, world, sensors.laser, sensor_rng(seed, Stream.LASER), bar)
     gyro = simulate_gyro(motion, sensors.gyro, sensor_rng(seed, Stream.GYRO))
     mag_rng = sensor_rng(seed, Stream.MAGNETOMETER)
@@ -144,7 +146,7 @@ def _simulate_into(scenario: Scenario, tmp: Path, progress: bool) -> SimulationR
     # 4. Write everything into the temporary folder (renamed by the caller).
     streams = Streams(motion, laser, gyro, mag, odom, gps)
     n_msgs = sum(len(s.t) for s in (motion, laser, gyro, mag, odom, gps))
-    with tqdm(total=n_msgs, unit="msg", desc="writing bag", disable=not progress) as bar:
+    with tqdm(total=n_msgs, unit="msg", desc="writing bag", disable=shown) as bar:
         counts = write_bag(tmp / "bag", streams, env.t0_s, bar)
     truth = {
         "scenario": scenario.name,

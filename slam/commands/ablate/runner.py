@@ -272,7 +272,9 @@ def run_ablation(
         if todo:
             groups = share_groups(dispatch_order(todo), workers)
             runner = _local(groups, out_dir, workers) if backend is Backend.LOCAL else _ray(groups, out_dir, workers, address)
-            with tqdm(total=len(jobs), initial=len(result.skipped), unit="job", desc="ablate", disable=not progress) as bar:
+            # disable=None: a bar only on a terminal, never into a piped log.
+            shown = None if progress else True
+            with tqdm(total=len(jobs), initial=len(result.skipped), unit="job", desc="ablate", disable=shown) as bar:
                 for outcome in runner:
                     result.outcomes.append(outcome)
                     if outcome.error is None:
