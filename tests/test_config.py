@@ -11,7 +11,7 @@ import yaml
 from slam.config import PipelineConfig, dump_config, load_config, parse_override, validation_sections
 from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
-from validation.diagnosis.model import load_model
+from validation.diagnosis.model import SystemModel, load_model
 
 REPO = Path(__file__).resolve().parents[1]
 TELEMAX = REPO / "configs" / "telemax.yaml"
@@ -198,7 +198,7 @@ def test_model_path_is_relative_to_the_config_file(tmp_path, monkeypatch):
     monkeypatch.chdir(elsewhere)
     cfg = load_config(path)
     assert isinstance(cfg.validation["model"], dict)
-    assert cfg.validation["model"] == load_yaml(MODEL)
+    assert SystemModel.model_validate(cfg.validation["model"]) == load_model(MODEL)
     vcfg, _ = validation_sections(cfg)
     assert vcfg.model == load_model(MODEL)
 
@@ -210,12 +210,12 @@ def test_model_path_given_as_override_is_relative_to_the_working_directory(tmp_p
     path.write_text("validation:\n  mode: oracle\n")
     monkeypatch.chdir(tmp_path)
     cfg = load_config(path, ["validation.model=m.yaml"])
-    assert cfg.validation["model"] == load_yaml(MODEL)
+    assert SystemModel.model_validate(cfg.validation["model"]) == load_model(MODEL)
 
 
 def test_shipped_config_inlines_its_model():
     cfg = load_config(TELEMAX)
-    assert cfg.validation["model"] == load_yaml(MODEL)
+    assert SystemModel.model_validate(cfg.validation["model"]) == load_model(MODEL)
     assert "model: validation/" not in dump_config(cfg)
 
 

@@ -9,6 +9,7 @@ import pytest
 
 from slam.config import FrontendConfig, load_config
 from slam.frontend.kiss import scan_quality
+from slam.frontend.scan_geometry import range_ceiling
 from slam.commands.inject import inject
 from slam.commands.inject import physics
 from slam.commands.inject.spec import parse_fault
@@ -19,7 +20,7 @@ from tests.synthetic import wall_ranges
 from validation.diagnosis.model import Plausibility
 from validation.base.errors import ValidationError
 from validation.observers import ObserversConfig, observe_steps
-from validation.observers.checks import ScanDegeneracyCheck, scan_streams, unary_checks
+from validation.observers.checks import ScanCeilingCheck, ScanDegeneracyCheck, bridged, scan_streams, unary_checks
 from validation.observers.config import observers_config
 from validation.streams import resample_streams
 
@@ -94,3 +95,47 @@ def test_the_check_blames_scan_matching_where_the_laser_is_cut(short_run, tmp_pa
     assert implausible[(log.t > 16.2) & (log.t < 19.8)].all() and not implausible[log.t < 15.0].any()
     assert out.metrics["blamed_steps"].get("SM_DIST", 0) >= 30
     assert out.metrics["observer_coverage"]["scan_degenerate_dist"] > 0.9
+
+
+def _ceiling_check(**kw) -> ScanCeilingCheck:
+    cfg = observers_config({"scan_ceiling": {"enabled": True, **kw}, "magnetometer": {"enabled": False},
+                            "gps": {"enabled": False}})
+    return next(c for c in unary_checks(cfg) if isinstance(c, ScanCeilingCheck))
+
+
+def test_a_scan_cut_at_a_range_ends_in_gaps_at_its_farthest_return():
+    """A room 3 m by 5 m seen whole, then cut at 2.5 m: the cut scan loses
+    the far walls, and every gap it leaves is bordered by returns just short
+    of the cut. A window in the side wall (no return through glass) is a gap
+    too, but its edges are at the wall, far short of the farthest return."""
+    room, angles = wall_ranges(ROOM)
+    cut = np.where(room > 2.5, np.inf, room)
+    window = np.where(np.abs(angles - np.pi / 2) < 0.3, np.inf, room)
+    no_return, edges, share = range_ceiling(np.vstack([room, cut, window]), 0.1, 30.0)
+    assert no_return[0] == 0.0 and edges[0] == 0
+    assert no_return[1] > 0.15 and edges[1] >= 2 and share[1] == 1.0
+    assert no_return[2] > 0.05 and edges[2] == 2 and share[2] == 0.0
+
+
+def test_the_ceiling_check_flags_cut_scans_and_bridges_short_gaps():
+    scans = _scans(["room"] * 6)
+    r = scans.ranges.copy()
+    r[[1, 3, 4]] = np.where(r[[1, 3, 4]] > 1.8, np.inf, r[[1, 3, 4]])
+    q = scan_quality(Scans(scans.t, r, scans.angles, 0.1, 30.0), FrontendConfig(max_range_m=30.0))
+    assert _ceiling_check().flags(q).tolist() == [False, True, False, True, True, False]
+    # Scan 2 lies between two cut scans 2 s apart: a range limit persists.
+    assert _ceiling_check(fill_s=2.0).flags(q).tolist() == [False, True, True, True, True, False]
+    assert bridged(np.arange(5.0), np.array([1, 0, 0, 0, 1], bool), 3.0).tolist() == [True, False, False, False, True]
+
+
+def test_the_ceiling_check_names_the_whole_scan_matcher_in_the_model():
+    from validation.config import parse_sections
+
+    model = {"components": ["ODO_DIST", "SM_DIST", "SM"], "sensors": {"SM": ["SM_DIST"]},
+             "relations": {"distance_odo_sm": ["ODO_DIST", "SM_DIST"]}, "unary_checks": {"scan_ceiling": "SM_DIST"}}
+    section = {"mode": "on", "model": model, "observers": {
+        "relations": [{"name": "distance_odo_sm", "stream_a": "odo_distance", "stream_b": "sm_distance",
+                       "window_s": 2.0, "boundary": 0.1, "threshold": 10, "max_counter": 30}],
+        "magnetometer": {"enabled": False}, "gps": {"enabled": False}, "scan_ceiling": {"enabled": True}}}
+    with pytest.raises(ValidationError, match="scan_ceiling.*tests SM, the model says SM_DIST"):
+        parse_sections(section, {"factors": {"scan_matching": {"x": ["SM_DIST"]}}})

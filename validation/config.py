@@ -119,7 +119,11 @@ def _check_names(cfg: ValidationConfig, gate: GatingConfig) -> None:
                 f"validation.observers: relation '{rel.name}' relates {sorted(rel.components)}, "
                 f"the model says {sorted(model.relations[rel.name])}"
             )
-    for check in (cfg.observers.magnetometer, cfg.observers.field_gyro, cfg.observers.gps):
+    obs = cfg.observers
+    for check in (obs.magnetometer, obs.field_gyro, obs.gps, obs.scan_ceiling):
         if check.enabled and check.name not in model.unary_checks:
             raise ValidationError(f"validation.observers: check '{check.name}' is not in the model's unary_checks")
+        if check.enabled and model.unary_checks[check.name] != check.component:
+            raise ValidationError(f"validation.observers: check '{check.name}' tests {check.component}, "
+                                  f"the model says {model.unary_checks[check.name]}")
     check_components(gate, model)

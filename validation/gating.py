@@ -167,13 +167,23 @@ class GatingConfig(StrictFrozen):
 
 
 def check_components(config: GatingConfig, model: SystemModel) -> None:
-    """Every component named in ``config.factors`` must be the model's."""
+    """Every component named in ``config.factors`` must be the model's, and
+    a sensor must gate the factors its modalities gate: a blame of the whole
+    sensor that gated nothing would be a validator doing nothing."""
     for factor, entry in config.factors.items():
         for dof, comps in entry.items():
             for c in comps:
                 if c not in model.components:
                     where = factor if dof == ALL_DOFS else f"{factor}.{dof}"
                     raise ValidationError(f"gating.factors.{where}: unknown component {c!r}")
+    gated = config.gated_components()
+    for sensor, parts in model.sensors.items():
+        used = [p for p in parts if p in gated]
+        if used and sensor not in gated:
+            raise ValidationError(
+                f"gating.factors: the model's sensor {sensor!r} gates no factor, though its modality {used[0]!r} "
+                f"does; a blame of {sensor} would change nothing: name it beside {used[0]}"
+            )
 
 
 def action_scale(config: GatingConfig, action: GatingAction) -> float:

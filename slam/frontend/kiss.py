@@ -24,7 +24,7 @@ import numpy as np
 
 from slam.config import FrontendConfig
 from slam.recording import Scans, Trajectory
-from slam.frontend.scan_geometry import scan_geometry
+from slam.frontend.scan_geometry import range_ceiling, scan_geometry
 
 log = logging.getLogger(__name__)
 
@@ -260,12 +260,18 @@ def run_frontend(
 class ScanQuality:
     """Per scan: ``t`` (n,) s, ``returns`` (n,) in range, ``min_eigenvalue``
     (n,) of its normalised point-to-line information matrix and that
-    eigenvector ``weak`` (n, 3) (forward, left, turn); :mod:`slam.frontend.scan_geometry`."""
+    eigenvector ``weak`` (n, 3) (forward, left, turn); the share of beams
+    without a return ``no_return`` (n,), the returns bordering a gap
+    ``gap_edges`` (n,) and the share of those near the farthest return
+    ``edges_at_ceiling`` (n,) (:mod:`slam.frontend.scan_geometry`)."""
 
     t: np.ndarray
     returns: np.ndarray
     min_eigenvalue: np.ndarray
     weak: np.ndarray
+    no_return: np.ndarray
+    gap_edges: np.ndarray
+    edges_at_ceiling: np.ndarray
 
 
 def scan_quality(scans: Scans, config: FrontendConfig, chunk: int = 512) -> ScanQuality:
@@ -273,7 +279,7 @@ def scan_quality(scans: Scans, config: FrontendConfig, chunk: int = 512) -> Scan
     the front-end registers (``config``'s range limits), ``chunk`` scans at
     a time."""
     max_range = min(config.max_range_m, scans.range_max)
-    parts = [scan_geometry(scans.ranges[i : i + chunk], scans.angles, config.min_range_m, max_range)
+    parts = [(*scan_geometry(scans.ranges[i : i + chunk], scans.angles, config.min_range_m, max_range),
+              *range_ceiling(scans.ranges[i : i + chunk], config.min_range_m, max_range))
              for i in range(0, len(scans), chunk)]
-    returns, eig, weak = (np.concatenate(p) for p in zip(*parts))
-    return ScanQuality(scans.t.copy(), returns, eig, weak)
+    return ScanQuality(scans.t.copy(), *(np.concatenate(p) for p in zip(*parts)))

@@ -56,3 +56,30 @@ def scan_geometry(ranges: np.ndarray, angles: np.ndarray, range_min: float, rang
     info = np.einsum("nbi,nbj->nij", rows, rows) / r.shape[1]
     values, vectors = np.linalg.eigh(info)
     return count, values[:, 0], vectors[:, :, 0]
+
+
+def range_ceiling(ranges: np.ndarray, range_min: float, range_max: float,
+                  near: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """How much scans ``ranges`` (n, B) m look cut off at a range ceiling:
+    the share of beams without a return (n,), the number of returns that
+    border a run of beams without one (n,) and the share of those edges
+    within ``near`` (a fraction) of the scan's farthest return (n,).
+
+    A laser that sees nothing beyond some distance R (a cut, or an open yard
+    beyond its reach) loses every surface past R: its scan ends in gaps whose
+    edges all lie just short of R, the farthest return it has. Indoors a gap
+    (an open door, glass, a far hall) is bordered by returns at any range,
+    rarely all near the scan's farthest one."""
+    r = np.asarray(ranges, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(r) & (r > range_min) & (r < range_max)
+    r = np.where(ok, r, 0.0)
+    farthest = r.max(axis=1, initial=0.0)
+    no_return = ~ok
+    before = np.pad(no_return[:, :-1], ((0, 0), (1, 0)))
+    after = np.pad(no_return[:, 1:], ((0, 0), (0, 1)))
+    edge = ok & (before | after)
+    edges = edge.sum(axis=1)
+    at_ceiling = (edge & (r >= (1.0 - near) * farthest[:, None])).sum(axis=1)
+    share = np.where(edges > 0, at_ceiling / np.maximum(edges, 1), 0.0)
+    return no_return.mean(axis=1), edges, share

@@ -100,7 +100,8 @@ class Validated(_ByValidator):
     mode = GatingMode.ON
 
     def scan_quality(self, rec: Recording, scan_poses: Trajectory | None):
-        if not self.validation.observers.scan.enabled or scan_poses is None:
+        obs = self.validation.observers
+        if not (obs.scan.enabled or obs.scan_ceiling.enabled) or scan_poses is None:
             return None
         from slam.frontend.kiss import scan_quality
 

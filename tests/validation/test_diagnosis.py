@@ -350,3 +350,35 @@ def test_unknown_observation_is_an_error():
         d.diagnose({"gyro_gps": M})
     with pytest.raises(ValidationError, match="unexpected value"):
         d.diagnose({"gyro_sm": PLAUS})
+
+
+def _ceiling_model(false_alarm: float | None) -> SystemModel:
+    return SystemModel(
+        components=("ODO_DIST", "SM_DIST", "SM_YAW", "SM"), sensors={"SM": ("SM_DIST", "SM_YAW")},
+        relations={"distance_odo_sm": ("ODO_DIST", "SM_DIST")}, unary_checks={"scan_ceiling": "SM"},
+        check_false_alarm={"scan_ceiling": false_alarm} if false_alarm else {},
+        priors={"ODO_DIST": 0.05, "SM_DIST": 0.02, "SM": 0.02},
+    )
+
+
+def test_a_check_that_may_raise_false_alarms_is_weighed_not_obeyed():
+    """Alone, an implausible verdict of a check that errs one time in ten is
+    more probably a false alarm than a fault (prior 0.02); beside a mismatch
+    of the odometry with scan matching it turns the blame from the odometry
+    (more probable by its prior) to the scan matcher the check tests."""
+    cut = {"scan_ceiling": Plausibility.IMPLAUSIBLE}
+    mismatch = {"distance_odo_sm": Observation.NO_MATCH}
+    with Diagnoser(_ceiling_model(0.1)) as d:
+        alone = d.diagnose(cut)
+        assert alone.diagnoses[0] == frozenset() and frozenset({"SM"}) in alone.diagnoses
+        assert alone.explanations[0].dismissed == {"scan_ceiling"}
+        assert d.diagnose(mismatch).diagnoses[0] == {"ODO_DIST"}
+        assert d.diagnose({**mismatch, **cut}).diagnoses[0] == {"SM"}
+    with Diagnoser(_ceiling_model(None)) as d:
+        assert d.diagnose(cut).diagnoses == (frozenset({"SM"}),)  # a hard check decides alone
+
+
+def test_only_a_unary_check_may_raise_false_alarms():
+    with pytest.raises(ValueError, match="distance_odo_sm.*not a unary check"):
+        SystemModel(components=("A", "B"), relations={"distance_odo_sm": ("A", "B")},
+                    check_false_alarm={"distance_odo_sm": 0.1})

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from validation.diagnosis.model import Observation, Plausibility, load_model
+from validation.diagnosis.model import Observation, Plausibility, SystemModel, load_model
 from validation.diagnosis.reiter import Diagnoser, DiagnosisResult
 from validation.base.errors import ValidationError
 from validation.gating import (
@@ -232,3 +232,17 @@ def test_config_errors():
     with pytest.raises(ValidationError, match="gating.factors.wheel.x: unknown component 'WHEEL'"):
         Gate(cfg, model)
     assert np.isinf(factor_scales(GatingConfig(), {"SM": EXC}, FACTOR_DOFS)["scan_matching"]).all()
+
+
+def test_a_sensor_must_gate_what_its_modalities_gate():
+    """A blame of the whole scan matcher (SM) must reach the factors its
+    modalities gate; named only under SM_DIST it would change nothing."""
+    from validation.gating import check_components
+
+    model = SystemModel(components=("ODO_DIST", "SM_DIST", "SM"), sensors={"SM": ("SM_DIST",)},
+                        relations={"distance_odo_sm": ("ODO_DIST", "SM_DIST")})
+    idle = GatingConfig(factors={"scan_matching": {"x": ["SM_DIST"]}})
+    with pytest.raises(ValidationError, match="sensor 'SM' gates no factor.*name it beside SM_DIST"):
+        check_components(idle, model)
+    check_components(GatingConfig(factors={"scan_matching": {"x": ["SM_DIST", "SM"]}}), model)
+    check_components(GatingConfig(factors={"odometry": {"x": ["ODO_DIST"]}}), model)  # scan matching not gated at all

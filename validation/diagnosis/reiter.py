@@ -49,18 +49,25 @@ def corr_name(relation: str) -> str:
     return f"CORR({relation})"
 
 
+def trust_name(check: str) -> str:
+    """Name of the assumable TRUST(check) of a unary check that may raise a false alarm."""
+    return f"TRUST({check})"
+
+
 @dataclass(frozen=True)
 class Explanation:
     """One subset-minimal diagnosis over all assumables.
 
     ``components``: components assumed abnormal; ``masked``: relations whose
     CORR assumption is retracted (their match is coincidental);
-    ``probability``: its prior probability under independent faults.
+    ``probability``: its prior probability under independent faults;
+    ``dismissed``: unary checks whose verdict is taken for a false alarm.
     """
 
     components: frozenset[str]
     masked: frozenset[str]
     probability: float
+    dismissed: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -115,6 +122,8 @@ class Diagnoser:
             if rule.corr:
                 self._assumables[corr_name(rule.relation)] = self._var("corr", rule.relation)
                 self._masking_prob[rule.relation] = rule.masking_prob
+        for check in model.check_false_alarm:
+            self._assumables[trust_name(check)] = self._var("trust", check)
         self._name_of = {lit: name for name, lit in self._assumables.items()}
 
     def _var(self, kind: str, name: str) -> int:
@@ -130,7 +139,8 @@ class Diagnoser:
         for r, (a, b) in m.relations.items():
             cnf.append([-v("ok", a), -v("ok", b), v("match", r)])
         for k, c in m.unary_checks.items():
-            cnf.append([-v("ok", c), v("plausible", k)])
+            trust = [-v("trust", k)] if k in m.check_false_alarm else []
+            cnf.append([-v("ok", c), *trust, v("plausible", k)])
         for a, b in m.fault_propagation:
             cnf += [[-v("ok", a), v("ok", b)], [-v("ok", b), v("ok", a)]]
         for rule in m.failure_masking:
@@ -224,9 +234,11 @@ class Diagnoser:
         for retracted in found:
             comps = frozenset(n for n in retracted if n in self.model.components)
             masked = frozenset(r for r in self._masking_prob if corr_name(r) in retracted)
-            explanations.append(Explanation(comps, masked, self._probability(comps, masked)))
+            dismissed = frozenset(k for k in self.model.check_false_alarm if trust_name(k) in retracted)
+            explanations.append(Explanation(comps, masked, self._probability(comps, masked, dismissed), dismissed))
         explanations.sort(
-            key=lambda e: (-e.probability, len(e.components) + len(e.masked), sorted(e.components), sorted(e.masked))
+            key=lambda e: (-e.probability, len(e.components) + len(e.masked) + len(e.dismissed),
+                           sorted(e.components), sorted(e.masked), sorted(e.dismissed))
         )
         diagnoses: list[frozenset[str]] = []
         probabilities: list[float] = []
@@ -238,15 +250,19 @@ class Diagnoser:
             key, tuple(diagnoses), tuple(probabilities), tuple(explanations), True, tuple(conflicts)
         )
 
-    def _probability(self, components: frozenset[str], masked: frozenset[str]) -> float:
+    def _probability(self, components: frozenset[str], masked: frozenset[str],
+                     dismissed: frozenset[str] = frozenset()) -> float:
         """prod p(S) over S in D times prod (1 - p(S)) over S not in D; the same
-        for coincidental matches with ``masking_prob``. Computed in logs."""
+        for coincidental matches with ``masking_prob`` and for dismissed
+        checks with ``check_false_alarm``. Computed in logs."""
         logp = 0.0
         for c in self.model.components:
             p = self.model.prior(c)
             logp += math.log(p) if c in components else math.log1p(-p)
         for r, p in self._masking_prob.items():
             logp += math.log(p) if r in masked else math.log1p(-p)
+        for k, p in self.model.check_false_alarm.items():
+            logp += math.log(p) if k in dismissed else math.log1p(-p)
         return math.exp(logp)
 
     def close(self) -> None:

@@ -88,12 +88,18 @@ class GpsQualityCheck:
 class ScanGeometrySeries(Protocol):
     """The front-end's figures per scan: ``t`` (n,) s, ``returns`` (n,),
     ``min_eigenvalue`` (n,) of the normalised point-to-line information
-    matrix and its unit eigenvector ``weak`` (n, 3) (forward, left, turn)."""
+    matrix and its unit eigenvector ``weak`` (n, 3) (forward, left, turn);
+    the share of beams without a return ``no_return`` (n,), the returns
+    bordering a gap ``gap_edges`` (n,) and the share of those within a tenth
+    of the farthest return ``edges_at_ceiling`` (n,)."""
 
     t: np.ndarray
     returns: np.ndarray
     min_eigenvalue: np.ndarray
     weak: np.ndarray
+    no_return: np.ndarray
+    gap_edges: np.ndarray
+    edges_at_ceiling: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -128,7 +134,49 @@ class ScanDegeneracyCheck:
         return np.asarray(values[self.streams[0]]) > 0.0
 
 
-UnaryCheck = MagnetometerCheck | FieldGyroCheck | GpsQualityCheck | ScanDegeneracyCheck
+@dataclass(frozen=True)
+class ScanCeilingCheck:
+    """The whole scan matcher against a laser that sees too little: a scan
+    cut off at a range ceiling (many beams without a return, and the gaps'
+    edges at the scan's farthest return) cannot give scan matching the
+    surfaces beyond it (:class:`~validation.observers.config.ScanCeilingConfig`).
+    Scans between two cut-off ones at most ``fill_s`` apart are cut off too:
+    a range limit persists. Its stream is the verdict per scan, as the scan
+    degeneracy check's."""
+
+    name: str
+    component: str
+    min_no_return: float
+    min_edges: int
+    min_edge_share: float
+    fill_s: float
+    hold_s: float
+    streams: tuple[str, ...] = ("scan_ceiling",)
+
+    def flags(self, geometry: ScanGeometrySeries) -> np.ndarray:
+        """True for each scan cut off at a range ceiling."""
+        cut = ((np.asarray(geometry.no_return) >= self.min_no_return)
+               & (np.asarray(geometry.gap_edges) >= self.min_edges)
+               & (np.asarray(geometry.edges_at_ceiling) >= self.min_edge_share))
+        return bridged(np.asarray(geometry.t, dtype=float), cut, self.fill_s)
+
+    def deviant(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
+        """True where a cut-off scan is at either end of the interval."""
+        return np.asarray(values[self.streams[0]]) > 0.0
+
+
+def bridged(t: np.ndarray, flags: np.ndarray, gap_s: float) -> np.ndarray:
+    """``flags`` with every sample between two flagged ones at most ``gap_s``
+    apart flagged too."""
+    out = flags.copy()
+    idx = np.flatnonzero(flags)
+    for a, b in zip(idx[:-1], idx[1:]):
+        if b > a + 1 and t[b] - t[a] <= gap_s:
+            out[a:b] = True
+    return out
+
+
+UnaryCheck = MagnetometerCheck | FieldGyroCheck | GpsQualityCheck | ScanDegeneracyCheck | ScanCeilingCheck
 
 
 def unary_checks(config: ObserversConfig, reference: MagneticReference | None = None) -> list[UnaryCheck]:
@@ -162,6 +210,10 @@ def unary_checks(config: ObserversConfig, reference: MagneticReference | None = 
         for axis, (name, component, label) in enumerate(zip(scan.names, scan.components, SCAN_AXES)):
             checks.append(ScanDegeneracyCheck(name, component, axis, scan.min_returns, scan.min_eigenvalue,
                                               scan.min_share, scan.hold_s, (f"scan_degenerate_{label}",)))
+    ceiling = config.scan_ceiling
+    if ceiling.enabled:
+        checks.append(ScanCeilingCheck(ceiling.name, ceiling.component, ceiling.min_no_return, ceiling.min_edges,
+                                       ceiling.min_edge_share, ceiling.fill_s, ceiling.hold_s))
     return checks
 
 
@@ -173,7 +225,7 @@ def scan_streams(checks: list[UnaryCheck], geometry: ScanGeometrySeries | None) 
         return {}
     t = np.asarray(geometry.t, dtype=float)
     return {c.streams[0]: Stream(t, c.flags(geometry).astype(float))
-            for c in checks if isinstance(c, ScanDegeneracyCheck)}
+            for c in checks if isinstance(c, ScanDegeneracyCheck | ScanCeilingCheck)}
 
 
 def held(t: np.ndarray, deviant: np.ndarray, hold_s: float) -> np.ndarray:

@@ -262,6 +262,26 @@ class ScanCheckConfig(StrictFrozen):
         return tuple(f"{self.name}_{axis}" for axis in SCAN_AXES)
 
 
+class ScanCeilingConfig(StrictFrozen):
+    """A laser that sees too little: a scan cut off at a range ceiling
+    (:func:`slam.frontend.scan_geometry.range_ceiling`) is implausible for
+    the whole scan matcher (``component``, a sensor of the model). A scan is
+    cut off when at least ``min_no_return`` of its beams have no return and
+    at least ``min_edge_share`` of its ``min_edges`` or more gap edges lie
+    within a tenth of its farthest return. A range limit does not come and go
+    from scan to scan: scans between two cut-off ones at most ``fill_s``
+    apart count as cut off too. Off unless enabled."""
+
+    enabled: bool = False
+    name: str = "scan_ceiling"
+    component: Component = "SM"
+    min_no_return: float = Field(0.1, gt=0.0, le=1.0)
+    min_edges: int = Field(2, ge=1)
+    min_edge_share: float = Field(0.5, gt=0.0, le=1.0)
+    fill_s: float = Field(0.0, ge=0.0)
+    hold_s: float = Field(0.0, ge=0.0)
+
+
 class ObserversConfig(StrictFrozen):
     """All observers. ``max_gap_s`` is the largest gap (s) between samples a
     step may be interpolated across; a sparse stream may bridge up to
@@ -293,6 +313,7 @@ class ObserversConfig(StrictFrozen):
     field_gyro: FieldGyroCheckConfig = FieldGyroCheckConfig()
     gps: GpsCheckConfig = GpsCheckConfig()
     scan: ScanCheckConfig = ScanCheckConfig()
+    scan_ceiling: ScanCeilingConfig = ScanCeilingConfig()
     max_gap_s: float = Field(0.5, gt=0.0)
     gap_periods: float | None = Field(3.0, gt=0.0)
     stream_max_gap_s: dict[str, float] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
@@ -304,7 +325,8 @@ class ObserversConfig(StrictFrozen):
     @model_validator(mode="after")
     def _names(self) -> "ObserversConfig":
         names = [r.name for r in self.relations] + [
-            self.magnetometer.name, self.field_gyro.name, self.gps.name, *self.scan.names
+            self.magnetometer.name, self.field_gyro.name, self.gps.name, *self.scan.names,
+            self.scan_ceiling.name,
         ]
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:

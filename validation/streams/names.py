@@ -36,7 +36,7 @@ StreamName = Literal[
 ]
 QualityStreamName = Literal[
     "mag_strength", "mag_dip", "mag_field_change", "gps_sigma",
-    "scan_degenerate_dist", "scan_degenerate_lat", "scan_degenerate_yaw",
+    "scan_degenerate_dist", "scan_degenerate_lat", "scan_degenerate_yaw", "scan_ceiling",
 ]
 
 ODOMETRY_QUANTITIES: tuple[str, ...] = ("yaw", "distance", "forward", "lateral", "speed", "fix_speed")
@@ -72,6 +72,7 @@ STREAM_COMPONENT: dict[str, str] = {
     "scan_degenerate_dist": "SM_DIST",
     "scan_degenerate_lat": "SM_LAT",
     "scan_degenerate_yaw": "SM_YAW",
+    "scan_ceiling": "SM",
 }
 STREAM_NAMES: tuple[str, ...] = get_args(StreamName) + get_args(QualityStreamName)
 """The fixed stream names (the further odometry sources' come on top)."""
