@@ -238,3 +238,95 @@ def test_calibrate_writes_the_compass_noise_into_the_factor(tmp_path):
     assert compass.correlation_s == pytest.approx(10.0, rel=0.25)
     assert compass.sigma_yaw_deg == pytest.approx(np.degrees(0.07), rel=0.2)
     assert "# Compass heading minus the integrated gyro's" in res.text
+
+
+# --- relations the data do not support -----------------------------------------------
+
+
+def speed_run(seed: int, follows: bool, duration_s: float = 300.0) -> CalibrationRun:
+    """A GPS speed and an odometry speed at 10 Hz, all declared clean. With
+    ``follows`` the robot speeds up and slows down and both see it (the
+    GPS with 5 cm/s of noise); without, it drives at a steady 1 m/s that
+    the odometry reads to 5 mm/s while the GPS speed jumps by 0.15 m/s a
+    sample: level with the odometry, its changes noise the odometry never
+    sees (the Husky bag's speed_gps_odo)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration_s, 0.1)
+    true = 1.0 + (0.4 * np.sin(t / 6.0) + 0.2 * np.sin(t / 2.1) if follows else 0.0)
+    odo = true + rng.normal(0.0, 0.005, len(t))
+    gps = true + rng.normal(0.0, 0.05 if follows else 0.15, len(t))
+    streams = {"gps_speed": Stream(t, gps), "odo_fix_speed": Stream(t, odo)}
+    step_t = fixed_rate_steps(t[0], t[-1], RATE_HZ)
+    return CalibrationRun(f"speed{seed}", streams, resample_streams(streams, step_t, 0.5), [],
+                          np.ones(len(step_t), dtype=bool), True)
+
+
+SPEED = RelationConfig(name="speed_gps_odo", stream_a="gps_speed", stream_b="odo_fix_speed", boundary=0.1,
+                       window_s=2.0, threshold=5, max_counter=25)
+
+
+@pytest.mark.parametrize("follows", [True, False])
+def test_a_relation_whose_gain_is_near_zero_is_dropped(follows):
+    """Speeds level with each other but whose changes do not follow: the
+    level alone kept them before; the gain of the changes now drops them,
+    with the reason in words."""
+    from slam.commands.calibrate.support import judge
+
+    runs = [speed_run(1, follows), speed_run(2, follows)]
+    choice = calibrate_relation(runs, SPEED, vcfg(SPEED), target=0.002)
+    verdict = judge(runs, choice, vcfg(SPEED))
+    if follows:
+        assert choice.fit.gain == pytest.approx(1.0, abs=0.1) and verdict.kept, verdict
+        return
+    assert choice.fit.gain_fitted and abs(choice.fit.gain) < 0.1
+    assert not verdict.kept and verdict.measure == "gain"
+    assert verdict.reason.startswith("odo_fix_speed does not follow gps_speed's changes over")
+    assert "at least 0.25 needed" in verdict.reason
+
+
+def test_the_changes_carry_evidence_only_with_a_gain_and_a_correlation():
+    """Step 3 of slam/commands/calibrate/support.py on fits built by hand:
+    a gain against the motion, near zero, and a good gain with changes that
+    hardly correlate."""
+    from slam.commands.calibrate.fit import RateFit
+    from slam.commands.calibrate.support import changes_evidence
+
+    def fit(gain: float, corr: float) -> RateFit:
+        return RateFit("gyro_yaw", "odo_yaw", 1.0, gain, 0.0, 0.01, 0.0, corr, 1000, 0.1)
+
+    assert changes_evidence(fit(1.0, 0.95), 1.0) is None
+    assert changes_evidence(fit(0.55, 0.9), 1.0) is None  # a skid-steer's odometry against its gyro
+    against = changes_evidence(fit(-0.9, 0.9), 1.0)
+    assert not against.kept and "turns against" in against.reason and "input.frames" in against.reason
+    assert changes_evidence(fit(0.1, 0.9), 1.0).measure == "gain"
+    weak = changes_evidence(fit(0.8, 0.3), 1.0)
+    assert not weak.kept and weak.measure == "correlation of the changes" and "explains 9 %" in weak.reason
+
+
+def heading_pair_run(seed: int) -> CalibrationRun:
+    """A compass and a GPS course: the same heading 0.3 rad apart, the
+    course with 0.3 rad of noise a sample (a course from fixes at walking
+    speed), the robot turning slowly."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 600.0, 0.1)
+    heading = np.unwrap(np.angle(np.exp(1j * 0.6 * np.sin(t / 40.0))))
+    streams = {"compass_yaw": Stream(t, heading + rng.normal(0.0, 0.01, len(t))),
+               "gps_course": Stream(t, heading - 0.3 + rng.normal(0.0, 0.3, len(t)))}
+    step_t = fixed_rate_steps(t[0], t[-1], RATE_HZ)
+    return CalibrationRun(f"heading{seed}", streams, resample_streams(streams, step_t, 0.5), [],
+                          np.ones(len(step_t), dtype=bool), True)
+
+
+def test_an_offset_observer_of_two_absolute_headings_is_judged_by_their_steady_difference():
+    """Its observer keeps the configured gain (1) and compares levels, so
+    the gain fitted to the changes (noise of the course) is no verdict on
+    it: the mean resultant length of the difference is."""
+    from slam.commands.calibrate.support import judge, uses_fitted_gain
+
+    rel = RelationConfig(name="yaw_compass_gps", kind="offset", stream_a="gps_course", stream_b="compass_yaw",
+                         window_s=4.0, sigma_floor=0.3, level_window_s=None, threshold=1, max_counter=21)
+    runs = [heading_pair_run(1), heading_pair_run(2)]
+    choice = calibrate_relation(runs, rel, vcfg(rel), target=0.002)
+    verdict = judge(runs, choice, vcfg(rel))
+    assert not uses_fitted_gain(choice.relation) and choice.relation.gain == 1.0
+    assert verdict.kept and verdict.measure == "mean resultant length" and verdict.value > 0.9, verdict

@@ -41,7 +41,7 @@ from slam.commands.calibrate.propose import Proposal, propose
 from slam.commands.calibrate.runs import CalibrationRun, load_run, parse_clean
 from slam.commands.calibrate.select import (CheckChoice, Choice, FieldGyroChoice, calibrate_field_gyro, calibrate_magnetometer,
                                    calibrate_relation)
-from slam.commands.calibrate.support import Support, judge
+from slam.commands.calibrate.support import Support, judge, uses_fitted_gain
 from slam.commands.calibrate.write import calibrated_config
 from slam.config import PipelineConfig, config_files, load_config, validation_sections
 from slam.errors import GslamError
@@ -78,6 +78,8 @@ class CalibrationResult:
     """The first pass's heading offset when it was added to the compass's mounting yaw and the runs learnt again."""
     dropped: dict[str, Support] = field(default_factory=dict)
     """The relations the data do not support, left out of the config (:mod:`slam.commands.calibrate.support`)."""
+    support: dict[str, Support] = field(default_factory=dict)
+    """The verdict on every relation some learning step observes, kept or not."""
 
 
 def calibrate(
@@ -176,7 +178,7 @@ def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm:
         elif not choice.met:
             log.warning("relation %s: no candidate keeps its alarms below %.3f %% of the learning steps",
                         name, 100 * target)
-        elif choice.fit.gain < 0:
+        elif choice.fit.gain < 0 and uses_fitted_gain(choice.relation):
             log.warning("relation %s: %s turns against %s (gain %.2f): check input.frames", name,
                         choice.relation.stream_b, choice.relation.stream_a, choice.fit.gain)
     mag = calibrate_magnetometer(loaded, vcfg.observers.magnetometer, target) if has_mag else None
@@ -194,7 +196,7 @@ def learn(loaded: Sequence[CalibrationRun], config: PipelineConfig, false_alarm:
     text = calibrated_config(config, choices, mag, field, proposals, header, target, len(loaded), lags, noise,
                              dropped)
     return CalibrationResult(None, choices, mag, field, proposals, target, text, lags, compass_noise=noise,
-                             heading_offset=heading, dropped=dropped)
+                             heading_offset=heading, dropped=dropped, support=support)
 
 
 def _learnt_from(stretch) -> str:

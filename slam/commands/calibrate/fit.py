@@ -90,6 +90,8 @@ class RateFit:
     steps: int
     motion: float
     inliers: list[np.ndarray] = field(default_factory=list, repr=False)
+    gain_fitted: bool = True
+    """False where stream a hardly moves and the gain is the configured one."""
 
 
 def changes(run: CalibrationRun, name: str, window_s: float, window: Window) -> tuple[np.ndarray, np.ndarray]:
@@ -99,14 +101,15 @@ def changes(run: CalibrationRun, name: str, window_s: float, window: Window) -> 
     return window_changes(s.t, values, s.valid[name], window_s, window)
 
 
-def _line(x: np.ndarray, y: np.ndarray, prior_gain: float) -> tuple[float, float]:
+def _line(x: np.ndarray, y: np.ndarray, prior_gain: float) -> tuple[float, float, bool]:
     """Huber line, or ``prior_gain`` and a robust intercept where ``x``
-    hardly moves (module docstring)."""
+    hardly moves (module docstring); and whether the gain was fitted."""
     gain, intercept = huber_line(x, y)
     if robust_sd(x) < MIN_MOTION * max(robust_sd(y - gain * x - intercept), 1e-12):
         gain = prior_gain
         intercept = float(np.median(y - gain * x))
-    return gain, intercept
+        return gain, intercept, False
+    return gain, intercept, True
 
 
 def _noise_model(r: np.ndarray, da: np.ndarray, keep: np.ndarray) -> tuple[float, float, float]:
@@ -145,7 +148,7 @@ def fit_rates(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, w
     keep = np.ones(len(da), dtype=bool)
     declared = all(r.declared for r in runs)
     for _ in range(1 if declared else 3):
-        gain, intercept = _line(da[keep], db[keep], prior_gain)
+        gain, intercept, _ = _line(da[keep], db[keep], prior_gain)
         r = db - gain * da - intercept
         if not declared:
             # The band grows with the motion: a sensor whose error is a
@@ -153,7 +156,7 @@ def fit_rates(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, w
             noise, sigma_rel, spread = _noise_model(r, da, keep)
             band = np.maximum(spread, np.sqrt(noise**2 + (sigma_rel * da) ** 2))
             keep = np.abs(r - np.median(r[keep])) <= OUTLIER_SIGMAS * band
-    gain, intercept = _line(da[keep], db[keep], prior_gain)
+    gain, intercept, fitted = _line(da[keep], db[keep], prior_gain)
     r = db - gain * da - intercept
     noise, sigma_rel, spread = _noise_model(r, da, keep)
     corr = float(np.corrcoef(da[keep], db[keep])[0, 1]) if keep.sum() > 2 and np.std(da[keep]) > 0 and np.std(db[keep]) > 0 else 0.0
@@ -170,7 +173,7 @@ def fit_rates(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, w
         good = run.clean if run.declared else run.clean & ~dilate(out, int(round(0.5 * window_s * rate_hz)))
         inliers.append(good)
     return RateFit(a, b, window_s, gain, intercept / window_s, noise, sigma_rel, corr, int(keep.sum()),
-                   robust_sd(da[keep]), inliers)
+                   robust_sd(da[keep]), inliers, fitted)
 
 
 def fit_offset(runs: Sequence[CalibrationRun], a: str, b: str, gain: float, level_window_s: float | None,

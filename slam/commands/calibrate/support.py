@@ -31,7 +31,22 @@ drops it and writes why (:func:`judge`). A relation is kept when:
 
    a negative association (the pair turns opposite ways) is dropped too,
    with a pointer to ``input.frames``;
-3. a boundary and ``th`` meet the false-alarm target
+3. wherever stream a moves enough for the gain to be fitted (more than
+   ``MIN_MOTION`` times the residual's noise, :mod:`slam.commands.calibrate.fit`)
+   and the observer uses that gain (not an offset observer of two
+   absolute streams, which keeps its configured gain and is judged by the
+   mean resultant length above), the changes themselves carry evidence: the gain at least ``MIN_GAIN``
+   and the correlation of the changes at least ``MIN_ASSOCIATION``. Both
+   streams of a relation measure one physical quantity (a turn, a travel,
+   a speed), so the gain is 1 up to the sensors' scale errors; the largest
+   of a working pair is a skid-steer robot's wheel odometry against its
+   gyro, up to about twice (or half: which stream is a) the true turn
+   (a Husky's wheel-separation multiplier is 1.875). A gain below a
+   quarter is no scale error but a stream that does not follow the other:
+   a GPS speed or course whose changes over the window are noise the
+   other never sees. A correlation below 0.5 explains less than a quarter
+   of b's changes (r^2 < 0.25): an observer on them would compare noise;
+4. a boundary and ``th`` meet the false-alarm target
    (:func:`slam.commands.calibrate.select.calibrate_relation`).
 
 The thresholds were set on the calibration runs of the shipped data
@@ -47,15 +62,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slam.commands.calibrate.fit import MIN_MOTION, changes
+from slam.commands.calibrate.fit import MIN_MOTION, RateFit, changes
 from slam.commands.calibrate.runs import CalibrationRun
 from slam.commands.calibrate.select import Choice
 from validation.config import ValidationConfig
+from validation.observers.config import RelationConfig
 from validation.streams import is_angular, is_integrated
 from validation.streams.names import split_source_stream
 
 MIN_OVERLAP = 0.1
 MIN_ASSOCIATION = 0.5
+MIN_GAIN = 0.25
 MAX_LEVEL_DIFFERENCE = 0.25
 LATERAL_SHARE = 0.5
 
@@ -172,10 +189,38 @@ def judge(runs: Sequence[CalibrationRun], choice: Choice, vcfg: ValidationConfig
             support = Support(False, support.measure, support.value,
                               f"{support.reason}, and their levels differ by {level:.2g} of their size (at most "
                               f"{MAX_LEVEL_DIFFERENCE:g} where they do not vary together)")
+    if support.kept and fit.gain_fitted and uses_fitted_gain(rel):
+        support = changes_evidence(fit, rel.window_s) or support
     if support.kept and not choice.met:
         return Support(False, support.measure, support.value,
                        "no boundary and th keep its false alarms below the target on the learning steps")
     return support
+
+
+def uses_fitted_gain(rel: RelationConfig) -> bool:
+    """Whether the calibrated observer of ``rel`` rests on the gain fitted
+    to the changes: every one but an offset observer of two absolute
+    streams (a level of 0), whose gain stays as configured
+    (:func:`slam.commands.calibrate.select.calibrate_relation`)."""
+    return not (rel.kind == "offset" and rel.level_window_s is None)
+
+
+def changes_evidence(fit: RateFit, window_s: float) -> Support | None:
+    """Step 3 of the module docstring: the verdict where the changes carry
+    no evidence, else None."""
+    a, b, over = fit.a, fit.b, f"over {window_s:g} s"
+    if fit.gain <= -MIN_GAIN:
+        return Support(False, "gain", fit.gain, f"{b} turns against {a} (gain {fit.gain:.2f} {over}): check "
+                       "input.frames (yaw_sign) of one of them")
+    if fit.gain < MIN_GAIN:
+        return Support(False, "gain", fit.gain, f"{b} does not follow {a}'s changes {over} (gain {fit.gain:.2g}, at "
+                       f"least {MIN_GAIN:g} needed: two measures of one motion differ by a scale factor, not by "
+                       "nothing)")
+    if fit.corr < MIN_ASSOCIATION:
+        return Support(False, "correlation of the changes", fit.corr,
+                       f"the changes of {a} and {b} {over} hardly correlate ({fit.corr:.2f}, at least "
+                       f"{MIN_ASSOCIATION:g} needed): {a} explains {100 * max(fit.corr, 0) ** 2:.0f} % of {b}'s")
+    return None
 
 
 def _associated(r: float, measure: str, a: str, b: str, window_s: float | None) -> Support:
