@@ -474,6 +474,77 @@ ERRORS: list[Case] = [
          broad_mat(sampling_rate=[[1e-3]])),
     Case("broad-quaternion-not-a-rotation", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"),
          "opt_quat at sample 0 is not a rotation", broad_mat(opt_quat=np.tile([2.0, 0, 0, 0], (50, 1)))),
+    # -- physics bounds on config keys (validation/base/bounds.py): one line, the key, the bound --
+    *(Case(f"config-{key.replace('.', '-')}-{value}", (*MAP, "--out", "{d}/o", "--set", f"{key}={value}"), says)
+      for key, value, says in (
+          ("output.map_voxel_m", "1e-9", "output.map_voxel_m: 1e-09 m is below 0.001 m"),
+          ("output.map_voxel_m", "1e6", "output.map_voxel_m: 1e+06 m is above 100 m"),
+          ("output.grid_resolution_m", "1e6", "output.grid_resolution_m: 1e+06 m is above 10 m"),
+          ("output.grid_resolution_m", "1e-9", "output.grid_resolution_m: 1e-09 m is below 0.005 m"),
+          ("submaps.resolution_m", "1e6", "submaps.resolution_m: 1e+06 m is above 10 m"),
+          ("frontend.min_motion_m", "1e9", "min_motion_m 1e+09 m is not below max_range_m 30 m"),
+          ("keyframes.period_s", "1e-300", "keyframes.period_s: 1e-300 s is below 0.0001 s"),
+          ("keyframes.period_s", "1e9", "keyframes.period_s: 1e+09 s is above 3600 s"),
+          ("keyframes.distance_m", "1e-300", "keyframes.distance_m: 1e-300 m is below 0.001 m"),
+          ("keyframes.yaw_deg", "1e-300", "keyframes.yaw_deg: 1e-300 deg is below 0.001 deg"),
+          ("evaluation.max_time_offset_s", "1e9", "evaluation.max_time_offset_s: 1e+09 s is above 10 s"),
+          ("validation.oracle_k_sigma", "1e-300", "oracle_k_sigma: 1e-300 sigmas is below 0.5 sigmas"),
+          ("validation.oracle_k_sigma", "1e9", "oracle_k_sigma: 1e+09 sigmas is above 100 sigmas"),
+          ("backend.factors.odometry.sigma_xy_m", "1e-300", "backend.factors.odometry.sigma_xy_m: 1e-300 m is below 0.0001 m"),
+          ("backend.factors.odometry.sigma_xy_m", "1e300", "backend.factors.odometry.sigma_xy_m: 1e+300 m is above 1e+06 m"),
+          ("backend.factors.odometry.sigma_yaw_deg", "1e-300", "odometry.sigma_yaw_deg: 1e-300 deg is below 0.001 deg"),
+          ("backend.factors.gyro.sigma_yaw_deg", "1e-300", "backend.factors.gyro.sigma_yaw_deg: 1e-300 deg is below"),
+          ("backend.factors.compass.sigma_yaw_deg", "1e-300", "backend.factors.compass.sigma_yaw_deg: 1e-300 deg"),
+          ("backend.factors.compass.sigma_yaw_deg", "1e300", "compass.sigma_yaw_deg: 1e+300 deg is above 10000 deg"),
+          ("backend.factors.scan_matching.sigma_xy_m", "1e-300", "scan_matching.sigma_xy_m: 1e-300 m is below"),
+          ("backend.factors.scan_matching.sigma_yaw_deg", "1e-300", "scan_matching.sigma_yaw_deg: 1e-300 deg"),
+          ("backend.factors.gps.sigma_floor_m", "1e-300", "backend.factors.gps.sigma_floor_m: 1e-300 m is below"),
+          ("backend.factors.gps.max_time_offset_s", "1e9", "gps.max_time_offset_s: 1e+09 s is above 10 s"),
+          ("backend.initial_sigma_xy_m", "1e-300", "backend.initial_sigma_xy_m: 1e-300 m is below 0.0001 m"),
+          ("backend.initial_sigma_yaw_deg", "1e-300", "backend.initial_sigma_yaw_deg: 1e-300 deg is below"),
+          ("submaps.local.sigma_xy_m", "1e-300", "submaps.local.sigma_xy_m: 1e-300 m is below 0.0001 m"),
+      )),
+    Case("config-relation-sigma-floor-1e-300", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "sigma_floor: 1e-300 (m or rad) is below 1e-12 (m or rad)", config(relation(1, sigma_floor=1e-300))),
+    # -- physics bounds on scenarios --
+    *(Case(f"scenario-{'-'.join(path[1:])}-{value:g}", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), says,
+           scenario(set_in(*path, value)))
+      for *path, value, says in (
+          ("sensors", "laser", "min_range_m", 20.0, "sensors.laser: min_range_m 20 is not below max_range_m 10"),
+          ("sensors", "odometry", "distance_scale_error", -2.0,
+           "sensors.odometry.distance_scale_error: -2 is below -0.5: the odometry would report less than half"),
+          ("sensors", "odometry", "rotation_overreport", 5.0, "sensors.odometry.rotation_overreport: 5 is above 1"),
+          ("sensors", "gyro", "bias_initial_rad_s", 1e6, "sensors.gyro.bias_initial_rad_s: 1e+06 rad/s is above 0.5 rad/s"),
+          ("sensors", "gyro", "bias_initial_rad_s", -1e6, "sensors.gyro.bias_initial_rad_s: -1e+06 rad/s is below -0.5"),
+          ("sensors", "gyro", "noise_rad_s", 1e6, "sensors.gyro.noise_rad_s: 1e+06 rad/s is above 1 rad/s"),
+          ("sensors", "magnetometer", "noise_T", 1.0, "sensors.magnetometer.noise_T: 1 T is above 0.0001 T"),
+          ("environment", "declination_deg", 1e6, "environment.declination_deg: 1e+06 deg is above 180 deg"),
+          ("environment", "field_strength_T", 1.0, "environment.field_strength_T: 1 T is above 0.001 T"),
+          ("environment", "field_strength_T", 1e-12, "environment.field_strength_T: 1e-12 T is below 1e-06 T"),
+      )),
+    # -- physics bounds on what the readers read --
+    Case("carmen-fov-1e-9", CARMEN, "no 2D laser resolves a thousandth of a degree",
+         carmen(head="PARAM laser_front_laser_fov 1e-9")),
+    Case("bag-angle-increment-1e-12", BAG, "no 2D laser resolves a thousandth of a degree",
+         bag(each("/scan", lambda t, m: setattr(m, "angle_increment", 1e-12)))),
+    *(Case(f"librsf-{name}", ("map", "{d}/X_Input.txt", "--config", str(CONFIGS / "datasets" / "librsf_corridor.yaml"),
+                              *QUICK, "--out", "{d}/o"), says,
+           text("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} {row if k == 7 else '0.5 0 0.01 0.01 0.01 0.01'}\n"
+                                       for k in range(50))))
+      for name, row, says in (
+          ("negative-variance", "0.5 0 0.01 -0.01 0.01 0.01", "odom2 line #8: var_vx -0.01 is negative"),
+          ("negative-yaw-variance", "0.5 0 0.01 0.01 0.01 -1", "odom2 line #8: var_wz -1 is negative"),
+          ("speed-1e9", "1e9 0 0.01 0.01 0.01 0.01", "odom2 line #8: speed 1e+09 m/s"),
+      )),
+    *(Case(f"broad-{name}", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"), says, broad_mat(**fields))
+      for name, fields, says in (
+          ("no-gravity", {"imu_acc": np.zeros((50, 3))}, "imu_acc: median magnitude 0 m/s^2, expected gravity"),
+          ("acceleration-in-g", {"imu_acc": np.tile([0.0, 0.0, 1.0], (50, 1))}, "imu_acc: median magnitude 1 m/s^2"),
+          ("no-field", {"imu_mag": np.zeros((50, 3))}, "imu_mag: median magnitude 0 uT, expected the Earth's field"),
+          ("field-of-1-tesla", {"imu_mag": np.tile([0.0, 1e6, 0.0], (50, 1))}, "imu_mag: median magnitude 1e+06 uT"),
+          ("gyro-1e6-rad-s", {"imu_gyr": np.vstack([np.zeros((10, 3)), [[1e6, 0.0, 0.0]], np.zeros((39, 3))])},
+           "imu_gyr at sample 10 is 1e+06 rad/s"),
+      )),
 ]
 
 

@@ -28,7 +28,7 @@ it, so the ``config.yaml`` written beside a result is self-contained).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Literal, Mapping
+from typing import Annotated, Any, Literal, Mapping
 
 from pydantic import ConfigDict, Field, field_validator
 
@@ -36,6 +36,7 @@ from validation.diagnosis.model import SystemModel
 from validation.gating import GatingConfig, check_components
 from validation.observers.config import ObserversConfig, observers_config
 from validation.trends import Window
+from validation.base import bounds
 from validation.base.modes import GatingMode
 from validation.base.yamlio import StrictFrozen, load_yaml, validate_mapping
 
@@ -51,7 +52,7 @@ class ValidationConfig(StrictFrozen):
     mode: GatingMode = GatingMode.OFF
     pass_: Pass = Field("offline", alias="pass")
     rate_hz: float = Field(10.0, gt=0.0)
-    oracle_k_sigma: float = Field(3.0, gt=0.0)
+    oracle_k_sigma: Annotated[float, bounds.ORACLE_K_SIGMA] = Field(3.0, gt=0.0)
     model: SystemModel | None = None
     observers: ObserversConfig = ObserversConfig()
 

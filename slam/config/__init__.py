@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import re
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
@@ -29,6 +29,7 @@ from slam.config.loops import LoopsConfig
 from slam.config.submaps import SubmapsConfig
 from slam.config.trees import check_finite, non_finite, yaml_number
 from validation.base.yamlio import DuplicateKey, UniqueKeyLoader, load_yaml
+from validation.base import bounds
 from validation.base.modes import GatingMode
 from validation.base.yamlio import Strict
 
@@ -218,6 +219,11 @@ class FrontendConfig(Strict):
         if self.min_range_m >= self.max_range_m:
             raise ValueError(f"min_range_m {self.min_range_m:g} is not below max_range_m {self.max_range_m:g}: "
                              "no beam would be kept")
+        # A scan is registered only once the robot moved min_motion_m: beyond
+        # the laser's reach, the next scan shares nothing with the map.
+        if self.min_motion_m >= self.max_range_m:
+            raise ValueError(f"min_motion_m {self.min_motion_m:g} m is not below max_range_m {self.max_range_m:g} m: "
+                             "a scan registered only after the robot left the laser's reach matches nothing")
         return self
 
 
@@ -227,9 +233,9 @@ class FrontendConfig(Strict):
 class KeyframeConfig(Strict):
     """A new keyframe when either limit is reached (null disables a limit)."""
 
-    period_s: float | None = Field(0.5, gt=0.0)
-    distance_m: float | None = Field(None, gt=0.0)
-    yaw_deg: float | None = Field(None, gt=0.0)
+    period_s: Annotated[float, bounds.KEYFRAME_PERIOD_S] | None = Field(0.5, gt=0.0)
+    distance_m: Annotated[float, bounds.KEYFRAME_DISTANCE_M] | None = Field(None, gt=0.0)
+    yaw_deg: Annotated[float, bounds.KEYFRAME_YAW_DEG] | None = Field(None, gt=0.0)
 
     @model_validator(mode="after")
     def _one_limit(self) -> "KeyframeConfig":
@@ -259,16 +265,16 @@ class OdometryFactorConfig(FactorConfig):
     validation keeps both; see :mod:`slam.gating.odometry_scale`."""
 
     learn_scale: bool = False
-    sigma_xy_m: float = Field(0.01, gt=0.0)
+    sigma_xy_m: bounds.Sigma_m = Field(0.01, gt=0.0)
     sigma_xy_per_m: float = Field(0.05, ge=0.0)
-    sigma_yaw_deg: float = Field(0.5, gt=0.0)
+    sigma_yaw_deg: bounds.Sigma_deg = Field(0.5, gt=0.0)
     sigma_yaw_per_rad: float = Field(0.1, ge=0.0)
 
 
 class GyroFactorConfig(FactorConfig):
     """Relative-yaw factor from the integrated gyro rate."""
 
-    sigma_yaw_deg: float = Field(0.2, gt=0.0)
+    sigma_yaw_deg: bounds.Sigma_deg = Field(0.2, gt=0.0)
     sigma_yaw_per_s_deg: float = Field(0.05, ge=0.0)
 
 
@@ -283,25 +289,25 @@ class CompassFactorConfig(FactorConfig):
     seconds holds about ``T / (2 * correlation_s)`` independent errors, and
     its priors together say no more than those. Null: independent errors."""
 
-    sigma_yaw_deg: float = Field(3.0, gt=0.0)
+    sigma_yaw_deg: bounds.Sigma_deg = Field(3.0, gt=0.0)
     correlation_s: float | None = Field(None, gt=0.0)
 
 
 class ScanMatchingFactorConfig(FactorConfig):
     """Between factor from KISS-ICP's relative pose."""
 
-    sigma_xy_m: float = Field(0.02, gt=0.0)
+    sigma_xy_m: bounds.Sigma_m = Field(0.02, gt=0.0)
     sigma_xy_per_m: float = Field(0.02, ge=0.0)
-    sigma_yaw_deg: float = Field(0.3, gt=0.0)
+    sigma_yaw_deg: bounds.Sigma_deg = Field(0.3, gt=0.0)
 
 
 class GpsFactorConfig(FactorConfig):
     """Position prior from a GPS fix near the keyframe; sigma from the
     receiver's covariance, floored, times ``sigma_scale``."""
 
-    sigma_floor_m: float = Field(0.5, gt=0.0)
+    sigma_floor_m: bounds.Sigma_m = Field(0.5, gt=0.0)
     sigma_scale: float = Field(1.0, gt=0.0)
-    max_time_offset_s: float = Field(0.25, gt=0.0)
+    max_time_offset_s: Annotated[float, bounds.MATCH_OFFSET_S] = Field(0.25, gt=0.0)
 
 
 class FactorsConfig(Strict):
@@ -330,8 +336,8 @@ class BackendConfig(Strict):
 
     optimizer: Literal["batch", "isam2", "gnc_tls", "gnc_gm"] = "batch"
     initial_pose: Literal["groundtruth", "origin"] = "groundtruth"
-    initial_sigma_xy_m: float = Field(0.01, gt=0.0)
-    initial_sigma_yaw_deg: float = Field(0.5, gt=0.0)
+    initial_sigma_xy_m: bounds.Sigma_m = Field(0.01, gt=0.0)
+    initial_sigma_yaw_deg: bounds.Sigma_deg = Field(0.5, gt=0.0)
     max_iterations: int = Field(100, ge=1)
     relative_error_tol: float = Field(1e-6, gt=0.0)
     robust_kernel: Kernel = "none"
@@ -355,7 +361,7 @@ class EvaluationConfig(Strict):
     """
 
     rpe_deltas_m: list[float] = Field(default_factory=lambda: [5.0])
-    max_time_offset_s: float = Field(0.05, gt=0.0)
+    max_time_offset_s: Annotated[float, bounds.MATCH_OFFSET_S] = Field(0.05, gt=0.0)
     sm_output_faults: bool = True
     sm_fault_window_s: float = Field(1.0, gt=0.0)
     sm_fault_trans_m: float = Field(0.15, gt=0.0)
@@ -374,11 +380,11 @@ class OutputConfig(Strict):
     and ``gslam ablate`` (slam.outputs.report).
     """
 
-    map_voxel_m: float = Field(0.05, gt=0.0)
+    map_voxel_m: Annotated[float, bounds.MAP_VOXEL_M] = Field(0.05, gt=0.0)
     plots: bool = True
     progress: bool = True
     grid: bool = True
-    grid_resolution_m: float = Field(0.05, gt=0.0)
+    grid_resolution_m: Annotated[float, bounds.GRID_CELL_M] = Field(0.05, gt=0.0)
     grid_hit_probability: float = Field(0.7, gt=0.5, lt=1.0)
     grid_miss_probability: float = Field(0.4, gt=0.0, lt=0.5)
     grid_no_return_m: float = Field(5.0, ge=0.0)

@@ -7,10 +7,11 @@ scan's points, :mod:`slam.matching.grid`).
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
+from validation.base import bounds
 from validation.base.yamlio import Strict as _Strict
 
 
@@ -31,8 +32,8 @@ class LocalMatchConfig(_Strict):
     max_linear_window_m: float = Field(1.5, ge=0.0)
     max_angular_window_deg: float = Field(180.0, ge=0.0, le=180.0)
     min_score: float = Field(0.3, ge=0.0, le=1.0)
-    sigma_xy_m: float = Field(0.03, gt=0.0)
-    sigma_yaw_deg: float = Field(0.5, gt=0.0)
+    sigma_xy_m: bounds.Sigma_m = Field(0.03, gt=0.0)
+    sigma_yaw_deg: bounds.Sigma_deg = Field(0.5, gt=0.0)
 
 
 class RefineConfig(_Strict):
@@ -101,8 +102,8 @@ class ConstraintSearchConfig(_Strict):
     max_angular_window_deg: float = Field(30.0, ge=0.0, le=180.0)
     near_min_score: float = Field(0.45, ge=0.0, le=1.0)
     loop_min_score: float = Field(0.55, ge=0.0, le=1.0)
-    sigma_xy_m: float = Field(0.03, gt=0.0)
-    sigma_yaw_deg: float = Field(0.5, gt=0.0)
+    sigma_xy_m: bounds.Sigma_m = Field(0.03, gt=0.0)
+    sigma_yaw_deg: bounds.Sigma_deg = Field(0.5, gt=0.0)
     robust_scale: float = Field(1.0, gt=0.0)
     inlier_probability: float = Field(0.99, gt=0.0, lt=1.0)
     optimise_every: int = Field(10, ge=1)
@@ -190,7 +191,7 @@ class SubmapsConfig(_Strict):
     max_scans: int = Field(60, ge=2)
     voxel_m: float = Field(0.05, gt=0.0)
     min_points: int = Field(20, ge=3)
-    resolution_m: float = Field(0.1, gt=0.0)
+    resolution_m: Annotated[float, bounds.GRID_CELL_M] = Field(0.1, gt=0.0)
     search_depth: int = Field(6, ge=0, le=10)
     tie_tolerance: float = Field(0.01, ge=0.0)
     blamed_scans: Literal["keep", "leave_out"] = "keep"

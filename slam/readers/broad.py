@@ -226,6 +226,38 @@ def _intervals(t: np.ndarray, flag: np.ndarray) -> list[Interval]:
     return [(float(a), float(b)) for a, b in merged if b - a >= MIN_FAULT_S]
 
 
+GRAVITY_M_S2 = (4.9, 19.6)
+"""The median of ``|imu_acc|`` (m/s^2) over a trial: an IMU held on the
+Earth reads gravity, 9.81, whatever it does (BROAD's trials: 9.82-9.95);
+half or twice that is no accelerometer in m/s^2 (one in g reads 1)."""
+FIELD_UT = (2.0, 1000.0)
+"""The median of ``|imu_mag|`` (uT) over a trial: the Earth's field is 22-67
+uT everywhere (BROAD's trials, magnets beside them included: 42-46); a
+tenth of the weakest or fifteen times the strongest is no field in uT (one
+in tesla reads 5e-5, one in nT 5e4)."""
+MAX_GYRO_RAD_S = 1000.0
+"""rad/s on any axis (as :data:`slam.readers.data_checks.MAX_YAW_RATE`):
+gyroscopes saturate at a few thousand deg/s (BROAD's trials reach 24)."""
+
+
+def check_imu_physics(path: Path, gyr: np.ndarray, acc: np.ndarray, mag: np.ndarray) -> None:
+    """One-line errors for IMU samples no IMU on the Earth gives: no
+    gravity, no Earth field (or one of a tesla), rates beyond any gyro."""
+    g = float(np.median(np.linalg.norm(acc, axis=1)))
+    if not GRAVITY_M_S2[0] <= g <= GRAVITY_M_S2[1]:
+        raise GslamError(f"{path}: imu_acc: median magnitude {g:.3g} m/s^2, expected gravity (9.81 m/s^2, within "
+                         f"{GRAVITY_M_S2[0]:g} to {GRAVITY_M_S2[1]:g}): an IMU on the Earth reads it (in g?)")
+    b = float(np.median(np.linalg.norm(mag, axis=1)))
+    if not FIELD_UT[0] <= b <= FIELD_UT[1]:
+        raise GslamError(f"{path}: imu_mag: median magnitude {b:.3g} uT, expected the Earth's field (22-67 uT, "
+                         f"within {FIELD_UT[0]:g} to {FIELD_UT[1]:g}; in tesla or nT?)")
+    fastest = np.abs(gyr).max(axis=1)
+    if fastest.max() > MAX_GYRO_RAD_S:
+        i = int(np.argmax(fastest > MAX_GYRO_RAD_S))
+        raise GslamError(f"{path}: imu_gyr at sample {i} is {fastest[i]:.3g} rad/s; no gyroscope measures more than "
+                         f"{MAX_GYRO_RAD_S:g} rad/s (in deg/s or mrad/s?)")
+
+
 def read_broad(
     path: str | Path,
     config: InputConfig | None = None,
@@ -256,6 +288,7 @@ def read_broad(
         mag = np.column_stack([np.interp(np.arange(n) / fs + mag_lag_s, np.arange(n) / fs, m) for m in mag.T])
     if not (np.isfinite(gyr).all() and np.isfinite(acc).all() and np.isfinite(mag).all()):
         raise GslamError(f"{path}: imu_gyr/imu_acc/imu_mag: expected finite samples")
+    check_imu_physics(path, gyr, acc, mag)
     t = np.arange(n) / fs
     tracked = np.isfinite(quat).all(axis=1)
     if not tracked.any():

@@ -13,7 +13,8 @@ says. The thresholds leave every shipped and real recording under
   a clock reset), one that jumps forward by more than the rest of the
   recording lasts (a clock jump, recordings joined), and streams whose
   spans do not overlap (different clocks): errors.
-* **Laser scans**: beam angles that do not turn or span more than a full
+* **Laser scans**: beam angles that do not turn, lie closer than a thousandth of a
+  degree (:data:`MIN_BEAM_STEP_RAD`) or span more than a full
   circle, or are not angles in radians: errors. Negative ranges and ranges
   no laser measures (beyond :data:`MAX_RANGE_M`): a warning, taken as no
   return. A laser whose every beam is out of its own limits returns
@@ -38,6 +39,9 @@ MAX_RANGE_M = 10_000.0
 """Ranges beyond this are no measurement (the longest 2D lidars reach a few km)."""
 MIN_BEAMS = 3
 """Fewer beams than this per scan cannot be matched."""
+MIN_BEAM_STEP_RAD = math.radians(1e-3)
+"""Beams closer than a thousandth of a degree: the finest 2D lasers are a
+hundred times coarser (0.1-0.25 deg; the logs under ../shared/data 0.25-1)."""
 MAX_YAW_RATE = 1000.0
 """rad/s (57,000 deg/s); gyroscopes saturate at a few thousand deg/s."""
 MIN_JUMP_S = 60.0
@@ -190,6 +194,10 @@ def check_scans(rec: Recording, source: object) -> None:
                              "that turn")
         step = float(np.median(np.abs(steps)))
         span = float(abs(angles[-1] - angles[0]))
+        if step < MIN_BEAM_STEP_RAD:
+            raise GslamError(f"{where}: {n_beams} beams {math.degrees(step):.3g} deg apart span "
+                             f"{math.degrees(span):.3g} deg; no 2D laser resolves a thousandth of a degree (a field "
+                             "of view or increment in other units?)")
         if span > 2 * math.pi + 1.5 * step:
             raise GslamError(f"{where}: {n_beams} beams {math.degrees(step):.6g} deg apart span "
                              f"{math.degrees(span):.6g} deg; a 2D laser sees at most 360 deg (the increment in degrees?)")

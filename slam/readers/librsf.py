@@ -118,6 +118,26 @@ def _increasing(path: Path, t: np.ndarray, what: str) -> None:
         raise GslamError(f"{path}: {what} #{k + 1}: expected increasing times, got {t[k]} after {t[k - 1]}")
 
 
+MAX_SPEED_M_S = 100.0
+"""m/s (360 km/h): no ground robot drives faster (the Corridor's reaches 0.8)."""
+_VARIANCES = ("var_vx", "var_vy", "var_wz")
+
+
+def _physical_odometry(path: Path, rows: np.ndarray) -> None:
+    """One-line errors for odom2 lines no robot gives: a speed beyond
+    :data:`MAX_SPEED_M_S`, a negative variance (a variance is a square)."""
+    speed = np.hypot(rows[:, 1], rows[:, 2])
+    if np.any(speed > MAX_SPEED_M_S):
+        k = int(np.argmax(speed > MAX_SPEED_M_S))
+        raise GslamError(f"{path}: odom2 line #{k + 1}: speed {speed[k]:.3g} m/s (vx {rows[k, 1]:g}, vy {rows[k, 2]:g}); "
+                         f"no ground robot drives faster than {MAX_SPEED_M_S:g} m/s (expected m/s)")
+    for column, name in zip((4, 5, 6), _VARIANCES):
+        if np.any(rows[:, column] < 0.0):
+            k = int(np.argmax(rows[:, column] < 0.0))
+            raise GslamError(f"{path}: odom2 line #{k + 1}: {name} {rows[k, column]:g} is negative; a variance is "
+                             "a square (expected 0 or more)")
+
+
 def integrate_velocities(t: np.ndarray, vx: np.ndarray, vy: np.ndarray, wz: np.ndarray) -> np.ndarray:
     """Poses (n, 3) from body velocities (m/s, m/s, rad/s) at times ``t`` (s),
     starting at the origin; the velocities at ``t_k`` act over
@@ -163,6 +183,7 @@ def read_librsf(path: str | Path, config: InputConfig | None = None) -> Recordin
         raise GslamError(f"{inp}: expected at least 2 '{_ODOM2}' lines, found {len(rows)}")
     t, vx, vy, wz = rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
     _increasing(inp, t, "odom2 line")
+    _physical_odometry(inp, rows)
     poses = integrate_velocities(t, vx, vy, wz)
     odometry = Trajectory(t=t.copy(), x=poses[:, 0], y=poses[:, 1], yaw=poses[:, 2])
 

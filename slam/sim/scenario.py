@@ -23,6 +23,7 @@ from slam.results.records import PLAIN_NAME, PLAIN_NAME_RULE
 from slam.config.trees import check_finite
 from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
+from validation.base.bounds import within
 from validation.base.yamlio import Strict
 
 Point = tuple[float, float]
@@ -145,19 +146,30 @@ class LaserConfig(Strict):
     max_range_m: float = Field(10.0, gt=0.0)
     range_noise_m: float = Field(0.01, ge=0.0)
 
+    @model_validator(mode="after")
+    def _range_window(self) -> "LaserConfig":
+        if self.min_range_m >= self.max_range_m:
+            raise ValueError(f"min_range_m {self.min_range_m:g} is not below max_range_m {self.max_range_m:g}: "
+                             "the laser would return nothing")
+        return self
+
 
 class GyroConfig(Strict):
     """z-rate with white noise (per sample) and a bias random walk."""
 
     rate_hz: float = Field(100.0, gt=0.0)
-    noise_rad_s: float = Field(0.002, ge=0.0)
-    bias_initial_rad_s: float = 0.0
+    # The worst MEMS gyros are off by a few deg/s (0.05 rad/s) and noisy by
+    # a tenth of that per sample: ten times more is no gyro that works.
+    noise_rad_s: Annotated[float, within(None, 1.0, "rad/s", high="no gyroscope is that noisy")] = Field(0.002, ge=0.0)
+    bias_initial_rad_s: Annotated[float, within(-0.5, 0.5, "rad/s", "no gyroscope's bias is 30 deg/s",
+                                                "no gyroscope's bias is 30 deg/s")] = 0.0
     bias_walk_rad_s_sqrt_s: float = Field(2e-5, ge=0.0)
 
 
 class MagnetometerConfig(Strict):
     rate_hz: float = Field(20.0, gt=0.0)
-    noise_T: float = Field(2e-7, ge=0.0)
+    noise_T: Annotated[float, within(None, 1e-4, "T", high="noise twice the Earth's field: no magnetometer that "
+                                     "works")] = Field(2e-7, ge=0.0)
     mounting_height_m: float = Field(0.3, ge=0.0)
 
 
@@ -168,8 +180,14 @@ class OdometryConfig(Strict):
     plus ``turn_slip_per_rad_s`` times the true turn rate."""
 
     rate_hz: float = Field(20.0, gt=0.0)
-    distance_scale_error: float = 0.005
-    rotation_overreport: float = 0.0
+    # A wheel's or track's radius is known to a few percent; tracks on a
+    # spot turn report up to about twice the true turn. -1 and below would
+    # report no motion, or motion backwards.
+    distance_scale_error: Annotated[float, within(-0.5, 0.5, "", "the odometry would report less than half the "
+                                                  "distance driven", "the odometry would report more than 1.5 times "
+                                                  "the distance driven")] = 0.005
+    rotation_overreport: Annotated[float, within(-0.5, 1.0, "", "the odometry would report less than half the turn",
+                                                 "the odometry would report more than twice the turn")] = 0.0
     turn_slip_per_rad_s: float = Field(0.05, ge=0.0)
     distance_noise_m_sqrt_m: float = Field(0.005, ge=0.0)
     yaw_noise_rad_sqrt_rad: float = Field(0.005, ge=0.0)
@@ -202,9 +220,13 @@ class SensorsConfig(Strict):
 class EnvironmentConfig(Strict):
     """Undisturbed Earth field, GPS datum and absolute start time."""
 
-    field_strength_T: float = Field(48e-6, gt=0.0)
+    # The Earth's field is 22-67 uT everywhere; a thousandth of a tesla is
+    # fifteen times the strongest, a microtesla twenty times the weakest.
+    field_strength_T: Annotated[float, within(1e-6, 1e-3, "T", "twenty times weaker than the Earth's field anywhere",
+                                              "fifteen times the Earth's strongest field")] = Field(48e-6, gt=0.0)
     dip_deg: float = Field(64.0, ge=-90.0, le=90.0)
-    declination_deg: float = 3.0
+    declination_deg: Annotated[float, within(-180.0, 180.0, "deg", "a declination is at most half a turn west",
+                                             "a declination is at most half a turn east")] = 3.0
     datum_lat_deg: float = Field(49.0, ge=-90.0, le=90.0)
     datum_lon_deg: float = Field(8.4, ge=-180.0, le=180.0)
     t0_s: float = Field(1_700_000_000.0, ge=-2_000_000_000.0, le=2_000_000_000.0)

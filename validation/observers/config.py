@@ -14,12 +14,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 import pydantic
 from pydantic import Field, field_validator, model_validator
 
+from validation.base import bounds
 from validation.base.errors import ValidationError
 from validation.streams import is_stream_name, stream_component
 from validation.trends import Rule, Window
@@ -94,7 +95,7 @@ class RelationConfig(StrictFrozen):
     window_s: float = Field(gt=0.0)
     gain: float = 1.0
     rate_offset: float = 0.0
-    sigma_floor: float | None = Field(None, gt=0.0)
+    sigma_floor: Annotated[float, bounds.SIGMA_FLOOR] | None = Field(None, gt=0.0)
     sigma_rel: float = Field(0.0, ge=0.0)
     k_sigma: float = Field(3.0, gt=0.0)
     cusum_drift: float = Field(0.5, ge=0.0)

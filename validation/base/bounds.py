@@ -1,0 +1,80 @@
+"""Physical bounds on configured numbers: what a ground robot's sensors,
+maps and clocks can be, so that a value off by many orders of magnitude (a
+unit slip, a typo of the exponent) is refused when the config is read, in
+one line naming the key, the value and the bound, rather than accepted in
+silence and felt later as a hang, a graph GTSAM cannot solve, or a map of
+billions of cells.
+
+Each bound is wide: it leaves every shipped config, scenario and the real
+recordings of ``../shared/data`` far inside, and says why in words. The
+bounds of the recordings' own values (stamps, ranges, rates) live with the
+readers (:mod:`slam.readers.data_checks`).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from pydantic import AfterValidator
+
+
+def within(lo: float | None, hi: float | None, unit: str, low: str = "", high: str = "") -> AfterValidator:
+    """A pydantic validator: the value (None passes) must lie in
+    ``[lo, hi]`` (a None end is open); else ``ValueError`` naming the value,
+    the bound in ``unit`` and why (``low`` below, ``high`` above)."""
+
+    u = f" {unit}" if unit else ""
+
+    def check(value: float | None) -> float | None:
+        if value is None:
+            return value
+        if lo is not None and value < lo:
+            raise ValueError(f"{value:g}{u} is below {lo:g}{u}: {low}")
+        if hi is not None and value > hi:
+            raise ValueError(f"{value:g}{u} is above {hi:g}{u}: {high}")
+        return value
+
+    return AfterValidator(check)
+
+
+# --- noise of measurements (sigmas of factors and observers) ---------------
+
+SIGMA_M = within(1e-4, 1e6, "m", "no sensor of a ground robot measures a position to 0.1 mm (and the square of "
+                 "a smaller sigma overflows the information)", "a sigma beyond 1000 km says nothing")
+"""A position sigma (m)."""
+SIGMA_DEG = within(1e-3, 1e4, "deg", "no compass, gyro or scan matcher measures a heading to a thousandth of a "
+                   "degree", "a sigma beyond 10,000 deg says nothing a full turn does not")
+"""A heading sigma (deg)."""
+SIGMA_FLOOR = within(1e-12, 1e6, "(m or rad)", "no sensor resolves 1e-12 m or rad, and the square underflows",
+                     "no change would ever be seen")
+"""An observer's noise floor, in its streams' unit (m or rad)."""
+
+# --- sizes of maps and keyframes --------------------------------------------
+
+MAP_VOXEL_M = within(1e-3, 100.0, "m", "finer than any laser's range noise", "one point per building")
+"""The spacing of a point map (m)."""
+GRID_CELL_M = within(5e-3, 10.0, "m", "finer than a 2D laser's range noise (1-3 cm), and a 100 m map of such "
+                     "cells holds 4e8 of them", "a cell holds whole rooms")
+"""The side of an occupancy or search grid cell (m)."""
+KEYFRAME_PERIOD_S = within(1e-4, 3600.0, "s", "faster than any laser or odometry publishes",
+                           "a run of an hour would be one keyframe")
+"""The time between keyframes (s)."""
+KEYFRAME_DISTANCE_M = within(1e-3, 1000.0, "m", "each keyframe would be the last one's noise",
+                             "no scan of one keyframe would overlap the next")
+"""The travel between keyframes (m)."""
+KEYFRAME_YAW_DEG = within(1e-3, 360.0, "deg", "each keyframe would be the last one's noise",
+                          "a turn that is never reached")
+"""The turn between keyframes (deg)."""
+
+# --- times and multiples -----------------------------------------------------
+
+MATCH_OFFSET_S = within(None, 10.0, "s", high="a pose that far from the stamp is another place (a ground robot "
+                        "moves metres a second)")
+"""The largest time between an estimate's stamp and the pose or fix it is compared with (s)."""
+ORACLE_K_SIGMA = within(0.5, 100.0, "sigmas", "it would exclude 62 % of good measurements",
+                        "it would exclude nothing a Gaussian error makes")
+"""The multiple of sigma beyond which the oracle excludes a measurement."""
+
+
+Sigma_m = Annotated[float, SIGMA_M]
+Sigma_deg = Annotated[float, SIGMA_DEG]
