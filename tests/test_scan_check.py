@@ -111,10 +111,11 @@ def test_a_scan_cut_at_a_range_ends_in_gaps_at_its_farthest_return():
     room, angles = wall_ranges(ROOM)
     cut = np.where(room > 2.5, np.inf, room)
     window = np.where(np.abs(angles - np.pi / 2) < 0.3, np.inf, room)
-    no_return, edges, share = range_ceiling(np.vstack([room, cut, window]), 0.1, 30.0)
+    no_return, edges, share, farthest = range_ceiling(np.vstack([room, cut, window]), 0.1, 30.0)
     assert no_return[0] == 0.0 and edges[0] == 0
     assert no_return[1] > 0.15 and edges[1] >= 2 and share[1] == 1.0
     assert no_return[2] > 0.05 and edges[2] == 2 and share[2] == 0.0
+    assert farthest[1] == pytest.approx(2.5, abs=0.05)
 
 
 def test_the_ceiling_check_flags_cut_scans_and_bridges_short_gaps():
@@ -126,6 +127,12 @@ def test_the_ceiling_check_flags_cut_scans_and_bridges_short_gaps():
     # Scan 2 lies between two cut scans 2 s apart: a range limit persists.
     assert _ceiling_check(fill_s=2.0).flags(q).tolist() == [False, True, True, True, True, False]
     assert bridged(np.arange(5.0), np.array([1, 0, 0, 0, 1], bool), 3.0).tolist() == [True, False, False, False, True]
+    # The same room ten times larger, cut at 18 m: the laser still sees a hall.
+    hall = Scans(scans.t, 10.0 * scans.ranges, scans.angles, 0.1, 80.0)
+    hall.ranges[[1, 3, 4]] = np.where(hall.ranges[[1, 3, 4]] > 18.0, np.inf, hall.ranges[[1, 3, 4]])
+    q = scan_quality(hall, FrontendConfig(max_range_m=80.0))
+    assert not _ceiling_check().flags(q).any()
+    assert _ceiling_check(max_ceiling_m=20.0).flags(q).tolist() == [False, True, False, True, True, False]
 
 
 def test_the_ceiling_check_names_the_whole_scan_matcher_in_the_model():

@@ -262,8 +262,9 @@ class ScanQuality:
     (n,) of its normalised point-to-line information matrix and that
     eigenvector ``weak`` (n, 3) (forward, left, turn); the share of beams
     without a return ``no_return`` (n,), the returns bordering a gap
-    ``gap_edges`` (n,) and the share of those near the farthest return
-    ``edges_at_ceiling`` (n,) (:mod:`slam.frontend.scan_geometry`)."""
+    ``gap_edges`` (n,), the share of those near the farthest return
+    ``edges_at_ceiling`` (n,) and that return ``farthest`` (n,) m
+    (:mod:`slam.frontend.scan_geometry`)."""
 
     t: np.ndarray
     returns: np.ndarray
@@ -272,6 +273,7 @@ class ScanQuality:
     no_return: np.ndarray
     gap_edges: np.ndarray
     edges_at_ceiling: np.ndarray
+    farthest: np.ndarray
 
 
 def scan_quality(scans: Scans, config: FrontendConfig, chunk: int = 512) -> ScanQuality:

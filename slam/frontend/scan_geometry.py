@@ -59,11 +59,12 @@ def scan_geometry(ranges: np.ndarray, angles: np.ndarray, range_min: float, rang
 
 
 def range_ceiling(ranges: np.ndarray, range_min: float, range_max: float,
-                  near: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  near: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """How much scans ``ranges`` (n, B) m look cut off at a range ceiling:
     the share of beams without a return (n,), the number of returns that
-    border a run of beams without one (n,) and the share of those edges
-    within ``near`` (a fraction) of the scan's farthest return (n,).
+    border a run of beams without one (n,), the share of those edges
+    within ``near`` (a fraction) of the scan's farthest return (n,) and that
+    farthest return (n,) m, the ceiling.
 
     A laser that sees nothing beyond some distance R (a cut, or an open yard
     beyond its reach) loses every surface past R: its scan ends in gaps whose
@@ -82,4 +83,4 @@ def range_ceiling(ranges: np.ndarray, range_min: float, range_max: float,
     edges = edge.sum(axis=1)
     at_ceiling = (edge & (r >= (1.0 - near) * farthest[:, None])).sum(axis=1)
     share = np.where(edges > 0, at_ceiling / np.maximum(edges, 1), 0.0)
-    return no_return.mean(axis=1), edges, share
+    return no_return.mean(axis=1), edges, share, farthest

@@ -357,14 +357,17 @@ def keyframe_candidates(rec: Recording, on_scans: bool, source: Path) -> tuple[n
 
 
 def blamed_scans(weights: dict[str, np.ndarray], n: int) -> np.ndarray:
-    """Keyframes (n,) bool whose scan the gating excluded in any direction:
-    its registration is wrong, so nothing may be built on it."""
+    """Keyframes (n,) bool whose scan the gating excluded in every
+    direction: the scan as a whole is wrong (the laser blind or cut off, the
+    whole scan matcher blamed), so nothing may be built on it. A scan
+    excluded in one direction only (a corridor's distance) still maps what
+    it sees."""
     from slam.graph.backend import dof_weights
 
     sm = weights.get("scan_matching")
     if sm is None:
         return np.zeros(n, dtype=bool)
-    return np.isinf(dof_weights(sm, "scan_matching")).any(axis=1)
+    return np.isinf(dof_weights(sm, "scan_matching")).all(axis=1)
 
 
 def submap_factors(submaps, weights: dict[str, np.ndarray], n: int,

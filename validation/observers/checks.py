@@ -90,8 +90,9 @@ class ScanGeometrySeries(Protocol):
     ``min_eigenvalue`` (n,) of the normalised point-to-line information
     matrix and its unit eigenvector ``weak`` (n, 3) (forward, left, turn);
     the share of beams without a return ``no_return`` (n,), the returns
-    bordering a gap ``gap_edges`` (n,) and the share of those within a tenth
-    of the farthest return ``edges_at_ceiling`` (n,)."""
+    bordering a gap ``gap_edges`` (n,), the share of those within a tenth
+    of the farthest return ``edges_at_ceiling`` (n,) and that return
+    ``farthest`` (n,) m."""
 
     t: np.ndarray
     returns: np.ndarray
@@ -100,6 +101,7 @@ class ScanGeometrySeries(Protocol):
     no_return: np.ndarray
     gap_edges: np.ndarray
     edges_at_ceiling: np.ndarray
+    farthest: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -149,6 +151,7 @@ class ScanCeilingCheck:
     min_no_return: float
     min_edges: int
     min_edge_share: float
+    max_ceiling_m: float
     fill_s: float
     hold_s: float
     streams: tuple[str, ...] = ("scan_ceiling",)
@@ -157,7 +160,8 @@ class ScanCeilingCheck:
         """True for each scan cut off at a range ceiling."""
         cut = ((np.asarray(geometry.no_return) >= self.min_no_return)
                & (np.asarray(geometry.gap_edges) >= self.min_edges)
-               & (np.asarray(geometry.edges_at_ceiling) >= self.min_edge_share))
+               & (np.asarray(geometry.edges_at_ceiling) >= self.min_edge_share)
+               & (np.asarray(geometry.farthest) <= self.max_ceiling_m))
         return bridged(np.asarray(geometry.t, dtype=float), cut, self.fill_s)
 
     def deviant(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -213,7 +217,8 @@ def unary_checks(config: ObserversConfig, reference: MagneticReference | None = 
     ceiling = config.scan_ceiling
     if ceiling.enabled:
         checks.append(ScanCeilingCheck(ceiling.name, ceiling.component, ceiling.min_no_return, ceiling.min_edges,
-                                       ceiling.min_edge_share, ceiling.fill_s, ceiling.hold_s))
+                                       ceiling.min_edge_share, ceiling.max_ceiling_m, ceiling.fill_s,
+                                       ceiling.hold_s))
     return checks
 
 

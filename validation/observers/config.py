@@ -269,7 +269,10 @@ class ScanCeilingConfig(StrictFrozen):
     the whole scan matcher (``component``, a sensor of the model). A scan is
     cut off when at least ``min_no_return`` of its beams have no return and
     at least ``min_edge_share`` of its ``min_edges`` or more gap edges lie
-    within a tenth of its farthest return. A range limit does not come and go
+    within a tenth of its farthest return, and that return, the ceiling, is
+    at most ``max_ceiling_m`` away: a laser that sees 25 m of a hall still
+    holds the matcher, one that sees 3 m of it does not (the laser blind
+    altogether is the scan check's, ``scan.min_returns``). A range limit does not come and go
     from scan to scan: scans between two cut-off ones at most ``fill_s``
     apart count as cut off too. Off unless enabled."""
 
@@ -279,6 +282,7 @@ class ScanCeilingConfig(StrictFrozen):
     min_no_return: float = Field(0.1, gt=0.0, le=1.0)
     min_edges: int = Field(2, ge=1)
     min_edge_share: float = Field(0.5, gt=0.0, le=1.0)
+    max_ceiling_m: float = Field(10.0, gt=0.0)
     fill_s: float = Field(0.0, ge=0.0)
     hold_s: float = Field(0.0, ge=0.0)
 

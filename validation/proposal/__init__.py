@@ -154,7 +154,7 @@ def propose_model(sources: Sequence[Source], loops: bool = False) -> ModelPropos
         relations += gps_relations(gps, movers, compass, main)
 
     unary: dict[str, str] = {}
-    checks = {"magnetometer": False, "gps": False, "scan": False}
+    checks = {"magnetometer": False, "gps": False, "scan": False, "scan_ceiling": False}
     if compass is not None and compass.magnetometer:
         unary["mag_plausible"] = "IMU_YAW"
         checks["magnetometer"] = True
@@ -166,7 +166,8 @@ def propose_model(sources: Sequence[Source], loops: bool = False) -> ModelPropos
     if scan is not None:
         for axis, comp in (("dist", "SM_DIST"), ("lat", "SM_LAT"), ("yaw", "SM_YAW")):
             unary[f"scan_degenerate_{axis}"] = comp
-        checks["scan"] = True
+        unary["scan_ceiling"] = "SM"
+        checks["scan"] = checks["scan_ceiling"] = True
     if scan is not None or loops:
         components.append("LOOP")
         unary["loop_consistency"] = "LOOP"

@@ -128,7 +128,8 @@ def _model_lines(p: ModelProposal, indent: str) -> list[str]:
             "gps_plausible": "the receiver's own sigma", "loop_consistency": "loop closures (loops.enabled)",
             "scan_degenerate_dist": "a scan with too few returns, or one that leaves",
             "scan_degenerate_lat": "  this direction unconstrained (observers.scan)",
-            "scan_degenerate_yaw": ""}
+            "scan_degenerate_yaw": "",
+            "scan_ceiling": "a laser that sees too little (observers.scan_ceiling)"}
     for name, comp in p.unary_checks.items():
         lines.append(_commented(f"{i2}  {name}: {comp}", what.get(name, ""), 56))
     lines += [
@@ -151,7 +152,8 @@ def _observer_lines(p: ModelProposal, base: Mapping[str, Any], indent: str) -> l
         lines.append(f"{i2}  - {_flow(r.config.compact())}")
     why = {"magnetometer": ("field strength and dip of the magnetometer", "no magnetometer field"),
            "gps": ("the GPS receiver's reported sigma", "no GPS"),
-           "scan": ("the scans' returns and geometry (slam/frontend/scan_geometry.py)", "no laser")}
+           "scan": ("the scans' returns and geometry (slam/frontend/scan_geometry.py)", "no laser"),
+           "scan_ceiling": ("a scan cut off at a range ceiling (slam/frontend/scan_geometry.py)", "no laser")}
     for check, on in p.checks.items():
         entry = dict(base.get(check) or {})
         entry["enabled"] = on
