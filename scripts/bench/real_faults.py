@@ -4,10 +4,12 @@ kernel and the oracles, per log and fault kind.
     python -m scripts.bench real_faults [--data DIR] [--logs intel freiburg-079 aces csail]
                                         [--faults cut2 cut3 cut4 slip yaw_slip]
                                         [--placements 0.2 0.5 0.8] [--length 0.1]
-                                        [--config configs/datasets/carmen.yaml] [--out runs/bench_real_faults]
+                                        [--config configs/datasets/carmen.yaml] [--out runs/bench_real_faults] [--jobs N]
 
 The CARMEN report logs (intel, freiburg-079, aces, csail: the config was
-chosen on the others, docs/loops.md) are mapped as recorded, then once per
+chosen on the others, docs/loops.md; ``--tuning`` runs those, fhw,
+freiburg-101, seattle and belgioioso, into ``real_faults_tuning.md``) are
+mapped as recorded, then once per
 fault kind with that fault injected by ``gslam inject`` at each placement
 (a share of the log's duration), each stretch ``--length`` of it long:
 
@@ -37,12 +39,14 @@ import logging
 import math
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from scripts.bench.common import KERNELS, csv_text, publish, quiet_logging, table
 from slam.commands.compare import load_variants
 from slam.commands.inject import inject
 from slam.config import load_config
+from slam.errors import GslamError
 from slam.pipeline.folder import MappingPipeline
 from slam.readers.datasets import data_root
 from slam.readers.read import read_recording
@@ -51,6 +55,7 @@ from slam.results.atomic import write_text
 log = logging.getLogger(__name__)
 ROOT = Path(__file__).resolve().parents[2]
 REPORT_LOGS = ("intel", "freiburg-079", "aces", "csail")
+TUNING_LOGS = ("fhw", "freiburg-101", "seattle", "belgioioso")
 FAULTS = {  # kind: the gslam inject spec after "KIND@T0:T1,"
     "cut2": "laser_cut@{a:.1f}:{b:.1f},range_m=2",
     "cut3": "laser_cut@{a:.1f}:{b:.1f},range_m=3",
@@ -78,10 +83,6 @@ def run_method(path: Path, config: Path, overrides: list[str], out: Path, record
     return pipe.run(), pipe
 
 
-def overrides(variant: dict) -> list[str]:
-    return [f"{k}={v}" for k, v in variant.items()]
-
-
 def method_row(name: str, fault: str, method: str, result, seconds: float) -> dict:
     m = result.metrics
     row = {"log": name, "fault": fault, "method": method, "ate_m": round(m["ate_rmse_m"], 3),
@@ -95,30 +96,34 @@ def method_row(name: str, fault: str, method: str, result, seconds: float) -> di
     return row
 
 
-def run_log(name: str, source: Path, args, variants: dict, tmp: Path) -> list[dict]:
-    rows = []
+def run_unit(name: str, source: Path, kind: str | None, args: argparse.Namespace) -> list[dict]:
+    """The rows of one log as recorded (``kind`` None: ungated and gated) or
+    with one fault kind injected (every method, the scan matching shared)."""
+    variants = load_variants(ROOT / "configs/variants.yaml")
     base = load_config(args.config)
-    duration = read_recording(source, base.input).duration
-    for method in ("ungated", "gated"):
-        t0 = time.perf_counter()
-        result, _ = run_method(source, args.config, overrides(variants[method]), tmp / f"{name}_clean_{method}")
-        rows.append(method_row(name, "none", method, result, time.perf_counter() - t0))
-        log.info("%s", rows[-1])
-    for kind in args.faults:
+    rows: list[dict] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        if kind is None:
+            for method in ("ungated", "gated"):
+                t0 = time.perf_counter()
+                result, _ = run_method(source, args.config, variants[method], tmp / method)
+                rows.append(method_row(name, "none", method, result, time.perf_counter() - t0))
+            return rows
+        duration = read_recording(source, base.input).duration
         specs = fault_specs(kind, duration, args.placements, args.length)
         try:
-            run = inject(source, specs, tmp / f"{name}_{kind}", config=base.input).run_dir
-        except Exception as e:  # a fault the log cannot take (e.g. a slip without raw odometry)
+            run = inject(source, specs, tmp / "injected", config=base.input).run_dir
+        except GslamError as e:  # a fault the log cannot take (a slip without raw odometry)
             log.info("%s %s: not injected (%s)", name, kind, e)
-            continue
+            return rows
         rec, frontend = read_recording(run, base.input), None
         for method in METHODS:
             t0 = time.perf_counter()
-            result, pipe = run_method(run, args.config, overrides(variants[method]),
-                                      tmp / f"{name}_{kind}_{method}", recording=rec, frontend=frontend)
+            result, pipe = run_method(run, args.config, variants[method], tmp / method,
+                                      recording=rec, frontend=frontend)
             frontend = pipe.frontend
             rows.append(method_row(name, kind, method, result, time.perf_counter() - t0))
-            log.info("%s", rows[-1])
     return rows
 
 
@@ -183,27 +188,35 @@ def summarise(rows: list[dict]) -> tuple[str, dict]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=None, help="the data folder (default: GSLAM_DATA or ../shared/data)")
-    ap.add_argument("--logs", nargs="+", default=list(REPORT_LOGS))
+    ap.add_argument("--logs", nargs="+", default=None, help="default: the report logs (the tuning logs with --tuning)")
+    ap.add_argument("--tuning", action="store_true",
+                    help="the tuning logs, written to real_faults_tuning.md: what the config was chosen on")
     ap.add_argument("--faults", nargs="+", default=list(FAULTS), choices=list(FAULTS))
     ap.add_argument("--placements", nargs="+", type=float, default=[0.2, 0.5, 0.8])
     ap.add_argument("--length", type=float, default=0.1, help="each stretch, as a share of the log's duration")
     ap.add_argument("--config", type=Path, default=ROOT / "configs/datasets/carmen.yaml")
     ap.add_argument("--out", type=Path, default=ROOT / "runs/bench_real_faults")
+    ap.add_argument("--jobs", type=int, default=1, help="processes, one log and fault kind each (default 1)")
     args = ap.parse_args(argv)
+    if args.logs is None:
+        args.logs = list(TUNING_LOGS if args.tuning else REPORT_LOGS)
     quiet_logging()
     root = (args.data or data_root()) / "carmen"
-    variants = load_variants(ROOT / "configs/variants.yaml")
     t_all = time.perf_counter()
-    rows: list[dict] = []
-    with tempfile.TemporaryDirectory() as tmp:
-        for name in args.logs:
-            rows += run_log(name, root / f"{name}-corrected.log.gz", args, variants, Path(tmp))
+    units = [(name, root / f"{name}-corrected.log.gz", kind) for name in args.logs for kind in (None, *args.faults)]
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        futures = [pool.submit(run_unit, name, source, kind, args) for name, source, kind in units]
+        rows = []
+        for (name, _, kind), future in zip(units, futures):
+            rows += future.result()
+            log.info("%s %s: done, %.0f s in", name, kind or "as recorded", time.perf_counter() - t_all)
     text, _ = summarise(rows)
+    page = "real_faults_tuning" if args.tuning else "real_faults"
     args.out.mkdir(parents=True, exist_ok=True)
-    write_text(args.out / "real_faults.md", text)
-    write_text(args.out / "real_faults.csv", csv_text(rows, sorted({k for r in rows for k in r})))
-    publish("real_faults", "Real recordings with injected faults: gated against the kernels and the oracles",
-            text, argv)
+    write_text(args.out / f"{page}.md", text)
+    write_text(args.out / f"{page}.csv", csv_text(rows, sorted({k for r in rows for k in r})))
+    title = "Real recordings with injected faults: gated against the kernels and the oracles"
+    publish(page, title + (", on the tuning logs" if args.tuning else ""), text, argv)
     print(text)
     print(f"{time.perf_counter() - t_all:.0f} s")
     return 0

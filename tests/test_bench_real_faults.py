@@ -1,0 +1,41 @@
+"""The real-fault bench's summary: each figure against its target, from the
+rows the harness measured."""
+
+from __future__ import annotations
+
+import pytest
+
+from scripts.bench.real_faults import KERNELS, METHODS, fault_specs, summarise
+
+
+def _rows(log: str, fault: str, ates: dict[str, float], **gated) -> list[dict]:
+    rows = []
+    for method in METHODS:
+        row = {"log": log, "fault": fault, "method": method, "ate_m": ates.get(method, 1.0)}
+        if method.startswith("gated"):
+            row.update(gated)
+        rows.append(row)
+    return rows
+
+
+def test_the_summary_holds_gated_against_the_best_kernel_and_the_interval_oracle():
+    rows = _rows("a", "cut3", {"gated": 0.5, "cauchy": 0.8, "interval_oracle": 0.25},
+                 alarm_fraction=0.1, precision=0.9, recall=0.5, detected=3, missed=1, delay_s=1.0)
+    rows += _rows("b", "cut3", {"gated": 2.0, "huber": 1.0, "interval_oracle": 2.0},
+                  alarm_fraction=0.1, precision=0.5, recall=0.5, detected=1, missed=1, delay_s=None)
+    rows += [{"log": "a", "fault": "none", "method": "ungated", "ate_m": 0.10},
+             {"log": "a", "fault": "none", "method": "gated", "ate_m": 0.11, "alarm_fraction": 0.03}]
+    text, f = summarise(rows)
+    assert f["gated / best kernel, worst"] == pytest.approx(2.0)
+    assert f["gated / best kernel, geometric mean"] == pytest.approx((0.5 / 0.8 * 2.0) ** 0.5)
+    assert f["gated / interval oracle, geometric mean"] == pytest.approx((2.0 * 1.0) ** 0.5)
+    assert f["stretches detected"] == pytest.approx(4 / 6)
+    assert f["uninjected gated / ungated, worst"] == pytest.approx(1.1)
+    assert f["uninjected alarm fraction, worst"] == pytest.approx(0.03)
+    assert "| a | cut3 |" in text and "cauchy 0.800" in text and "missed" in text and "met" in text
+    assert set(KERNELS) < set(METHODS)
+
+
+def test_faults_are_placed_as_shares_of_the_log():
+    assert fault_specs("cut2", 100.0, [0.2, 0.5], 0.1) == ["laser_cut@20.0:30.0,range_m=2", "laser_cut@50.0:60.0,range_m=2"]
+    assert fault_specs("yaw_slip", 10.0, [0.0], 0.5) == ["slip@0.0:5.0,scale=1.0,yaw_scale=1.5"]
