@@ -86,10 +86,11 @@ def commit() -> str:
     return f"{rev} (with uncommitted changes)" if dirty else rev
 
 
-def publish(name: str, title: str, body: str, argv: Sequence[str] | None) -> Path:
+def publish(name: str, title: str, body: str, argv: Sequence[str] | None, bench: str | None = None) -> Path:
     """Write ``docs/results/NAME.md``: ``title``, a header naming the
-    command, commit, machine and date, then ``body`` (Markdown)."""
-    command = " ".join(["python -m scripts.bench", name, *map(shlex.quote, argv or [])])
+    command (``python -m scripts.bench BENCH ARGV``, BENCH defaulting to
+    NAME), commit, machine and date, then ``body`` (Markdown)."""
+    command = " ".join(["python -m scripts.bench", bench or name, *map(shlex.quote, argv or [])])
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     header = (f"# {title}\n\n"
               f"Written by `{command}` at commit {commit()}, {date}, on {machine()}. "

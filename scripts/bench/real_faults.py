@@ -42,7 +42,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from scripts.bench.common import KERNELS, csv_text, publish, quiet_logging, table
+from scripts.bench.common import KERNELS, csv_text, include_in_readme, publish, quiet_logging, table
 from slam.commands.compare import load_variants
 from slam.commands.inject import inject
 from slam.config import load_config
@@ -216,7 +216,9 @@ def main(argv: list[str] | None = None) -> int:
     write_text(args.out / f"{page}.md", text)
     write_text(args.out / f"{page}.csv", csv_text(rows, sorted({k for r in rows for k in r})))
     title = "Real recordings with injected faults: gated against the kernels and the oracles"
-    publish(page, title + (", on the tuning logs" if args.tuning else ""), text, argv)
+    publish(page, title + (", on the tuning logs" if args.tuning else ""), text, argv, bench="real_faults")
+    if not args.tuning:
+        include_in_readme("real_faults")
     print(text)
     print(f"{time.perf_counter() - t_all:.0f} s")
     return 0

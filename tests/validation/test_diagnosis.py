@@ -356,7 +356,7 @@ def _ceiling_model(false_alarm: float | None) -> SystemModel:
     return SystemModel(
         components=("ODO_DIST", "SM_DIST", "SM_YAW", "SM"), sensors={"SM": ("SM_DIST", "SM_YAW")},
         relations={"distance_odo_sm": ("ODO_DIST", "SM_DIST")}, unary_checks={"scan_ceiling": "SM"},
-        check_false_alarm={"scan_ceiling": false_alarm} if false_alarm else {},
+        false_alarm={"scan_ceiling": false_alarm} if false_alarm else {},
         priors={"ODO_DIST": 0.05, "SM_DIST": 0.02, "SM": 0.02},
     )
 
@@ -378,7 +378,23 @@ def test_a_check_that_may_raise_false_alarms_is_weighed_not_obeyed():
         assert d.diagnose(cut).diagnoses == (frozenset({"SM"}),)  # a hard check decides alone
 
 
-def test_only_a_unary_check_may_raise_false_alarms():
-    with pytest.raises(ValueError, match="distance_odo_sm.*not a unary check"):
-        SystemModel(components=("A", "B"), relations={"distance_odo_sm": ("A", "B")},
-                    check_false_alarm={"distance_odo_sm": 0.1})
+def test_a_relation_that_may_raise_false_alarms_blames_only_with_other_evidence():
+    """A mismatch that happens one step in ten between healthy sensors is,
+    alone, a false alarm; two such relations mismatching on one sensor are
+    more probably its fault (0.02) than two coincidences (0.01)."""
+    model = SystemModel(
+        components=("ODO_DIST", "ODO_YAW", "SM_DIST", "SM_YAW", "SM"), sensors={"SM": ("SM_DIST", "SM_YAW")},
+        relations={"distance_odo_sm": ("ODO_DIST", "SM_DIST"), "yaw_odo_sm": ("ODO_YAW", "SM_YAW")},
+        false_alarm={"distance_odo_sm": 0.1, "yaw_odo_sm": 0.1},
+        priors={"ODO_DIST": 0.02, "ODO_YAW": 0.02, "SM_DIST": 0.05, "SM_YAW": 0.05, "SM": 0.02},
+    )
+    with Diagnoser(model) as d:
+        one = d.diagnose({"distance_odo_sm": Observation.NO_MATCH, "yaw_odo_sm": Observation.MATCH})
+        assert one.diagnoses[0] == frozenset() and one.explanations[0].dismissed == {"distance_odo_sm"}
+        both = d.diagnose({"distance_odo_sm": Observation.NO_MATCH, "yaw_odo_sm": Observation.NO_MATCH})
+        assert both.diagnoses[0] == {"SM"}
+
+
+def test_only_an_observer_may_raise_false_alarms():
+    with pytest.raises(ValueError, match="'A'.*not a relation or unary check"):
+        SystemModel(components=("A", "B"), relations={"distance_odo_sm": ("A", "B")}, false_alarm={"A": 0.1})

@@ -18,13 +18,15 @@ component, and optional rules. Its meaning, in Reiter's terms:
   and keeps its heading), or the whole sensor with one fault (a scan
   matcher in an open yard loses everything), which is then one fault, not
   three;
-* a unary check that may raise a false alarm (``check_false_alarm``: the
-  probability that it says implausible of a healthy component) is a
-  retractable assumption too: ``ok(S) ∧ TRUST(check) -> plausible(S)``. Its
-  verdict is then evidence the diagnosis weighs against the relations'
-  rather than a threshold that blames on its own: alone it is explained
-  more cheaply as a false alarm, and beside a mismatch it makes the
-  component it tests the more probable culprit;
+* an observer that may raise a false alarm (``false_alarm``: the
+  probability that a relation says no_match, or a unary check implausible,
+  of healthy components) is a retractable assumption TRUST:
+  ``ok(Si) ∧ ok(Sj) ∧ TRUST(relation) -> match(Si, Sj)`` and
+  ``ok(S) ∧ TRUST(check) -> plausible(S)``. Its verdict is then evidence
+  the diagnosis weighs rather than a threshold that blames on its own:
+  alone, it is explained more cheaply as a false alarm than as a fault
+  rarer than that; beside other evidence against the same component it
+  makes that component the more probable culprit;
 * failure masking on a relation, ``match(S1, S2) ∧ CORR(match(S1, S2)) ->
   ok(S1) ∧ ok(S2)``: a match is taken as evidence that both are healthy. With
   ``corr: false`` the assumption CORR cannot be retracted, so a match always
@@ -93,7 +95,7 @@ class SystemModel(StrictFrozen):
     unary_checks: dict[str, str] = Field(default_factory=dict)
     fault_propagation: tuple[tuple[str, str], ...] = ()
     failure_masking: tuple[MaskingRule, ...] = ()
-    check_false_alarm: dict[str, float] = Field(default_factory=dict)
+    false_alarm: dict[str, float] = Field(default_factory=dict)
     priors: dict[str, float] = Field(default_factory=dict)
 
     @field_validator("components")
@@ -148,11 +150,11 @@ class SystemModel(StrictFrozen):
                 raise ValueError(f"failure_masking.{i}: relation {rule.relation!r} listed twice")
             seen.add(rule.relation)
         check("priors", tuple(self.priors))
-        for name, p in self.check_false_alarm.items():
-            if name not in self.unary_checks:
-                raise ValueError(f"check_false_alarm: {name!r} is not a unary check")
+        for name, p in self.false_alarm.items():
+            if name not in self.relations and name not in self.unary_checks:
+                raise ValueError(f"false_alarm: {name!r} is not a relation or unary check")
             if not 0.0 < p < 1.0:
-                raise ValueError(f"check_false_alarm.{name} must be in (0, 1), got {p}")
+                raise ValueError(f"false_alarm.{name} must be in (0, 1), got {p}")
         return self
 
     def prior(self, component: str) -> float:

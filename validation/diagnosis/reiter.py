@@ -49,9 +49,9 @@ def corr_name(relation: str) -> str:
     return f"CORR({relation})"
 
 
-def trust_name(check: str) -> str:
-    """Name of the assumable TRUST(check) of a unary check that may raise a false alarm."""
-    return f"TRUST({check})"
+def trust_name(observer: str) -> str:
+    """Name of the assumable TRUST(observer) of a relation or unary check that may raise a false alarm."""
+    return f"TRUST({observer})"
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,8 @@ class Explanation:
     ``components``: components assumed abnormal; ``masked``: relations whose
     CORR assumption is retracted (their match is coincidental);
     ``probability``: its prior probability under independent faults;
-    ``dismissed``: unary checks whose verdict is taken for a false alarm.
+    ``dismissed``: relations and unary checks whose verdict is taken for a
+    false alarm.
     """
 
     components: frozenset[str]
@@ -122,8 +123,8 @@ class Diagnoser:
             if rule.corr:
                 self._assumables[corr_name(rule.relation)] = self._var("corr", rule.relation)
                 self._masking_prob[rule.relation] = rule.masking_prob
-        for check in model.check_false_alarm:
-            self._assumables[trust_name(check)] = self._var("trust", check)
+        for observer in model.false_alarm:
+            self._assumables[trust_name(observer)] = self._var("trust", observer)
         self._name_of = {lit: name for name, lit in self._assumables.items()}
 
     def _var(self, kind: str, name: str) -> int:
@@ -137,9 +138,10 @@ class Diagnoser:
             sensor = m.sensor_of(c)
             cnf.append([-v("nab", c), v("ok", c)] if sensor is None else [-v("nab", c), -v("nab", sensor), v("ok", c)])
         for r, (a, b) in m.relations.items():
-            cnf.append([-v("ok", a), -v("ok", b), v("match", r)])
+            trust = [-v("trust", r)] if r in m.false_alarm else []
+            cnf.append([-v("ok", a), -v("ok", b), *trust, v("match", r)])
         for k, c in m.unary_checks.items():
-            trust = [-v("trust", k)] if k in m.check_false_alarm else []
+            trust = [-v("trust", k)] if k in m.false_alarm else []
             cnf.append([-v("ok", c), *trust, v("plausible", k)])
         for a, b in m.fault_propagation:
             cnf += [[-v("ok", a), v("ok", b)], [-v("ok", b), v("ok", a)]]
@@ -234,7 +236,7 @@ class Diagnoser:
         for retracted in found:
             comps = frozenset(n for n in retracted if n in self.model.components)
             masked = frozenset(r for r in self._masking_prob if corr_name(r) in retracted)
-            dismissed = frozenset(k for k in self.model.check_false_alarm if trust_name(k) in retracted)
+            dismissed = frozenset(k for k in self.model.false_alarm if trust_name(k) in retracted)
             explanations.append(Explanation(comps, masked, self._probability(comps, masked, dismissed), dismissed))
         explanations.sort(
             key=lambda e: (-e.probability, len(e.components) + len(e.masked) + len(e.dismissed),
@@ -254,14 +256,14 @@ class Diagnoser:
                      dismissed: frozenset[str] = frozenset()) -> float:
         """prod p(S) over S in D times prod (1 - p(S)) over S not in D; the same
         for coincidental matches with ``masking_prob`` and for dismissed
-        checks with ``check_false_alarm``. Computed in logs."""
+        observers with ``false_alarm``. Computed in logs."""
         logp = 0.0
         for c in self.model.components:
             p = self.model.prior(c)
             logp += math.log(p) if c in components else math.log1p(-p)
         for r, p in self._masking_prob.items():
             logp += math.log(p) if r in masked else math.log1p(-p)
-        for k, p in self.model.check_false_alarm.items():
+        for k, p in self.model.false_alarm.items():
             logp += math.log(p) if k in dismissed else math.log1p(-p)
         return math.exp(logp)
 
