@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import distance_transform_edt
 
-from slam.matching.grid import likelihood_field, max_pool_levels, score_pyramid
+from slam.matching.grid import likelihood_field, max_pool_stack, score_pyramid
 from slam.matching.search import CorrelativeSearch, angular_step, branch_and_bound
 
 
@@ -43,7 +43,7 @@ def test_likelihood_field_is_the_gaussian_of_the_distance_to_the_nearest_hit():
 def test_max_pool_levels_hold_the_maximum_of_each_block():
     rng = np.random.default_rng(2)
     field = rng.random((23, 17)).astype(np.float32)
-    levels = max_pool_levels(field, 3)
+    levels = max_pool_stack(field, 3)
     for h, level in enumerate(levels):
         size = 1 << h
         for x, y in [(0, 0), (5, 3), (22, 16), (20, 10), (11, 15)]:

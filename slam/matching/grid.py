@@ -35,12 +35,12 @@ LEVELS = 255
 class ScorePyramid:
     """A likelihood field and its max-pooled levels; see the module docstring.
 
-    ``levels[h]`` (nx, ny) uint8, the field in 255ths (a quarter of the
-    memory of floats, and as fast to gather); ``levels[0]`` is the field
-    itself.
+    ``stack`` (levels, nx, ny) uint8: level ``h`` is ``stack[h]``, the
+    field in 255ths (a quarter of the memory of floats, and as fast to
+    gather); ``stack[0]`` is the field itself.
     """
 
-    levels: tuple[np.ndarray, ...]
+    stack: np.ndarray
     origin: np.ndarray
     resolution_m: float
     pad: int = 0
@@ -49,13 +49,18 @@ class ScorePyramid:
     and read 0 where the truth is 0 or outside."""
 
     @property
+    def levels(self) -> tuple[np.ndarray, ...]:
+        """The levels (nx, ny), finest first."""
+        return tuple(self.stack)
+
+    @property
     def depth(self) -> int:
         """The coarsest level's index."""
-        return len(self.levels) - 1
+        return len(self.stack) - 1
 
     @property
     def field(self) -> np.ndarray:
-        return self.levels[0]
+        return self.stack[0]
 
     def cells(self, points: np.ndarray) -> np.ndarray:
         """Integer cell indices (..., 2) of points (..., 2) in the grid's frame."""
@@ -69,14 +74,14 @@ class ScorePyramid:
 
     def lookup(self, level: int, cells: np.ndarray) -> np.ndarray:
         """Values of ``level`` (in 255ths) at integer cells (..., 2), clipped into the grid."""
-        grid = self.levels[level]
+        grid = self.stack[level]
         ix = np.clip(cells[..., 0], 0, grid.shape[0] - 1)
         iy = np.clip(cells[..., 1], 0, grid.shape[1] - 1)
         return grid[ix, iy]
 
     def lookup_flat(self, level: int, flat: np.ndarray) -> np.ndarray:
         """Values of ``level`` (in 255ths) at flat cell indices (``x * ny + y``), unchecked."""
-        return self.levels[level].ravel().take(flat)
+        return self.stack[level].ravel().take(flat)
 
 
 def hit_cells(points: np.ndarray, origin: np.ndarray, resolution_m: float, shape: tuple[int, int]) -> np.ndarray:
@@ -94,8 +99,8 @@ def likelihood_field(hits: np.ndarray, resolution_m: float, sigma_m: float) -> n
 
     The maximum over hits of a Gaussian of the distance is separable (a
     max-product convolution with ``g(dx) g(dy)``), so it is two passes of
-    shifted maxima along each axis, on the rows and columns that hold hits
-    or lie within reach of one."""
+    maxima along each axis, over the box of rows and columns that hold hits
+    or lie within reach of one (compiled: :func:`slam.matching.kernels.spread_hits`)."""
     field = np.zeros(hits.shape, dtype=np.float32)
     if not hits.any():
         return field
@@ -105,38 +110,27 @@ def likelihood_field(hits: np.ndarray, resolution_m: float, sigma_m: float) -> n
     cols = np.nonzero(hits.any(axis=0))[0]
     x0, x1 = max(rows[0] - reach, 0), min(rows[-1] + reach + 1, hits.shape[0])
     y0, y1 = max(cols[0] - reach, 0), min(cols[-1] + reach + 1, hits.shape[1])
-    h = hits[x0:x1, y0:y1].astype(np.float32)
-    # Pass along y, then along x: out[x, y] = max_k g[k] * in[x, y + k - reach].
-    for axis in (1, 0):
-        src, out = h, np.zeros_like(h)
-        n = src.shape[axis]
-        for k, w in enumerate(g):
-            shift = k - reach
-            lo, hi = max(0, -shift), min(n, n - shift)
-            if lo >= hi:
-                continue
-            dst = [slice(None), slice(None)]
-            from_ = [slice(None), slice(None)]
-            dst[axis], from_[axis] = slice(lo, hi), slice(lo + shift, hi + shift)
-            np.maximum(out[tuple(dst)], w * src[tuple(from_)], out=out[tuple(dst)])
-        h = out
-    field[x0:x1, y0:y1] = h
+    from slam.matching import kernels
+
+    kernels.spread_hits(np.ascontiguousarray(hits), g, x0, x1, y0, y1, field)
     return field
 
 
-def max_pool_levels(field: np.ndarray, depth: int) -> tuple[np.ndarray, ...]:
-    """``field`` and its levels 1..``depth``: level h at (x, y) is the maximum
-    of ``field`` over [x, x + 2^h) x [y, y + 2^h) (cells beyond the edge
-    count as 0)."""
-    levels = [field]
+def max_pool_stack(field: np.ndarray, depth: int) -> np.ndarray:
+    """``field`` (nx, ny) and its levels 1..``depth`` stacked (depth + 1, nx,
+    ny): level h at (x, y) is the maximum of ``field`` over [x, x + 2^h) x
+    [y, y + 2^h) (cells beyond the edge count as 0)."""
+    stack = np.empty((depth + 1,) + field.shape, dtype=field.dtype)
+    stack[0] = field
+    rows = np.empty_like(field)
     for h in range(1, depth + 1):
-        prev, half = levels[-1], 1 << (h - 1)
-        cur = prev.copy()
-        np.maximum(cur[:-half], prev[half:], out=cur[:-half])
-        nxt = cur.copy()
-        np.maximum(nxt[:, :-half], cur[:, half:], out=nxt[:, :-half])
-        levels.append(nxt)
-    return tuple(levels)
+        prev, cur, half = stack[h - 1], stack[h], 1 << (h - 1)
+        # Along x, then along y; numpy's maxima of uint8 run wider than a compiled loop's.
+        np.maximum(prev[:-half], prev[half:], out=rows[:-half])
+        rows[-half:] = prev[-half:]
+        np.maximum(rows[:, :-half], rows[:, half:], out=cur[:, :-half])
+        cur[:, -half:] = rows[:, -half:]
+    return stack
 
 
 def score_pyramid(points: np.ndarray, resolution_m: float, sigma_m: float, depth: int, margin_m: float,
@@ -166,4 +160,4 @@ def score_pyramid(points: np.ndarray, resolution_m: float, sigma_m: float, depth
     field[:, -pad_low - 1 :] = 0.0
     # Rounding is monotone, so pooling the rounded field pools the field.
     quantised = np.rint(field * LEVELS).astype(np.uint8)
-    return ScorePyramid(max_pool_levels(quantised, depth), origin, resolution_m, pad_low)
+    return ScorePyramid(max_pool_stack(quantised, depth), origin, resolution_m, pad_low)

@@ -8,7 +8,8 @@ best pose is found exactly, without scoring every pose, by branch and bound
 over the field's max-pooled pyramid (Hess et al. 2016, Sec. V): a block of
 ``2^h x 2^h`` offsets at one yaw scores at most its mean on level ``h``.
 
-The search is vectorised level by level rather than node by node:
+The search runs level by level rather than node by node (compiled:
+:mod:`slam.matching.kernels`):
 
 1. *dive*: from the best coarsest block, take the best child down to a
    single pose; its score is a lower bound on the optimum;
@@ -30,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slam.matching.grid import LEVELS, ScorePyramid
+from slam.matching.grid import ScorePyramid
 
 
 @dataclass(frozen=True)
@@ -52,35 +53,15 @@ def angular_step(points: np.ndarray, resolution_m: float) -> float:
     return float(np.arccos(1.0 - resolution_m**2 / (2.0 * d * d)))
 
 
-def _scores(pyr: ScorePyramid, level: int, base: np.ndarray, a: np.ndarray, ox: np.ndarray, oy: np.ndarray) -> np.ndarray:
-    """Mean of ``level`` over the points of yaws ``a`` (k,) shifted by
-    (ox, oy) cells (k,); ``base`` (yaws, n) the points' flat cell indices
-    per yaw."""
-    ny = pyr.levels[level].shape[1]
-    flat = base[a] + (ox * ny + oy).astype(np.int32)[:, None]
-    return pyr.lookup_flat(level, flat).mean(axis=1) * (1.0 / LEVELS)
-
-
-def _children(level: int, a: np.ndarray, ox: np.ndarray, oy: np.ndarray, hi: int):
-    """The four blocks of ``level - 1`` inside each block of ``level``
-    (offsets up to ``hi``)."""
-    half = 1 << (level - 1)
-    ca = np.repeat(a, 4)
-    cx = np.repeat(ox, 4) + np.tile([0, half, 0, half], len(a))
-    cy = np.repeat(oy, 4) + np.tile([0, 0, half, half], len(a))
-    keep = (cx <= hi) & (cy <= hi)
-    return ca[keep], cx[keep], cy[keep]
-
-
 class CorrelativeSearch:
     """The search space of one scan in one grid: every yaw of the angular
     window (``yaws``) times every cell offset of the linear window, with the
     points' cells precomputed per yaw; see the module docstring."""
 
     def __init__(self, pyr: ScorePyramid, points: np.ndarray, guess: np.ndarray, linear_window_m: float,
-                 angular_window_rad: float, angular_step_rad: float | None = None, max_batch: int = 4096):
-        pts = np.asarray(points, dtype=np.float64)
-        self.pyr, self.guess, self.max_batch = pyr, np.asarray(guess, dtype=float), max_batch
+                 angular_window_rad: float, angular_step_rad: float | None = None):
+        pts = np.ascontiguousarray(points, dtype=np.float64)
+        self.pyr, self.guess = pyr, np.asarray(guess, dtype=float)
         res = pyr.resolution_m
         self.step = angular_step_rad if angular_step_rad is not None else angular_step(pts, res)
         n_yaw = int(np.ceil(angular_window_rad / self.step)) if angular_window_rad > 0 else 0
@@ -92,23 +73,22 @@ class CorrelativeSearch:
         if pyr.pad < hi + (1 << self.depth):
             raise ValueError(f"a window of {w} cells needs a grid padded by {hi + (1 << self.depth)} cells, not {pyr.pad}")
         # The points' cells at every yaw, for the window's lowest offset (-w, -w).
-        c, s = np.cos(self.yaws), np.sin(self.yaws)
-        x = c[:, None] * pts[None, :, 0] - s[:, None] * pts[None, :, 1] + guess[0]
-        y = s[:, None] * pts[None, :, 0] + c[:, None] * pts[None, :, 1] + guess[1]
+        from slam.matching import kernels
+
+        self._kernels = kernels
         nx, ny = pyr.field.shape
-        cells = pyr.cells(np.stack([x, y], axis=-1)) - w
-        ix = np.clip(cells[..., 0], 0, nx - 1 - hi)
-        iy = np.clip(cells[..., 1], 0, ny - 1 - hi)
-        self.base = (ix.astype(np.int64) * ny + iy).astype(np.int32)  # grids stay below 2^31 cells
+        self._levels = pyr.stack.reshape(len(pyr.stack), -1)
+        self._ny = ny
+        self.base = kernels.point_cells(np.cos(self.yaws), np.sin(self.yaws), pts, np.asarray(guess, dtype=np.float64),
+                                        np.asarray(pyr.origin, dtype=np.float64), float(res), w, hi, nx, ny)
         self.evaluated = 0
 
     def scores(self, level: int, a: np.ndarray, ox: np.ndarray, oy: np.ndarray) -> np.ndarray:
+        """Scores of the blocks of ``level`` at yaw indices ``a`` and offsets
+        (``ox``, ``oy``) (k,): their mean on that level, a bound on every
+        pose inside."""
         self.evaluated += len(a)
-        b = self.max_batch
-        if len(a) <= b:
-            return _scores(self.pyr, level, self.base, a, ox, oy)
-        return np.concatenate([_scores(self.pyr, level, self.base, a[i : i + b], ox[i : i + b], oy[i : i + b])
-                               for i in range(0, len(a), b)])
+        return self._kernels.block_scores(self._levels, level, self._ny, self.base, a, ox, oy)
 
     def top(self):
         """The coarsest blocks (yaw index, x and y offsets) and their bounds."""
@@ -122,33 +102,21 @@ class CorrelativeSearch:
     def dive(self, a, ox, oy, sc) -> float:
         """The score of the pose reached from the best block by always taking the best child."""
         k = int(np.argmax(sc))
-        a, ox, oy = a[k : k + 1], ox[k : k + 1], oy[k : k + 1]
-        best = float(sc[k])
-        for level in range(self.depth, 0, -1):
-            a, ox, oy = _children(level, a, ox, oy, self.hi)
-            child = self.scores(level - 1, a, ox, oy)
-            k = int(np.argmax(child))
-            a, ox, oy, best = a[k : k + 1], ox[k : k + 1], oy[k : k + 1], float(child[k])
+        best, evaluated = self._kernels.dive(self._levels, self._ny, self.base, int(a[k]), int(ox[k]), int(oy[k]),
+                                             float(sc[k]), self.depth, self.hi)
+        self.evaluated += evaluated
         return best
 
-    def sweep(self, blocks, bound: float, outside=None):
+    def sweep(self, blocks, bound: float, exclude: tuple[np.ndarray, int, int, int] | None = None):
         """Every pose whose score reaches ``bound``, from the blocks given;
-        ``outside(level, a, ox, oy)``, if given, keeps only the blocks that
-        reach outside an excluded region."""
+        ``exclude`` (near_yaw, bx, by, r), if given, keeps only the blocks
+        that reach outside the box of ``r`` cells around offset (bx, by) at
+        the yaws ``near_yaw`` (bool per yaw)."""
         a, ox, oy, sc = blocks
-        keep = sc >= bound
-        a, ox, oy, sc = a[keep], ox[keep], oy[keep], sc[keep]
-        for level in range(self.depth, 0, -1):
-            if outside is not None:
-                keep = outside(level, a, ox, oy)
-                a, ox, oy = a[keep], ox[keep], oy[keep]
-            a, ox, oy = _children(level, a, ox, oy, self.hi)
-            sc = self.scores(level - 1, a, ox, oy)
-            keep = sc >= bound
-            a, ox, oy, sc = a[keep], ox[keep], oy[keep], sc[keep]
-        if outside is not None:
-            keep = outside(0, a, ox, oy)
-            a, ox, oy, sc = a[keep], ox[keep], oy[keep], sc[keep]
+        near_yaw, bx, by, r = exclude if exclude is not None else (np.zeros(0, dtype=bool), 0, 0, 0)
+        a, ox, oy, sc, evaluated = self._kernels.sweep(self._levels, self._ny, self.base, a, ox, oy, sc, float(bound),
+                                                       self.depth, self.hi, exclude is not None, near_yaw, bx, by, r)
+        self.evaluated += evaluated
         return a, ox, oy, sc
 
     def poses(self, a: np.ndarray, ox: np.ndarray, oy: np.ndarray) -> np.ndarray:
@@ -195,13 +163,7 @@ class CorrelativeSearch:
         by = int(round((pose[1] - self.guess[1]) / res)) + self.w
         r = int(np.floor(exclude_m / res))
         near_yaw = np.abs(self.yaws - pose[2]) <= exclude_rad
-
-        def outside(level, a, ox, oy):
-            size = (1 << level) - 1
-            inside = near_yaw[a] & (ox >= bx - r) & (ox + size <= bx + r) & (oy >= by - r) & (oy + size <= by + r)
-            return ~inside
-
-        a, ox, oy, _ = self.sweep(self.top(), bound, outside)
+        a, ox, oy, _ = self.sweep(self.top(), bound, (near_yaw, bx, by, r))
         return self.poses(a, ox, oy)
 
 
@@ -214,12 +176,11 @@ def branch_and_bound(
     min_score: float = 0.0,
     tie_tolerance: float = 0.0,
     angular_step_rad: float | None = None,
-    max_batch: int = 4096,
 ) -> SearchResult | None:
     """The best pose of ``points`` (n, 2) within the windows around
     ``guess``; None when no pose scores ``min_score`` or more. See the
     module docstring."""
     if len(points) == 0:
         return None
-    search = CorrelativeSearch(pyr, points, guess, linear_window_m, angular_window_rad, angular_step_rad, max_batch)
+    search = CorrelativeSearch(pyr, points, guess, linear_window_m, angular_window_rad, angular_step_rad)
     return search.best(min_score, tie_tolerance)
