@@ -195,6 +195,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
                       args.set or [], progress=not args.quiet, force=args.force, command=args.command_line)
     print((res.out_dir / "comparison.md").read_text())
     print(f"wrote {res.out_dir}" + _report_hint(res.out_dir))
+    _warn_self_checks(res.results)
     return 0
 
 
@@ -216,6 +217,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         print(f"reused {res.run_dir} (the same scenario and seed)")
     print((res.compare.out_dir / "comparison.md").read_text())
     print(f"result folders, tables and figures in {res.compare.out_dir}" + _report_hint(res.compare.out_dir))
+    _warn_self_checks(res.compare.results)
     return 0
 
 
@@ -234,6 +236,16 @@ def _cmd_ablate(args: argparse.Namespace) -> int:
     return 1 if res.failed else 0
 
 
+def _warn_self_checks(results: dict) -> None:
+    """One warning line per variant whose map failed its self-check."""
+    from slam.outputs.self_check import warning_line
+
+    for name, res in results.items():
+        check = res.metrics.get("self_check")
+        if check is not None and check["failed"]:
+            print(f"gslam: warning: {name}: {warning_line(check)}", file=sys.stderr)
+
+
 def _print_metrics(out_dir: Path, metrics: dict) -> None:
     keys = (
         "ate_rmse_m", "ate_rmse_unaligned_m", "rpe_trans_pct", "rpe_rot_deg_per_m", "final_error_m",
@@ -241,7 +253,15 @@ def _print_metrics(out_dir: Path, metrics: dict) -> None:
         "isolation_precision", "isolation_recall", "validation_time_s",
     )
     shown = {k: metrics[k] for k in keys if k in metrics}
+    check = metrics.get("self_check")
     print(f"wrote {out_dir}")
+    if check is not None:
+        from slam.outputs.self_check import summary_line, warning_line
+
+        if check["failed"]:
+            print(f"gslam: warning: {warning_line(check)}", file=sys.stderr)
+        else:
+            print(summary_line(check))
     print(json.dumps(shown, indent=2))
 
 

@@ -65,9 +65,10 @@ def test_map_writes_every_documented_file(mapped, short_run):
     assert metrics["n_poses"] == len(res.trajectory)
     assert set(metrics["timings_s"]) == {
         "read", "frontend", "validation", "loops", "submaps", "graph_build", "optimise", "write", "grid", "mcap",
-        "prepare", "frontend_wait", "plots_wait",
+        "prepare", "frontend_wait", "plots_wait", "self_check",
     }
     assert not any(k in metrics for k in ("alarm_fraction", "validation_steps"))
+    assert metrics["self_check"]["verdict"] == "pass" and metrics["self_check"]["blame_share"] is None
 
     # TUM files carry absolute stamps t0 + t.
     est, t0 = read_tum(res.out_dir / "trajectory.tum", short_run.t0)

@@ -201,7 +201,7 @@ def run_compare(
         _figures(tmp, results, recording)
         if base.output.report:
             made = collect(input_path, config_path, dump_config(base), command)
-            report_s = _report(tmp, rows, recording.name, made.rows())
+            report_s = _report(tmp, rows, recording.name, made.rows(), results)
         else:
             report_s = 0.0
     for name, res in results.items():
@@ -254,14 +254,19 @@ def _run_variants(
     return results, recording
 
 
-def _report(folder: Path, rows: list[dict[str, Any]], name: str, provenance: list[tuple[str, str]]) -> float:
-    """``report.html``: its provenance, the table, the comparison's figures
-    and each variant's map; the seconds it took."""
+def _report(folder: Path, rows: list[dict[str, Any]], name: str, provenance: list[tuple[str, str]],
+            results: dict[str, MapResult]) -> float:
+    """``report.html``: its provenance, the table, each variant's self-check,
+    the comparison's figures and each variant's map; the seconds it took."""
+    from slam.outputs.self_check import SELF_CHECK_NOTE, self_check_table
+
     t = time.perf_counter()
     variants = [row["variant"] for row in rows]
     sections = [
         Section("Variants compared", " ".join(definitions_text()) + " Each variant's result folder holds its files "
                 "(trajectory.tum, metrics.json, map.pgm, run.mcap).", tables=[_table(rows)]),
+        Section("Self-check", SELF_CHECK_NOTE,
+                tables=[self_check_table({v: r.metrics.get("self_check") for v, r in results.items()})]),
         Section("Trajectories", figures=[
             Figure(folder / "trajectories.png", "every variant over the reference, around it"),
             Figure(folder / "trajectories_full.png", "every variant over the reference, whole"),

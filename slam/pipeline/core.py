@@ -51,6 +51,7 @@ class Timings:
     prepare_s: float = 0.0  # beside scan matching: imports, the files that do not need the estimate
     frontend_wait_s: float = 0.0  # waiting for scan matching in the second process
     plots_wait_s: float = 0.0  # waiting for the figures, grid and bag in the second process
+    self_check_s: float = 0.0  # the map's self-check (slam/outputs/self_check.py)
 
 
 class Mapping:
@@ -299,6 +300,28 @@ class Mapping:
             m.update(self.validation.metrics)
         m.update(self.extra_metrics)
         self.metrics = m
+
+    def check_self(self) -> None:
+        """The map's self-check without ground truth (:mod:`slam.outputs.self_check`)
+        into ``metrics['self_check']``; it only reads the estimate. Not part
+        of :meth:`run`: the result folder runs it while the figures are drawn."""
+        from slam.outputs.pointcloud import beam_limits
+        from slam.outputs.self_check import check_map
+
+        rec, meas = self.recording, self.measurements
+        on_scans = rec.scans is not None and meas.scan_index is not None
+        check = check_map(
+            self.backend.trajectory,
+            scans=rec.scans if on_scans else None,
+            scan_index=meas.scan_index if on_scans else None,
+            beam_limits=beam_limits(self.config.frontend, rec.scans) if on_scans else None,
+            loops=self.loop_factors.loops if self.loop_factors is not None else (),
+            odometry=meas.odometry,
+            stamps_synthesised=rec.stamps_synthesised,
+            blame_share=self.metrics.get("alarm_fraction"),
+        )
+        self.timings.self_check_s = check.time_s
+        self.metrics["self_check"] = check.as_dict()
 
     # -- what the steps share -------------------------------------------------
 

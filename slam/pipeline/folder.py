@@ -113,6 +113,7 @@ class MappingPipeline:
                 core.run(self.scan_matching)
                 self.frontend = core.frontend
                 self.start_figures(tmp)
+                core.check_self()  # while the second process draws
                 self.write(tmp)
             finally:  # before a failed result's folder is removed
                 self.close_helpers()
@@ -283,9 +284,13 @@ def import_next_steps() -> None:
     import slam.gating.truth  # noqa: F401
     import slam.graph.backend  # noqa: F401
     import slam.outputs.evaluation  # noqa: F401
+    import slam.outputs.self_check  # noqa: F401
     import slam.outputs.tum  # noqa: F401
     import slam.outputs.validation_status  # noqa: F401
     import validation.validator  # noqa: F401
+    from slam.outputs.pointcloud import import_open3d
+
+    import_open3d()  # the self-check's nearest neighbours; a second or more to load
 
 
 def run_map(
