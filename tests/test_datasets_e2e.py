@@ -66,12 +66,14 @@ def test_carmen_intel_graph_and_validation(tmp_path):
 
 def test_carmen_intel_judged_by_a_fixed_gap_observes_nothing_and_says_so(tmp_path, capsys):
     """With every gap judged against 0.5 s (no observers.gap_periods), no
-    observer of the thinned log ever observes: --gating on is an error
-    naming the relation and why, not a silently ungated map."""
+    relation observer of the thinned log ever observes: with the scan
+    ceiling check off too, --gating on is an error naming the relation and
+    why, not a silently ungated map."""
     out = tmp_path / "o"
     code = main(["-q", "map", str(real_data("carmen/intel-corrected.log.gz")), "--config",
                  str(ROOT / "configs/datasets/carmen.yaml"), "--out", str(out), "--gating", "on",
-                 "--set", "output.plots=false", "--set", "validation.observers.gap_periods=null"])
+                 "--set", "output.plots=false", "--set", "validation.observers.gap_periods=null",
+                 "--set", "validation.observers.scan_ceiling.enabled=false"])
     err = capsys.readouterr().err
     assert code == 1 and not out.exists()
     assert "gslam: error:" in err and "yaw_odo_sm" in err and "gaps longer than the 0.5 s" in err
