@@ -14,7 +14,7 @@ multiply-add).
 The module is imported on the first search, so a command that matches no
 scans does not pay numba's import. Compiled code is cached beside the
 module, else in the user's cache folder (numba's own fallback); where
-neither can be written, each process compiles once (about 2.5 s) instead.
+neither can be written, each process compiles once (about 3 s) instead.
 """
 
 from __future__ import annotations
