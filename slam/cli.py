@@ -12,6 +12,7 @@ import platform
 import shlex
 import signal
 import sys
+import warnings
 from pathlib import Path
 
 from slam import __version__
@@ -451,6 +452,7 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
+    warnings.showwarning = _show_warning
     received: list[int] = []
     if sys.stdout is not None and not isinstance(sys.stdout, _WatchedStdout):
         sys.stdout = _WatchedStdout(sys.stdout)
@@ -485,6 +487,20 @@ def main(argv: list[str] | None = None) -> int:
         if received:  # the signal's exception turned into another on its way (an import it interrupted)
             return _stopped(received[0])
         raise
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A Python warning (numpy's overflow, a library's deprecation) as one
+    line naming where it arose, like the command's own warnings, instead of
+    the interpreter's two lines quoting the source."""
+    stream = file if file is not None else sys.stderr
+    if stream is None:
+        return
+    try:
+        stream.write(f"gslam: warning: {_one_line(str(message))} ({category.__name__}, "
+                     f"{Path(filename).name}:{lineno})\n")
+    except (OSError, ValueError):  # stderr closed or gone: nowhere to say it
+        pass
 
 
 def _stopped(signum: int) -> int:

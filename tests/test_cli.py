@@ -356,3 +356,25 @@ def test_benchmarks_fail_on_bad_input_with_one_line(argv, tmp_path):
     assert done.returncode == 1
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"bench {name}: "), done.stderr
+
+def test_a_python_warning_is_one_line_naming_where_it_arose(capsys):
+    """numpy's RuntimeWarning on a hostile value reaches the user as one
+    line, like the command's own warnings, not as the interpreter's two."""
+    import warnings
+
+    import numpy as np
+
+    from slam import cli
+
+    previous = warnings.showwarning
+    try:
+        warnings.showwarning = cli._show_warning
+        with warnings.catch_warnings():
+            warnings.simplefilter("always")
+            warnings.showwarning = cli._show_warning
+            np.exp(np.array([1e300]))
+    finally:
+        warnings.showwarning = previous
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.startswith("gslam: warning: overflow encountered in exp (RuntimeWarning, test_cli.py:")
