@@ -792,3 +792,24 @@ def test_the_space_a_simulation_needs_is_checked_first(world: World, tmp_path: P
     err = capsys.readouterr().err
     assert code == 1 and "--out needs about" in err and "free some space" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("name, config", [
+    ("huge.log", "carmen.yaml"),
+    ("Huge_Input.txt", "librsf_corridor.yaml"),
+    ("huge.bag", "husky.yaml"),
+    ("huge.mcap", "husky.yaml"),
+    ("huge.db3", "husky.yaml"),
+])
+def test_a_huge_sparse_file_is_refused_on_its_first_bytes(tmp_path, capsys, name, config):
+    """A 20 GB file of zeros (sparse: no disk is used) is refused in one line
+    from its first bytes, before a reader takes gigabytes into memory."""
+    from slam.cli import main
+
+    path = tmp_path / name
+    with open(path, "wb") as f:
+        f.truncate(20 << 30)
+    code = main(["-q", "map", str(path), "--config", f"configs/datasets/{config}", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1 and str(path) in err
+    assert "binary content" in err or "not a readable ROS bag" in err

@@ -64,7 +64,7 @@ import numpy as np
 from slam.config import InputConfig
 from slam.errors import GslamError
 from validation.base.geometry import wrap_angle
-from slam.readers.files import decode_log
+from slam.readers.files import SNIFF_BYTES, decode_log, sniff_log
 from validation.base.yamlio import check_regular_file
 from slam.recording import relative_poses
 from slam.recording import Recording, Scans, Trajectory
@@ -111,11 +111,11 @@ class _Log:
 def _open_lines(path: Path) -> list[str]:
     check_regular_file(path, "CARMEN log")
     try:
-        if path.name.lower().endswith(".gz"):
-            with gzip.open(path, "rb") as f:
-                data = f.read()
-        else:
-            data = path.read_bytes()
+        opener = gzip.open if path.name.lower().endswith(".gz") else open
+        with opener(path, "rb") as f:
+            head = f.read(SNIFF_BYTES)
+            sniff_log(head, path, "CARMEN text log")
+            data = head + f.read()
     except FileNotFoundError:
         raise GslamError(f"{path}: no such file") from None
     except EOFError:

@@ -7,6 +7,17 @@ from pathlib import Path
 from slam.errors import GslamError
 
 
+SNIFF_BYTES = 1 << 20
+"""How much of a text log is looked at before the whole is read: a binary
+file (a disk image, a sparse file of zeros) is refused on its first
+megabyte, not after gigabytes are in memory."""
+
+
+def sniff_log(head: bytes, source: str | Path, what: str) -> None:
+    """Refuse a log whose first bytes ``head`` are binary (as :func:`decode_log`)."""
+    decode_log(head, source, what)
+
+
 def decode_log(data: bytes, source: str | Path, what: str) -> str:
     """The text of a log whose fields are ASCII numbers and words (CARMEN,
     libRSF): a byte-order mark dropped, a stray byte that is not UTF-8 (a

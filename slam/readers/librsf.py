@@ -39,7 +39,7 @@ from slam.config import InputConfig
 from slam.errors import GslamError
 from validation.base.geometry import wrap_angle
 from slam.readers.carmen import chain_steps
-from slam.readers.files import decode_log
+from slam.readers.files import SNIFF_BYTES, decode_log, sniff_log
 from validation.base.yamlio import check_regular_file
 from slam.recording import Gyro, PlaceMatches, Recording, Trajectory
 
@@ -94,7 +94,10 @@ def _read_rows(path: Path, wanted: dict[str, tuple[int, str]]) -> dict[str, np.n
     rows: dict[str, list[list[float]]] = {kind: [] for kind in wanted}
     check_regular_file(path, "libRSF file")
     try:
-        text = decode_log(path.read_bytes(), path, "libRSF text file")
+        with open(path, "rb") as f:
+            head = f.read(SNIFF_BYTES)
+            sniff_log(head, path, "libRSF text file")
+            text = decode_log(head + f.read(), path, "libRSF text file")
     except OSError as e:
         raise GslamError(f"{path}: cannot read ({e.strerror or e})") from None
     for lineno, line in enumerate(text.splitlines(), start=1):

@@ -133,7 +133,28 @@ def _make_streams(path: Path, config: InputConfig) -> list[_Stream]:
     return streams
 
 
+BAG_MAGIC = {".bag": b"#ROSBAG V2.0\n", ".mcap": b"\x89MCAP0\r\n", ".db3": b"SQLite format 3\x00"}
+"""The bytes each bag file format starts with."""
+
+
+def check_magic(path: Path) -> None:
+    """Refuse a bag file that does not start as its format does, before a
+    reader looks for its index (in a 20 GB sparse file of zeros, gigabytes
+    into memory)."""
+    magic = BAG_MAGIC.get(path.suffix)
+    if magic is None or not path.is_file():
+        return
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(magic))
+    except OSError as e:
+        raise GslamError(f"{path}: cannot read ({e.strerror or e})") from None
+    if head != magic:
+        raise GslamError(f"{path}: not a readable ROS bag (a {path.suffix} file starts with {magic!r}, this one with {head!r})")
+
+
 def _open_reader(path: Path) -> Any:
+    check_magic(path)
     try:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
