@@ -453,6 +453,9 @@ def main(argv: list[str] | None = None) -> int:
         format="%(levelname)s %(name)s: %(message)s",
     )
     warnings.showwarning = _show_warning
+    for stream in (sys.stdout, sys.stderr):  # a Latin-1 terminal cannot encode a path named in Greek
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
     received: list[int] = []
     if sys.stdout is not None and not isinstance(sys.stdout, _WatchedStdout):
         sys.stdout = _WatchedStdout(sys.stdout)

@@ -378,3 +378,17 @@ def test_a_python_warning_is_one_line_naming_where_it_arose(capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert err.startswith("gslam: warning: overflow encountered in exp (RuntimeWarning, test_cli.py:")
+
+
+def test_a_latin1_terminal_gets_what_it_cannot_show_escaped(tmp_path, short_run):
+    """A path the terminal's encoding cannot show (Greek on a Latin-1
+    terminal) is escaped in what the command prints, not a UnicodeEncodeError."""
+    import os
+
+    out = tmp_path / "χάρτης.yaml"
+    env = {**os.environ, "PYTHONIOENCODING": "latin-1"}
+    run = subprocess.run([sys.executable, "-m", "slam.cli", "inspect", str(short_run.run_dir), "--config-out", str(out)],
+                         capture_output=True, env=env, cwd=Path(__file__).resolve().parents[1], stdin=subprocess.DEVNULL)
+    said = (run.stdout + run.stderr).decode("latin-1")
+    assert run.returncode == 0 and "Traceback" not in said and out.is_file()
+    assert "\\u03c7\\u03ac\\u03c1" in said  # the name, escaped
