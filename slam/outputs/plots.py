@@ -47,16 +47,32 @@ def fault_shading(faults: Mapping[str, Sequence[Interval]]) -> list[Shade]:
     return [(f"true {c} fault", iv, fault_color(c)) for c, iv in faults.items() if iv]
 
 
-def save_figure(fig: Figure, path: str | Path) -> None:
-    """Write ``fig`` to ``path`` as a PNG, atomically."""
+def save_figure(fig: Figure, path: str | Path, description: str | None = None) -> None:
+    """Write ``fig`` to ``path`` as a PNG, atomically; ``description``: the
+    PNG's Description text (what the figure draws, for a reader of the file,
+    :func:`png_description`)."""
     with atomic_path(path) as tmp:
-        _render_png(fig, tmp)
+        _render_png(fig, tmp, description)
     logger.debug("wrote figure %s", path)
 
 
-def _render_png(fig: Figure, target) -> None:
+def png_description(path: str | Path) -> str | None:
+    """The Description text :func:`save_figure` wrote into a PNG, if any."""
+    from PIL import Image
+
+    with Image.open(path) as image:
+        return image.text.get("Description")
+
+
+TRAJECTORIES_DESCRIPTION = "trajectories: "
+"""How :func:`plot_trajectories`' Description starts; the labels drawn follow, comma-separated."""
+
+
+def _render_png(fig: Figure, target, description: str | None = None) -> None:
     # zlib level 1: the same pixels, written in a fraction of the time.
-    fig.savefig(target, format="png", dpi=DPI, bbox_inches="tight", pil_kwargs={"compress_level": 1})
+    metadata = {"Description": description} if description else None
+    fig.savefig(target, format="png", dpi=DPI, bbox_inches="tight", metadata=metadata,
+                pil_kwargs={"compress_level": 1})
 
 
 def warm_up() -> None:
@@ -170,7 +186,7 @@ def plot_trajectories(
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.legend(loc="best", fontsize="small")
-    save_figure(fig, path)
+    save_figure(fig, path, TRAJECTORIES_DESCRIPTION + ", ".join(trajectories))
 
 
 LARGE_COORDINATE_M = 1e4
