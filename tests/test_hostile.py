@@ -536,6 +536,24 @@ ERRORS: list[Case] = [
           ("negative-yaw-variance", "0.5 0 0.01 0.01 0.01 -1", "odom2 line #8: var_wz -1 is negative"),
           ("speed-1e9", "1e9 0 0.01 0.01 0.01 0.01", "odom2 line #8: speed 1e+09 m/s"),
       )),
+    # -- counts bounded before they reach C++ (KISS-ICP, GTSAM) or size an array --
+    *(Case(f"set-{key}-{value}", (*MAP, "--out", "{d}/o", "--set", f"{key}={value}"), f"--set {key}={value}: {key}: {says}")
+      for key, value, says in (
+          ("frontend.max_points_per_voxel", "100000000000000000000", "1e+20 is above 1e+06"),
+          ("frontend.max_iterations", "100000000000000000000", "1e+20 iterations is above 100000 iterations"),
+          ("frontend.threads", "100000000000000000000", "1e+20 threads is above 1024 threads"),
+          ("backend.max_iterations", str(10**25), "1e+25 iterations is above 100000 iterations"),
+          ("loops.registration.max_iterations", "100000000000000000000", "1e+20 iterations is above"),
+          ("submaps.refine.max_points", "100000000000000000000", "1e+20 is above 1e+06"),
+          ("submaps.recognition.rings", "100000000000000000000", "1e+20 is above 1e+06"),
+          ("backend.max_iterations", "1e300", "Input should be a valid integer"),
+      )),
+    Case("set-integer-of-5000-digits", (*MAP, "--out", "{d}/o", "--set", "backend.max_iterations=" + "9" * 5000),
+         "an integer of 5,000 digits; no setting needs more than 30"),
+    Case("config-integer-of-5000-digits", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: line 2: invalid YAML (an integer of 5,000 digits", text("c.yaml", "backend:\n  max_iterations: " + "9" * 5000 + "\n")),
+    Case("relation-threshold-1e12", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "relations.0.threshold: 1e+12 is above 1e+06", config(relation(0, threshold=10**12, max_counter=None))),
     *(Case(f"broad-{name}", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"), says, broad_mat(**fields))
       for name, fields, says in (
           ("no-gravity", {"imu_acc": np.zeros((50, 3))}, "imu_acc: median magnitude 0 m/s^2, expected gravity"),

@@ -208,11 +208,11 @@ class FrontendConfig(Strict):
     min_range_m: float = Field(0.1, ge=0.0)
     max_range_m: float = Field(30.0, gt=0.0)
     voxel_size_m: float = Field(0.1, gt=0.0)
-    max_points_per_voxel: int = Field(20, ge=1)
+    max_points_per_voxel: bounds.Count = Field(20, ge=1)
     initial_threshold_m: float = Field(0.5, gt=0.0)
     min_motion_m: float = Field(0.05, ge=0.0)
-    max_iterations: int = Field(500, ge=1)
-    threads: int = Field(1, ge=0)
+    max_iterations: bounds.Iterations = Field(500, ge=1)
+    threads: bounds.Threads = Field(1, ge=0)
 
     @model_validator(mode="after")
     def _range_window(self) -> "FrontendConfig":
@@ -338,7 +338,7 @@ class BackendConfig(Strict):
     initial_pose: Literal["groundtruth", "origin"] = "groundtruth"
     initial_sigma_xy_m: bounds.Sigma_m = Field(0.01, gt=0.0)
     initial_sigma_yaw_deg: bounds.Sigma_deg = Field(0.5, gt=0.0)
-    max_iterations: int = Field(100, ge=1)
+    max_iterations: bounds.Iterations = Field(100, ge=1)
     relative_error_tol: float = Field(1e-6, gt=0.0)
     robust_kernel: Kernel = "none"
     robust_param: float = Field(1.345, gt=0.0)
@@ -501,6 +501,8 @@ def parse_override(text: str) -> tuple[str, Any]:
     except DuplicateKey as e:
         raise GslamError(f"--set {text}: key '{e.key}' given twice; the second would silently replace the first") \
             from None
+    except yaml.constructor.ConstructorError as e:  # a value YAML reads but cannot hold (a 5,000-digit integer)
+        raise GslamError(f"--set {text}: {e.problem}") from None
     except yaml.YAMLError:
         value = raw
     return key, value

@@ -10,6 +10,7 @@ from typing import Literal
 
 from pydantic import Field
 
+from validation.base import bounds
 from validation.loops.constraint import ObserverConfig
 from validation.base.yamlio import Strict
 
@@ -26,11 +27,11 @@ class DescriptorConfig(Strict):
     sectors of the descriptor's yaw.
     """
 
-    rings: int = Field(20, ge=2)
-    sectors: int = Field(60, ge=4)
+    rings: bounds.Count = Field(20, ge=2)
+    sectors: bounds.Count = Field(60, ge=4)
     max_radius_m: float = Field(15.0, gt=0.0)
     max_distance: float = Field(0.25, ge=0.0, le=1.0)
-    candidates: int = Field(2, ge=0)
+    candidates: bounds.Count = Field(2, ge=0)
     linear_window_m: float = Field(1.5, ge=0.0)
 
 
@@ -50,8 +51,8 @@ class RegistrationConfig(Strict):
     max_distance_m: float = Field(0.4, gt=0.0)
     inlier_distance_m: float = Field(0.2, gt=0.0)
     kernel_m: float = Field(0.1, gt=0.0)
-    max_iterations: int = Field(20, ge=1)
-    normal_half_window: int = Field(2, ge=1)
+    max_iterations: bounds.Iterations = Field(20, ge=1)
+    normal_half_window: bounds.Count = Field(2, ge=1)
     normal_max_gap_m: float = Field(0.3, gt=0.0)
     min_linearity: float = Field(0.8, ge=0.0, le=1.0)
 
@@ -67,7 +68,7 @@ class CorrelativeConfig(Strict):
 
     resolution_m: float = Field(0.2, gt=0.0)
     angular_step_deg: float = Field(1.0, gt=0.0)
-    max_points: int = Field(60, ge=3)
+    max_points: bounds.Count = Field(60, ge=3)
     tie_tolerance: float = Field(0.05, ge=0.0, le=1.0)
     skip_below_m: float = Field(0.5, ge=0.0)
     skip_below_deg: float = Field(5.0, ge=0.0)
@@ -89,7 +90,7 @@ class AcceptanceConfig(Strict):
     min_overlap: float = Field(0.6, gt=0.0, le=1.0)
     max_rms_m: float = Field(0.05, gt=0.0)
     min_relative_information: float = Field(0.05, ge=0.0, le=1.0)
-    min_pinned: int = Field(1, ge=1, le=3)
+    min_pinned: bounds.Count = Field(1, ge=1, le=3)
     max_correction_m: float = Field(3.0, gt=0.0)
 
 
@@ -140,7 +141,7 @@ class LoopsConfig(Strict):
     source: Literal["auto", "submaps", "scans", "file"] = "auto"
     local_map_m: float = Field(3.0, ge=0.0)
     query_map_m: float = Field(3.0, ge=0.0)
-    local_map_scans: int = Field(10, ge=1)
+    local_map_scans: bounds.Count = Field(10, ge=1)
     voxel_m: float = Field(0.1, gt=0.0)
     query_spacing_m: float = Field(1.0, ge=0.0)
     min_separation_m: float = Field(10.0, ge=0.0)
@@ -151,7 +152,7 @@ class LoopsConfig(Strict):
     search_yaw_deg: float = Field(3.0, ge=0.0)
     search_yaw_per_m_deg: float = Field(0.5, ge=0.0)
     max_search_yaw_deg: float = Field(20.0, ge=0.0)
-    max_candidates: int = Field(2, ge=1)
+    max_candidates: bounds.Count = Field(2, ge=1)
     information_scale: float = Field(1.0, gt=0.0)
     robust_kernel: Literal["none", "huber", "cauchy", "dcs"] | None = None
     robust_param: float | None = Field(None, gt=0.0)

@@ -53,7 +53,7 @@ class RefineConfig(_Strict):
 
     max_distance_m: float = Field(0.15, gt=0.0)
     inlier_distance_m: float = Field(0.1, gt=0.0)
-    max_points: int = Field(400, ge=10)
+    max_points: bounds.Count = Field(400, ge=10)
     kernel_m: float = Field(0.05, gt=0.0)
     max_shift_m: float = Field(0.2, gt=0.0)
     max_turn_deg: float = Field(3.0, gt=0.0)
@@ -91,7 +91,7 @@ class ConstraintSearchConfig(_Strict):
     """
 
     max_distance_m: float = Field(10.0, gt=0.0)
-    max_per_scan: int = Field(3, ge=0)
+    max_per_scan: bounds.Count = Field(3, ge=0)
     spacing_m: float = Field(1.0, ge=0.0)
     loop_separation_m: float = Field(20.0, ge=0.0)
     linear_window_m: float = Field(0.3, ge=0.0)
@@ -106,7 +106,7 @@ class ConstraintSearchConfig(_Strict):
     sigma_yaw_deg: bounds.Sigma_deg = Field(0.5, gt=0.0)
     robust_scale: float = Field(1.0, gt=0.0)
     inlier_probability: float = Field(0.99, gt=0.0, lt=1.0)
-    optimise_every: int = Field(10, ge=1)
+    optimise_every: bounds.Count = Field(10, ge=1)
     refine_near: bool = True
     agree: list[Literal["near", "loop"]] = []
     agree_m: float = Field(0.02, gt=0.0)
@@ -156,11 +156,11 @@ class RecognitionConfig(_Strict):
     enabled: bool = True
     min_path_m: float = Field(30.0, ge=0.0)
     spacing_m: float = Field(1.0, gt=0.0)
-    rings: int = Field(20, ge=2)
-    sectors: int = Field(60, ge=4)
+    rings: bounds.Count = Field(20, ge=2)
+    sectors: bounds.Count = Field(60, ge=4)
     max_radius_m: float = Field(20.0, gt=0.0)
     max_distance: float = Field(0.4, gt=0.0, le=1.0)
-    candidates: int = Field(3, ge=1)
+    candidates: bounds.Count = Field(3, ge=1)
     linear_window_m: float = Field(3.0, gt=0.0)
     angular_window_deg: float = Field(12.0, gt=0.0, le=180.0)
     min_score: float = Field(0.6, ge=0.0, le=1.0)
@@ -188,11 +188,11 @@ class SubmapsConfig(_Strict):
     node_spacing_m: float = Field(0.25, ge=0.0)
     node_turn_deg: float = Field(5.0, ge=0.0)
     length_m: float = Field(4.0, gt=0.0)
-    max_scans: int = Field(60, ge=2)
+    max_scans: bounds.Count = Field(60, ge=2)
     voxel_m: float = Field(0.05, gt=0.0)
-    min_points: int = Field(20, ge=3)
+    min_points: bounds.Count = Field(20, ge=3)
     resolution_m: Annotated[float, bounds.GRID_CELL_M] = Field(0.1, gt=0.0)
-    search_depth: int = Field(6, ge=0, le=10)
+    search_depth: bounds.Count = Field(6, ge=0, le=10)
     tie_tolerance: float = Field(0.01, ge=0.0)
     blamed_scans: Literal["keep", "leave_out"] = "keep"
     local: LocalMatchConfig = LocalMatchConfig()

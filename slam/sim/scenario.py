@@ -23,6 +23,7 @@ from slam.results.records import PLAIN_NAME, PLAIN_NAME_RULE
 from slam.config.trees import check_finite
 from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
+from validation.base import bounds
 from validation.base.bounds import within
 from validation.base.yamlio import Strict
 
@@ -113,7 +114,7 @@ class RobotConfig(Strict):
     start_pause_s: float = Field(1.0, ge=0.0)
     end_pause_s: float = Field(1.0, ge=0.0)
     truth_rate_hz: float = Field(100.0, ge=100.0)
-    laps: int = Field(1, ge=1)
+    laps: bounds.Count = Field(1, ge=1)
 
     @field_validator("waypoints")
     @classmethod
@@ -140,7 +141,7 @@ class RobotConfig(Strict):
 
 class LaserConfig(Strict):
     rate_hz: float = Field(10.0, gt=0.0)
-    beams: int = Field(541, ge=2)
+    beams: bounds.Count = Field(541, ge=2)
     fov_deg: float = Field(270.0, gt=0.0, le=360.0)
     min_range_m: float = Field(0.1, ge=0.0)
     max_range_m: float = Field(10.0, gt=0.0)
@@ -239,7 +240,7 @@ class FaultsConfig(Strict):
     :mod:`slam.sim.faults`)."""
 
     compass_error_deg: float = Field(5.0, gt=0.0)
-    sm_min_returns: int = Field(20, ge=3)
+    sm_min_returns: bounds.Count = Field(20, ge=3)
     sm_min_eigenvalue: float = Field(0.03, ge=0.0)
     odo_slip: float = Field(0.12, gt=0.0)
     gyro_bias_rad_s: float = Field(0.01, gt=0.0)

@@ -78,3 +78,20 @@ ORACLE_K_SIGMA = within(0.5, 100.0, "sigmas", "it would exclude 62 % of good mea
 
 Sigma_m = Annotated[float, SIGMA_M]
 Sigma_deg = Annotated[float, SIGMA_DEG]
+
+# --- counts handed to loops and to C++ (KISS-ICP, GTSAM) ----------------------
+
+ITERATIONS = within(1, 100_000, "iterations", high="an optimiser or ICP that has not converged in 100,000 "
+                    "iterations will not, and a larger count (1e20) overflows the C++ integer it is passed as")
+"""An iteration limit (GTSAM's optimisers, KISS-ICP's and our ICP)."""
+THREADS = within(0, 1024, "threads", high="more threads than any machine runs, and a larger count overflows the "
+                 "C++ integer it is passed as")
+"""A thread count (0: all cores)."""
+COUNT = within(None, 1_000_000, "", high="no count of points, candidates, rings, scans or steps a config holds "
+               "comes near a million (a typo of the exponent?), and a larger one overflows the C++ integer it is "
+               "passed as or sizes an array that fills the memory")
+"""Any other count of a config (points per voxel, candidates, rings, scans, steps)."""
+
+Iterations = Annotated[int, ITERATIONS]
+Threads = Annotated[int, THREADS]
+Count = Annotated[int, COUNT]

@@ -28,6 +28,10 @@ above any real one, far below what would exhaust the memory."""
 MAX_YAML_VALUES = 1_000_000
 """Most values a YAML file may expand to: aliases can make a few lines
 expand to billions (a "billion laughs" file), which no config needs."""
+MAX_INT_DIGITS = 30
+"""Most digits of an integer in a YAML file: far above any count or seed a
+config holds (a 64-bit number has 20), far below the 4,300 digits beyond
+which Python refuses to convert one (a ValueError, not a YAML error)."""
 _BOM = b"\xef\xbb\xbf"
 
 
@@ -110,6 +114,18 @@ class UniqueKeyLoader(SAFE_LOADER):  # type: ignore[misc, valid-type]
                 except TypeError:  # an unhashable key: the constructor says so
                     continue
         return super().construct_mapping(node, deep=deep)
+
+
+    def construct_yaml_int(self, node):
+        digits = sum(c.isdigit() for c in str(node.value))
+        if digits > MAX_INT_DIGITS:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"an integer of {digits:,} digits; no setting needs more than {MAX_INT_DIGITS}",
+                node.start_mark)
+        return super().construct_yaml_int(node)
+
+
+UniqueKeyLoader.add_constructor("tag:yaml.org,2002:int", UniqueKeyLoader.construct_yaml_int)
 
 
 class DuplicateKey(yaml.YAMLError):

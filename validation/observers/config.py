@@ -101,8 +101,8 @@ class RelationConfig(StrictFrozen):
     cusum_drift: float = Field(0.5, ge=0.0)
     level_window_s: float | None = Field(60.0, gt=0.0)
     level_max_rate: float | None = Field(None, gt=0.0)
-    threshold: int = Field(ge=0)
-    max_counter: int | None = Field(None, ge=1)
+    threshold: bounds.Count = Field(ge=0)
+    max_counter: bounds.Count | None = Field(None, ge=1)
     warmup_s: float | None = Field(None, ge=0.0)
     boundary_a: float | None = Field(None, gt=0.0)
     boundary_b: float | None = Field(None, gt=0.0)
@@ -253,7 +253,7 @@ class ScanCheckConfig(StrictFrozen):
     enabled: bool = False
     name: str = "scan_degenerate"
     components: tuple[Component, Component, Component] = ("SM_DIST", "SM_LAT", "SM_YAW")
-    min_returns: int = Field(20, ge=1)
+    min_returns: bounds.Count = Field(20, ge=1)
     min_eigenvalue: float = Field(0.03, ge=0.0)
     min_share: float = Field(0.5, gt=0.0, lt=1.0)
     hold_s: float = Field(0.0, ge=0.0)
@@ -280,7 +280,7 @@ class ScanCeilingConfig(StrictFrozen):
     name: str = "scan_ceiling"
     component: Component = "SM"
     min_no_return: float = Field(0.1, gt=0.0, le=1.0)
-    min_edges: int = Field(2, ge=1)
+    min_edges: bounds.Count = Field(2, ge=1)
     min_edge_share: float = Field(0.5, gt=0.0, le=1.0)
     max_ceiling_m: float = Field(10.0, gt=0.0)
     fill_s: float = Field(0.0, ge=0.0)
