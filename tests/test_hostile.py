@@ -548,6 +548,18 @@ ERRORS: list[Case] = [
           ("submaps.recognition.rings", "100000000000000000000", "1e+20 is above 1e+06"),
           ("backend.max_iterations", "1e300", "Input should be a valid integer"),
       )),
+    # -- search windows and the grids they pad --
+    *(Case(f"set-{key}-{value}", (*MAP, "--out", "{d}/o", "--set", f"{key}={value}"), f"--set {key}={value}: {says}")
+      for key, value, says in (
+          ("submaps.local.linear_window_m", "1e5", "submaps.local.linear_window_m: 100000 m is above 100 m"),
+          ("submaps.constraints.max_linear_window_m", "1e5", "submaps.constraints.max_linear_window_m: 100000 m is above"),
+          ("submaps.recognition.linear_window_m", "1e5", "submaps.recognition.linear_window_m: 100000 m is above"),
+          ("loops.descriptor.linear_window_m", "1e5", "loops.descriptor.linear_window_m: 100000 m is above"),
+          ("submaps.constraints.max_linear_window_m", "90", "submaps: constraints.max_linear_window_m 90 m at resolution_m 0.1 m "
+           "pads each submap's search grid by 3,600 cells per axis (at most 2,000)"),
+          ("submaps.local.max_linear_window_m", "0.1", "submaps.local: linear_window_m 0.6 m is above max_linear_window_m 0.1 m"),
+          ("submaps.constraints.angular_window_deg", "1e5", "submaps.constraints.angular_window_deg"),
+      )),
     Case("set-integer-of-5000-digits", (*MAP, "--out", "{d}/o", "--set", "backend.max_iterations=" + "9" * 5000),
          "an integer of 5,000 digits; no setting needs more than 30"),
     Case("config-integer-of-5000-digits", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),

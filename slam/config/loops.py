@@ -32,7 +32,7 @@ class DescriptorConfig(Strict):
     max_radius_m: float = Field(15.0, gt=0.0)
     max_distance: float = Field(0.25, ge=0.0, le=1.0)
     candidates: bounds.Count = Field(2, ge=0)
-    linear_window_m: float = Field(1.5, ge=0.0)
+    linear_window_m: bounds.SearchWindow_m = Field(1.5, ge=0.0)
 
 
 class RegistrationConfig(Strict):

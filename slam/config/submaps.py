@@ -27,13 +27,26 @@ class LocalMatchConfig(_Strict):
     constraint between a scan and the submap it was matched against.
     """
 
-    linear_window_m: float = Field(0.6, ge=0.0)
-    angular_window_deg: float = Field(30.0, ge=0.0)
-    max_linear_window_m: float = Field(1.5, ge=0.0)
+    linear_window_m: bounds.SearchWindow_m = Field(0.6, ge=0.0)
+    angular_window_deg: float = Field(30.0, ge=0.0, le=180.0)
+    max_linear_window_m: bounds.SearchWindow_m = Field(1.5, ge=0.0)
     max_angular_window_deg: float = Field(180.0, ge=0.0, le=180.0)
     min_score: float = Field(0.3, ge=0.0, le=1.0)
     sigma_xy_m: bounds.Sigma_m = Field(0.03, gt=0.0)
     sigma_yaw_deg: bounds.Sigma_deg = Field(0.5, gt=0.0)
+
+    @model_validator(mode="after")
+    def _windows_ordered(self):
+        _windows_ordered(self.linear_window_m, self.max_linear_window_m, "m")
+        _windows_ordered(self.angular_window_deg, self.max_angular_window_deg, "deg")
+        return self
+
+
+def _windows_ordered(least: float, most: float, unit: str) -> None:
+    key = "linear" if unit == "m" else "angular"
+    if least > most:
+        raise ValueError(f"{key}_window_{unit} {least:g} {unit} is above max_{key}_window_{unit} {most:g} {unit}: "
+                         "a window is at least the one and at most the other")
 
 
 class RefineConfig(_Strict):
@@ -94,10 +107,10 @@ class ConstraintSearchConfig(_Strict):
     max_per_scan: bounds.Count = Field(3, ge=0)
     spacing_m: float = Field(1.0, ge=0.0)
     loop_separation_m: float = Field(20.0, ge=0.0)
-    linear_window_m: float = Field(0.3, ge=0.0)
+    linear_window_m: bounds.SearchWindow_m = Field(0.3, ge=0.0)
     linear_window_per_m: float = Field(0.02, ge=0.0)
-    max_linear_window_m: float = Field(3.0, ge=0.0)
-    angular_window_deg: float = Field(3.0, ge=0.0)
+    max_linear_window_m: bounds.SearchWindow_m = Field(3.0, ge=0.0)
+    angular_window_deg: float = Field(3.0, ge=0.0, le=180.0)
     angular_window_per_m_deg: float = Field(0.2, ge=0.0)
     max_angular_window_deg: float = Field(30.0, ge=0.0, le=180.0)
     near_min_score: float = Field(0.45, ge=0.0, le=1.0)
@@ -115,6 +128,8 @@ class ConstraintSearchConfig(_Strict):
 
     @model_validator(mode="after")
     def _agree_needs_refine_near(self):
+        _windows_ordered(self.linear_window_m, self.max_linear_window_m, "m")
+        _windows_ordered(self.angular_window_deg, self.max_angular_window_deg, "deg")
         if self.agree and not self.refine_near:
             raise ValueError(f"agree: {self.agree} compares with the refinement refine_near makes; "
                              "set refine_near: true or agree: []")
@@ -161,7 +176,7 @@ class RecognitionConfig(_Strict):
     max_radius_m: float = Field(20.0, gt=0.0)
     max_distance: float = Field(0.4, gt=0.0, le=1.0)
     candidates: bounds.Count = Field(3, ge=1)
-    linear_window_m: float = Field(3.0, gt=0.0)
+    linear_window_m: bounds.SearchWindow_m = Field(3.0, gt=0.0)
     angular_window_deg: float = Field(12.0, gt=0.0, le=180.0)
     min_score: float = Field(0.6, ge=0.0, le=1.0)
     max_drift_per_m: float = Field(0.1, ge=0.0)
@@ -200,6 +215,20 @@ class SubmapsConfig(_Strict):
     constraints: ConstraintSearchConfig = ConstraintSearchConfig()
     ambiguity: AmbiguityConfig = AmbiguityConfig()
     recognition: RecognitionConfig = RecognitionConfig()
+
+    @model_validator(mode="after")
+    def _search_grid_size(self) -> "SubmapsConfig":
+        # A submap's search grid is padded by twice the widest window on each side (slam.submaps.local).
+        pad = 4 * self.max_window_m / self.resolution_m
+        if pad > bounds.MAX_SEARCH_PAD_CELLS:
+            widest = max((self.local.max_linear_window_m, "local.max_linear_window_m"),
+                         (self.constraints.max_linear_window_m, "constraints.max_linear_window_m"),
+                         (self.recognition.linear_window_m if self.recognition.enabled else 0.0,
+                          "recognition.linear_window_m"))
+            raise ValueError(f"{widest[1]} {widest[0]:g} m at resolution_m {self.resolution_m:g} m pads each "
+                             f"submap's search grid by {pad:,.0f} cells per axis (at most "
+                             f"{bounds.MAX_SEARCH_PAD_CELLS:,}): narrow the window or coarsen the cells")
+        return self
 
     @property
     def max_window_m(self) -> float:

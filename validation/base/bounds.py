@@ -66,6 +66,14 @@ KEYFRAME_YAW_DEG = within(1e-3, 360.0, "deg", "each keyframe would be the last o
                           "a turn that is never reached")
 """The turn between keyframes (deg)."""
 
+SEARCH_WINDOW_M = within(None, 100.0, "m", high="a scan searched for that far from its guess is looked for in "
+                         "the whole building, not corrected (and the search grid is padded by the window)")
+"""The half-width of a scan matcher's linear search window (m)."""
+MAX_SEARCH_PAD_CELLS = 2000
+"""Most cells a search grid is padded by on each axis (twice its widest
+window over its cell size, on both sides): 2000 makes a grid of at least
+4e6 cells per pyramid level, a 100 m window at 0.1 m cells."""
+
 # --- times and multiples -----------------------------------------------------
 
 MATCH_OFFSET_S = within(None, 10.0, "s", high="a pose that far from the stamp is another place (a ground robot "
@@ -77,6 +85,7 @@ ORACLE_K_SIGMA = within(0.5, 100.0, "sigmas", "it would exclude 62 % of good mea
 
 
 Sigma_m = Annotated[float, SIGMA_M]
+SearchWindow_m = Annotated[float, SEARCH_WINDOW_M]
 Sigma_deg = Annotated[float, SIGMA_DEG]
 
 # --- counts handed to loops and to C++ (KISS-ICP, GTSAM) ----------------------
