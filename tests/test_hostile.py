@@ -560,6 +560,19 @@ ERRORS: list[Case] = [
           ("submaps.local.max_linear_window_m", "0.1", "submaps.local: linear_window_m 0.6 m is above max_linear_window_m 0.1 m"),
           ("submaps.constraints.angular_window_deg", "1e5", "submaps.constraints.angular_window_deg"),
       )),
+    # -- injected faults outside physics or outside the recording --
+    *(Case(f"inject-{fault}", ("inject", "{run}", "--fault", fault, "--out", "{d}/o"), says)
+      for fault, says in (
+          ("laser_cut@2:4,range_m=1e-9", "--fault laser_cut@2:4,range_m=1e-9: range_m: 1e-09 m is below 0.01 m"),
+          ("laser_cut@2:4,range_m=1e9", "--fault laser_cut@2:4,range_m=1e9: range_m: 1e+09 m is above 1000 m"),
+          ("slip@2:4,scale=1e9", "--fault slip@2:4,scale=1e9: scale: 1e+09 is above 10"),
+          ("slip@2:4,yaw_scale=1e9", "--fault slip@2:4,yaw_scale=1e9: yaw_scale: 1e+09 is above 10"),
+          ("gyro_bias@2:4,bias_deg_s=1e300", "--fault gyro_bias@2:4,bias_deg_s=1e300: bias_deg_s: 1e+300 deg/s is above 2000 deg/s"),
+          ("gyro_bias@4:2", "--fault gyro_bias@4:2: the interval 4:2 must end after it starts"),
+          ("gyro_bias@2:1e300", "--fault gyro_bias@2:1e+300,bias_deg_s=2.0,label_deg_s=0.57: ends at 1e+300 s, after "
+           "the recording ends (24.0 s)"),
+          ("gyro_bias@1000:2000", "--fault gyro_bias@1000:2000,bias_deg_s=2.0,label_deg_s=0.57: starts after the recording ends"),
+      )),
     Case("set-integer-of-5000-digits", (*MAP, "--out", "{d}/o", "--set", "backend.max_iterations=" + "9" * 5000),
          "an integer of 5,000 digits; no setting needs more than 30"),
     Case("config-integer-of-5000-digits", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),

@@ -57,6 +57,9 @@ def _check_intervals(faults: Sequence[Fault], rec: Recording) -> None:
     for fault in faults:
         if fault.start_s >= rec.duration:
             raise GslamError(f"--fault {fault.text()}: starts after the recording ends ({rec.duration:.1f} s)")
+        if fault.end_s > rec.duration:
+            raise GslamError(f"--fault {fault.text()}: ends at {fault.end_s:g} s, after the recording ends "
+                             f"({rec.duration:.1f} s); its true interval would say the fault lasted past the data")
 
 
 def _sidecar(rec: Recording, source: Path, faults: Sequence[Fault], truth: dict[str, list[Interval]],

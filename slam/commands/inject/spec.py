@@ -21,13 +21,22 @@ thresholds the simulator labels its faults with (``label_*`` parameters).
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 import pydantic
 from pydantic import Field, model_validator
 
 from slam.errors import GslamError
+from validation.base import bounds
+from validation.base.bounds import within
 from validation.base.yamlio import StrictFrozen
+
+# What the faults can physically be: a laser's reach, a slipping wheel, a gyro's measuring range.
+_CUT_RANGE_M = within(0.01, 1000.0, "m", "shorter than any laser's minimum range: every beam would be cut",
+                      "beyond any laser's reach: no beam would be cut")
+_SLIP_SCALE = within(None, 10.0, "", high="a slipping wheel or track reports a few times its travel, not more")
+_GYRO_BIAS_DEG_S = within(-2000.0, 2000.0, "deg/s", "beyond any gyro's measuring range (2000 deg/s)",
+                          "beyond any gyro's measuring range (2000 deg/s)")
 
 
 class Fault(StrictFrozen):
@@ -80,8 +89,8 @@ class LaserCutFault(Fault):
     modality as the simulator does (:mod:`slam.sim.faults`)."""
 
     kind: Literal["laser_cut"] = "laser_cut"
-    range_m: float = Field(4.0, gt=0.0)
-    label_min_returns: int = Field(20, ge=3)
+    range_m: Annotated[float, _CUT_RANGE_M] = Field(4.0, gt=0.0)
+    label_min_returns: bounds.Count = Field(20, ge=3)
     label_min_eigenvalue: float = Field(0.03, ge=0.0)
 
 
@@ -91,7 +100,7 @@ class GyroBiasFault(Fault):
     threshold, 0.01 rad/s)."""
 
     kind: Literal["gyro_bias"] = "gyro_bias"
-    bias_deg_s: float = 2.0
+    bias_deg_s: Annotated[float, _GYRO_BIAS_DEG_S] = 2.0
     label_deg_s: float = Field(0.57, gt=0.0)
 
 
@@ -101,8 +110,8 @@ class SlipFault(Fault):
     added error exceeds ``label_slip`` of the motion (the simulator's 0.12)."""
 
     kind: Literal["slip"] = "slip"
-    scale: float = Field(1.5, ge=0.0)
-    yaw_scale: float = Field(1.0, ge=0.0)
+    scale: Annotated[float, _SLIP_SCALE] = Field(1.5, ge=0.0)
+    yaw_scale: Annotated[float, _SLIP_SCALE] = Field(1.0, ge=0.0)
     label_slip: float = Field(0.12, gt=0.0)
 
 
