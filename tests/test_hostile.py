@@ -573,6 +573,28 @@ ERRORS: list[Case] = [
            "the recording ends (24.0 s)"),
           ("gyro_bias@1000:2000", "--fault gyro_bias@1000:2000,bias_deg_s=2.0,label_deg_s=0.57: starts after the recording ends"),
       )),
+    # -- sigmas and observer parameters outside sense --
+    *(Case(f"set-{key}-{value}", (*MAP, "--out", "{d}/o", "--set", f"{key}={value}"), f"--set {key}={value}: {says}")
+      for key, value, says in (
+          ("backend.factors.odometry.sigma_xy_per_m", "1e300", "backend.factors.odometry.sigma_xy_per_m: 1e+300 is above 100"),
+          ("backend.factors.gyro.sigma_yaw_per_s_deg", "1e300", "backend.factors.gyro.sigma_yaw_per_s_deg: 1e+300 is above 100"),
+          ("backend.factors.gps.sigma_scale", "1e-300", "backend.factors.gps.sigma_scale: 1e-300 is below 0.001"),
+          ("backend.factors.gps.sigma_scale", "1e300", "backend.factors.gps.sigma_scale: 1e+300 is above 1000"),
+          ("backend.factors.odometry.sigma_xy_m", "1e-300", "backend.factors.odometry.sigma_xy_m: 1e-300 m is below 0.0001 m"),
+          ("validation.observers.magnetometer.hold_s", "1e12", "validation.observers: magnetometer.hold_s: 1e+12 s is above 86400 s"),
+      )),
+    *(Case(f"relation-{name}", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), says, config(relation(i, **values)))
+      for name, i, values, says in (
+          ("boundary-1e9", 0, {"boundary": 1e9}, "relations.0.boundary: 1e+09 (stream units per s) is above 1000"),
+          ("boundary-negative", 0, {"boundary": -1.0}, "relations.0.boundary: Input should be greater than 0"),
+          ("k-sigma-1e300", 5, {"k_sigma": 1e300}, "relations.5.k_sigma: 1e+300 sigmas is above 100 sigmas"),
+          ("k-sigma-1e-300", 5, {"k_sigma": 1e-300}, "relations.5.k_sigma: 1e-300 sigmas is below 0.5 sigmas"),
+          ("sigma-rel-1e300", 5, {"sigma_rel": 1e300}, "relations.5.sigma_rel: 1e+300 is above 10"),
+          ("sigma-floor-1e-300", 5, {"sigma_floor": 1e-300}, "relations.5.sigma_floor: 1e-300 (m or rad) is below"),
+      )),
+    *(Case(f"relation-window-{value}", (*MAP[:2], "--config", "{d}/c.yaml", "--gating", "on", "--out", "{d}/o"),
+           f"relations.yaw_compass_gyro.window_s {says}", config(relation(0, window_s=value)))
+      for value, says in ((1e-9, "1e-09 s holds fewer than 2 validation steps"), (1e9, "1e+09 s is longer than the run"))),
     Case("set-integer-of-5000-digits", (*MAP, "--out", "{d}/o", "--set", "backend.max_iterations=" + "9" * 5000),
          "an integer of 5,000 digits; no setting needs more than 30"),
     Case("config-integer-of-5000-digits", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),

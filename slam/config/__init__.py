@@ -266,16 +266,16 @@ class OdometryFactorConfig(FactorConfig):
 
     learn_scale: bool = False
     sigma_xy_m: bounds.Sigma_m = Field(0.01, gt=0.0)
-    sigma_xy_per_m: float = Field(0.05, ge=0.0)
+    sigma_xy_per_m: Annotated[float, bounds.SIGMA_GROWTH] = Field(0.05, ge=0.0)
     sigma_yaw_deg: bounds.Sigma_deg = Field(0.5, gt=0.0)
-    sigma_yaw_per_rad: float = Field(0.1, ge=0.0)
+    sigma_yaw_per_rad: Annotated[float, bounds.SIGMA_GROWTH] = Field(0.1, ge=0.0)
 
 
 class GyroFactorConfig(FactorConfig):
     """Relative-yaw factor from the integrated gyro rate."""
 
     sigma_yaw_deg: bounds.Sigma_deg = Field(0.2, gt=0.0)
-    sigma_yaw_per_s_deg: float = Field(0.05, ge=0.0)
+    sigma_yaw_per_s_deg: Annotated[float, bounds.SIGMA_GROWTH] = Field(0.05, ge=0.0)
 
 
 class CompassFactorConfig(FactorConfig):
@@ -297,7 +297,7 @@ class ScanMatchingFactorConfig(FactorConfig):
     """Between factor from KISS-ICP's relative pose."""
 
     sigma_xy_m: bounds.Sigma_m = Field(0.02, gt=0.0)
-    sigma_xy_per_m: float = Field(0.02, ge=0.0)
+    sigma_xy_per_m: Annotated[float, bounds.SIGMA_GROWTH] = Field(0.02, ge=0.0)
     sigma_yaw_deg: bounds.Sigma_deg = Field(0.3, gt=0.0)
 
 
@@ -306,7 +306,7 @@ class GpsFactorConfig(FactorConfig):
     receiver's covariance, floored, times ``sigma_scale``."""
 
     sigma_floor_m: bounds.Sigma_m = Field(0.5, gt=0.0)
-    sigma_scale: float = Field(1.0, gt=0.0)
+    sigma_scale: Annotated[float, bounds.SIGMA_SCALE] = Field(1.0, gt=0.0)
     max_time_offset_s: Annotated[float, bounds.MATCH_OFFSET_S] = Field(0.25, gt=0.0)
 
 

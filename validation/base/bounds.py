@@ -48,6 +48,22 @@ SIGMA_DEG = within(1e-3, 1e4, "deg", "no compass, gyro or scan matcher measures 
 SIGMA_FLOOR = within(1e-12, 1e6, "(m or rad)", "no sensor resolves 1e-12 m or rad, and the square underflows",
                      "no change would ever be seen")
 """An observer's noise floor, in its streams' unit (m or rad)."""
+SIGMA_GROWTH = within(None, 100.0, "", high="a sigma that grows by more than 100 times the motion (per m, per rad, "
+                      "per s) says nothing, and its square overflows")
+"""How fast a factor's sigma grows with the step (m per m, deg per s, rad per rad)."""
+SIGMA_SCALE = within(1e-3, 1e3, "", "a receiver a thousand times better than it says is none (and the square "
+                     "of the sigma underflows)", "a fix a thousand times worse than its receiver says is no fix")
+"""A multiple of a measured sigma (GPS)."""
+K_SIGMA = within(0.5, 100.0, "sigmas", "it would flag 62 % of good observations",
+                 "it would flag nothing a Gaussian error makes")
+"""The multiple of sigma beyond which an observer sees a mismatch."""
+SIGMA_REL = within(None, 10.0, "", high="a relative sigma of more than 10 times the change lets any change pass")
+"""A sigma relative to the change observed."""
+BOUNDARY = within(None, 1000.0, "(stream units per s)", high="no ground robot turns at 1000 rad/s or "
+                  "accelerates at 1000 m/s^2: every trend would be flat")
+"""A trend observer's boundary between flat and rising or falling (rad/s, m/s^2)."""
+HOLD_S = within(None, 86400.0, "s", high="a deviation held for a day before it counts is never seen")
+"""How long a check's deviation must last before it counts (s)."""
 
 # --- sizes of maps and keyframes --------------------------------------------
 

@@ -91,21 +91,21 @@ class RelationConfig(StrictFrozen):
     kind: Literal["trend", "residual", "cusum", "offset"] = "trend"
     stream_a: str
     stream_b: str
-    boundary: float | None = Field(None, gt=0.0)
+    boundary: Annotated[float, bounds.BOUNDARY] | None = Field(None, gt=0.0)
     window_s: float = Field(gt=0.0)
     gain: float = 1.0
     rate_offset: float = 0.0
     sigma_floor: Annotated[float, bounds.SIGMA_FLOOR] | None = Field(None, gt=0.0)
-    sigma_rel: float = Field(0.0, ge=0.0)
-    k_sigma: float = Field(3.0, gt=0.0)
+    sigma_rel: Annotated[float, bounds.SIGMA_REL] = Field(0.0, ge=0.0)
+    k_sigma: Annotated[float, bounds.K_SIGMA] = Field(3.0, gt=0.0)
     cusum_drift: float = Field(0.5, ge=0.0)
     level_window_s: float | None = Field(60.0, gt=0.0)
     level_max_rate: float | None = Field(None, gt=0.0)
     threshold: bounds.Count = Field(ge=0)
     max_counter: bounds.Count | None = Field(None, ge=1)
     warmup_s: float | None = Field(None, ge=0.0)
-    boundary_a: float | None = Field(None, gt=0.0)
-    boundary_b: float | None = Field(None, gt=0.0)
+    boundary_a: Annotated[float, bounds.BOUNDARY] | None = Field(None, gt=0.0)
+    boundary_b: Annotated[float, bounds.BOUNDARY] | None = Field(None, gt=0.0)
     mismatch_margin: float | None = Field(None, gt=0.0)
     component_a: Component | None = None
     component_b: Component | None = None
@@ -207,7 +207,7 @@ class MagnetometerCheckConfig(StrictFrozen):
     dip_deg: float | None = Field(None, ge=-90.0, le=90.0)
     tolerance_T: float = Field(5e-6, gt=0.0)
     tolerance_dip_deg: float = Field(5.0, gt=0.0)
-    hold_s: float = Field(1.0, ge=0.0)
+    hold_s: Annotated[float, bounds.HOLD_S] = Field(1.0, ge=0.0)
 
 
 class FieldGyroCheckConfig(StrictFrozen):
@@ -222,7 +222,7 @@ class FieldGyroCheckConfig(StrictFrozen):
     window_s: float = Field(1.0, gt=0.0)
     smooth_s: float = Field(0.1, gt=0.0)
     tolerance_T: float = Field(5e-6, gt=0.0)
-    hold_s: float = Field(0.0, ge=0.0)
+    hold_s: Annotated[float, bounds.HOLD_S] = Field(0.0, ge=0.0)
 
 
 class GpsCheckConfig(StrictFrozen):
@@ -232,7 +232,7 @@ class GpsCheckConfig(StrictFrozen):
     name: str = "gps_plausible"
     component: Component = "GPS"
     max_sigma_m: float = Field(5.0, gt=0.0)
-    hold_s: float = Field(0.0, ge=0.0)
+    hold_s: Annotated[float, bounds.HOLD_S] = Field(0.0, ge=0.0)
 
 
 SCAN_AXES = ("dist", "lat", "yaw")
@@ -256,7 +256,7 @@ class ScanCheckConfig(StrictFrozen):
     min_returns: bounds.Count = Field(20, ge=1)
     min_eigenvalue: float = Field(0.03, ge=0.0)
     min_share: float = Field(0.5, gt=0.0, lt=1.0)
-    hold_s: float = Field(0.0, ge=0.0)
+    hold_s: Annotated[float, bounds.HOLD_S] = Field(0.0, ge=0.0)
 
     @property
     def names(self) -> tuple[str, str, str]:
@@ -284,7 +284,7 @@ class ScanCeilingConfig(StrictFrozen):
     min_edge_share: float = Field(0.5, gt=0.0, le=1.0)
     max_ceiling_m: float = Field(10.0, gt=0.0)
     fill_s: float = Field(0.0, ge=0.0)
-    hold_s: float = Field(0.0, ge=0.0)
+    hold_s: Annotated[float, bounds.HOLD_S] = Field(0.0, ge=0.0)
 
 
 class ObserversConfig(StrictFrozen):
