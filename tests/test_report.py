@@ -54,6 +54,7 @@ def test_compare_report_holds_the_table_and_every_figure(compared):
         "every variant over the reference, whole": folder / "trajectories_full.png",
         "yaw streams and trends": folder / "compass_trends.png",
         "observers": folder / "observer_alarms.png",
+        "gating timeline": folder / "gating_timeline.png",
         "ungated": folder / "ungated" / "map.png",
         "gated": folder / "gated" / "map.png",
     }
@@ -61,6 +62,70 @@ def test_compare_report_holds_the_table_and_every_figure(compared):
     for alt, path in expected.items():
         assert images[alt] == path.read_bytes(), alt
     assert compared.report_s > 0
+
+
+def _section(page: str, heading: str) -> str:
+    """The HTML from ``heading``'s h2 to the next h2 (or the end)."""
+    start = page.index(f"<h2>{heading}</h2>")
+    end = page.find("<h2>", start + 1)
+    return page[start:end if end > 0 else len(page)]
+
+
+def _csv_spans(path: Path) -> list[tuple[str, str, str, float, float]]:
+    """(factor, dof, action, from, to) of each run of exclude or inflate in
+    validation.csv's gate columns, a run lasting to the next step's time."""
+    rows = list(csv.DictReader(path.open()))
+    t = [float(r["t"]) for r in rows]
+    spans = []
+    for column in (c for c in rows[0] if c.startswith("gate.") and c != "gate.loop"):
+        _, factor, dof = column.split(".")
+        k = 0
+        while k < len(rows):
+            action = rows[k][column]
+            j = k
+            while j + 1 < len(rows) and rows[j + 1][column] == action:
+                j += 1
+            if action != "include":
+                spans.append((factor, dof, action, t[k], t[j + 1] if j + 1 < len(t) else t[j] + t[1] - t[0]))
+            k = j + 1
+    return spans
+
+
+@pytest.mark.slow
+def test_compare_report_has_the_gating_timeline(compared, short_run):
+    folder = compared.out_dir
+    timeline = _section((folder / "report.html").read_text(), "Gating timeline")
+    spans = _csv_spans(folder / "gated" / "validation.csv")
+    assert spans, "the short run's compass fault should be gated"
+    for factor, dof, action, a, b in spans:
+        assert f"<tr><td>gated</td><td>{factor}</td><td>{dof}</td><td>{action}</td><td>{a:.1f}</td><td>{b:.1f}</td></tr>" \
+            in timeline
+    assert "<td>ungated</td>" not in timeline  # nothing validated there
+    # The true faults, each detected or missed, and metrics.json's figures.
+    metrics = compared.results["gated"].metrics
+    for comp, intervals in short_run.faults.items():
+        for a, b in intervals:
+            assert re.search(rf"<tr><td>gated</td><td>{comp}</td><td>{a:.1f}</td><td>{b:.1f}</td>"
+                             r"<td>(detected|missed)</td>", timeline)
+    assert (f"<tr><td>gated</td><td>{metrics['faults_missed']}</td><td>{metrics['faults_detected']}</td>"
+            f"<td>{metrics['false_alarm_fraction']:.3f}</td>") in timeline
+    assert "true fault" in timeline
+    (data, alt), = IMAGE.findall(timeline)
+    assert alt == "gating timeline" and base64.b64decode(data) == (folder / "gating_timeline.png").read_bytes()
+
+
+@pytest.mark.slow
+def test_gating_timeline_without_truth_has_no_true_fault(short_run, tmp_path):
+    # The run folder's bag alone: the same data, no truth.json.
+    res = run_compare(short_run.run_dir / "bag", TELEMAX_CONFIG, tmp_path / "c", only=["gated"])
+    assert res.results["gated"].recording is None or res.results["gated"].recording.fault_truth is None
+    timeline = _section((res.out_dir / "report.html").read_text(), "Gating timeline")
+    spans = _csv_spans(res.out_dir / "gated" / "validation.csv")
+    assert spans
+    for factor, dof, action, a, b in spans:
+        assert f"<td>{factor}</td><td>{dof}</td><td>{action}</td><td>{a:.1f}</td>" in timeline
+    assert "true fault" not in timeline.lower() and "missed" not in timeline and "false alarm" not in timeline
+    assert len(IMAGE.findall(timeline)) == 1
 
 
 @pytest.mark.slow

@@ -41,7 +41,7 @@ from slam.resources import shipped_config
 log = logging.getLogger(__name__)
 
 COMPARE_FILES = ("comparison.csv", "comparison.md", "report.html", "trajectories.png", "trajectories_full.png",
-                 "compass_trends.png", "observer_alarms.png")
+                 "compass_trends.png", "observer_alarms.png", "gating_timeline.png")
 """The files of a comparison beside its variants' folders."""
 
 COLUMNS: tuple[tuple[str, str, str], ...] = (
@@ -198,10 +198,11 @@ def run_compare(
         rows = result.table()
         (tmp / "comparison.csv").write_text(_csv(rows))
         (tmp / "comparison.md").write_text(_markdown(rows, f"{recording.name}: variants compared"))
-        _figures(tmp, results, recording)
+        timelines = _timelines(results, recording)
+        _figures(tmp, results, recording, timelines)
         if base.output.report:
             made = collect(input_path, config_path, dump_config(base), command)
-            report_s = _report(tmp, rows, recording.name, made.rows(), results)
+            report_s = _report(tmp, rows, recording.name, made.rows(), results, timelines)
         else:
             report_s = 0.0
     for name, res in results.items():
@@ -254,10 +255,20 @@ def _run_variants(
     return results, recording
 
 
+def _timelines(results: dict[str, MapResult], recording) -> list:
+    """The gating timeline of each variant validated with a diagnosis."""
+    from slam.outputs.gating_timeline import gating_timeline, has_timeline
+
+    return [gating_timeline(name, r.validation, recording.fault_truth)
+            for name, r in results.items() if has_timeline(r.validation)]
+
+
 def _report(folder: Path, rows: list[dict[str, Any]], name: str, provenance: list[tuple[str, str]],
-            results: dict[str, MapResult]) -> float:
+            results: dict[str, MapResult], timelines: list) -> float:
     """``report.html``: its provenance, the table, each variant's self-check,
-    the comparison's figures and each variant's map; the seconds it took."""
+    the comparison's figures, the gating timeline and each variant's map;
+    the seconds it took."""
+    from slam.outputs.gating_timeline import timeline_note, timeline_tables
     from slam.outputs.self_check import SELF_CHECK_NOTE, self_check_table
 
     t = time.perf_counter()
@@ -275,6 +286,12 @@ def _report(folder: Path, rows: list[dict[str, Any]], name: str, provenance: lis
                 figures=[Figure(folder / "compass_trends.png", "yaw streams and trends")]),
         Section("Observer timelines (the paper's Fig. 3)", "The gated variant's observer alarms and blamed "
                 "sensors over the true faults.", figures=[Figure(folder / "observer_alarms.png", "observers")]),
+    ]
+    if timelines:
+        metrics = {tl.variant: results[tl.variant].metrics for tl in timelines}
+        sections.append(Section("Gating timeline", timeline_note(timelines), tables=timeline_tables(timelines, metrics),
+                                figures=[Figure(folder / "gating_timeline.png", "gating timeline")]))
+    sections += [
         Section("Maps", "Each variant's occupancy grid and trajectory (map.png).", small=True,
                 figures=[Figure(folder / v / "map.png", v) for v in variants]),
     ]
@@ -284,7 +301,8 @@ def _report(folder: Path, rows: list[dict[str, Any]], name: str, provenance: lis
     return elapsed
 
 
-def _figures(out: Path, results: dict[str, MapResult], recording) -> None:
+def _figures(out: Path, results: dict[str, MapResult], recording, timelines: list) -> None:
+    from slam.outputs.gating_timeline import plot_gating_timeline
     from slam.outputs.plots import fault_shading, plot_trajectories
     from slam.outputs.validation_figures import plot_observer_alarms, plot_yaw_trends
 
@@ -301,3 +319,5 @@ def _figures(out: Path, results: dict[str, MapResult], recording) -> None:
     if validation is not None and validation.observer_log is not None:
         plot_yaw_trends(out / "compass_trends.png", recording, validation)
         plot_observer_alarms(out / "observer_alarms.png", recording, validation)
+    if timelines:
+        plot_gating_timeline(out / "gating_timeline.png", recording.name, timelines)

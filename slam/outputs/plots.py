@@ -47,12 +47,12 @@ def fault_shading(faults: Mapping[str, Sequence[Interval]]) -> list[Shade]:
     return [(f"true {c} fault", iv, fault_color(c)) for c, iv in faults.items() if iv]
 
 
-def save_figure(fig: Figure, path: str | Path, description: str | None = None) -> None:
-    """Write ``fig`` to ``path`` as a PNG, atomically; ``description``: the
-    PNG's Description text (what the figure draws, for a reader of the file,
-    :func:`png_description`)."""
+def save_figure(fig: Figure, path: str | Path) -> None:
+    """Write ``fig`` to ``path`` as a PNG, atomically; the figure's label
+    (``fig.set_label``), where it has one, is the PNG's Description text:
+    what the figure draws, for a reader of the file (:func:`png_description`)."""
     with atomic_path(path) as tmp:
-        _render_png(fig, tmp, description)
+        _render_png(fig, tmp, fig.get_label() or None)
     logger.debug("wrote figure %s", path)
 
 
@@ -186,7 +186,8 @@ def plot_trajectories(
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.legend(loc="best", fontsize="small")
-    save_figure(fig, path, TRAJECTORIES_DESCRIPTION + ", ".join(trajectories))
+    fig.set_label(TRAJECTORIES_DESCRIPTION + ", ".join(trajectories))
+    save_figure(fig, path)
 
 
 LARGE_COORDINATE_M = 1e4
