@@ -114,7 +114,7 @@ class RobotConfig(Strict):
     start_pause_s: float = Field(1.0, ge=0.0)
     end_pause_s: float = Field(1.0, ge=0.0)
     truth_rate_hz: float = Field(100.0, ge=100.0)
-    laps: bounds.Count = Field(1, ge=1)
+    laps: int = Field(1, ge=1)
 
     @field_validator("waypoints")
     @classmethod

@@ -23,7 +23,6 @@ from pydantic import Discriminator, Field, Tag, ValidationError, model_validator
 from slam.config import describe_validation_error
 from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
-from validation.base import bounds
 from validation.base.yamlio import StrictFrozen
 
 SCENARIO_PREFIX = "scenario."
@@ -56,7 +55,7 @@ class RandomSweep(StrictFrozen):
     """``samples`` points drawn with ``seed`` (the same spec draws the same
     points), each parameter independently."""
 
-    samples: bounds.Count = Field(ge=1)
+    samples: int = Field(ge=1)
     seed: int = Field(0, ge=0)
     params: dict[str, Distribution] = Field(min_length=1)
 
@@ -85,8 +84,8 @@ class SweepSpec(StrictFrozen):
 class SeedRange(StrictFrozen):
     """``count`` consecutive seeds from ``first``."""
 
-    first: bounds.Count = Field(1, ge=0)
-    count: bounds.Count = Field(ge=1)
+    first: int = Field(1, ge=0)
+    count: int = Field(ge=1)
 
     def seeds(self) -> list[int]:
         return list(range(self.first, self.first + self.count))
