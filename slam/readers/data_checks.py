@@ -44,6 +44,12 @@ MIN_BEAM_STEP_RAD = math.radians(1e-3)
 hundred times coarser (0.1-0.25 deg; the logs under ../shared/data 0.25-1)."""
 MAX_YAW_RATE = 1000.0
 """rad/s (57,000 deg/s); gyroscopes saturate at a few thousand deg/s."""
+MAX_POSE_M = 1e7
+"""m: a pose farther from its frame's origin than a quarter of the Earth's
+circumference is no local map frame."""
+MAX_POSE_STEP_M = 1000.0
+"""m between two consecutive poses of one stream: no ground robot covers a
+kilometre between two samples of its odometry."""
 MIN_JUMP_S = 60.0
 """A forward jump shorter than this is a gap, never an error."""
 STREAMS = ("scans", "gyro", "compass", "odometry", "gps", "groundtruth")
@@ -99,7 +105,34 @@ def check_recording(rec: Recording, source: object, offsets: dict[str, float] | 
     check_stamps(rec, source, offsets or {})
     check_scans(rec, source)
     check_rates(rec, source)
+    check_poses(rec, source)
     return rec
+
+
+def check_poses(rec: Recording, source: object) -> None:
+    """Poses (odometry, ground truth, further odometries) are finite, within
+    :data:`MAX_POSE_M` of their origin and at most :data:`MAX_POSE_STEP_M`
+    apart from one sample to the next."""
+    streams = {"odometry": rec.odometry, "groundtruth": rec.groundtruth,
+               **{f"odometry {name}": traj for name, traj in rec.extra_odometry.items()}}
+    for name, traj in streams.items():
+        if traj is None or not len(traj.t):
+            continue
+        xy = np.column_stack([traj.x, traj.y]).astype(np.float64)
+        bad = ~np.isfinite(xy).all(axis=1) | ~np.isfinite(np.asarray(traj.yaw, dtype=np.float64))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise GslamError(f"{source}: {name} pose {i} (t = {traj.t[i]:.3f} s) is not finite")
+        far = np.abs(xy).max(axis=1) > MAX_POSE_M
+        if far.any():
+            i = int(np.argmax(far))
+            raise GslamError(f"{source}: {name} pose {i} (t = {traj.t[i]:.3f} s) is at ({xy[i, 0]:.6g}, {xy[i, 1]:.6g}) m, "
+                             f"beyond {MAX_POSE_M:g} m of its origin: no local map frame (the unit wrong?)")
+        step = np.hypot(*np.diff(xy, axis=0).T) if len(xy) > 1 else np.zeros(0)
+        if step.size and step.max() > MAX_POSE_STEP_M:
+            i = int(np.argmax(step)) + 1
+            raise GslamError(f"{source}: {name} pose {i} (t = {traj.t[i]:.3f} s) is {step[i - 1]:.6g} m from the one "
+                             f"before; no robot moves more than {MAX_POSE_STEP_M:g} m between two samples")
 
 
 def check_rates(rec: Recording, source: object) -> None:
