@@ -595,7 +595,7 @@ ERRORS: list[Case] = [
           ("boundary-negative", 0, {"boundary": -1.0}, "relations.0.boundary: Input should be greater than 0"),
           ("k-sigma-1e300", 5, {"k_sigma": 1e300}, "relations.5.k_sigma: 1e+300 sigmas is above 100 sigmas"),
           ("k-sigma-1e-300", 5, {"k_sigma": 1e-300}, "relations.5.k_sigma: 1e-300 sigmas is below 0.5 sigmas"),
-          ("sigma-rel-1e300", 5, {"sigma_rel": 1e300}, "relations.5.sigma_rel: 1e+300 is above 10"),
+          ("sigma-rel-1e300", 5, {"sigma_rel": 1e300}, "relations.5.sigma_rel: 1e+300 is above 1000"),
           ("sigma-floor-1e-300", 5, {"sigma_floor": 1e-300}, "relations.5.sigma_floor: 1e-300 (m or rad) is below"),
       )),
     *(Case(f"relation-window-{value}", (*MAP[:2], "--config", "{d}/c.yaml", "--gating", "on", "--out", "{d}/o"),

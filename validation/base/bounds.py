@@ -57,8 +57,11 @@ SIGMA_SCALE = within(1e-3, 1e3, "", "a receiver a thousand times better than it 
 K_SIGMA = within(0.5, 100.0, "sigmas", "it would flag 62 % of good observations",
                  "it would flag nothing a Gaussian error makes")
 """The multiple of sigma beyond which an observer sees a mismatch."""
-SIGMA_REL = within(None, 10.0, "", high="a relative sigma of more than 10 times the change lets any change pass")
-"""A sigma relative to the change observed."""
+MAX_SIGMA_REL = 1000.0
+SIGMA_REL = within(None, MAX_SIGMA_REL, "", high="a relative sigma of more than 1000 times the change lets any change pass")
+"""A sigma relative to the change observed. ``gslam calibrate`` learns up to
+about 30 on streams that do not move together (and then drops them), so
+the bound only refuses what no fit gives."""
 BOUNDARY = within(None, 1000.0, "(stream units per s)", high="no ground robot turns at 1000 rad/s or "
                   "accelerates at 1000 m/s^2: every trend would be flat")
 """A trend observer's boundary between flat and rising or falling (rad/s, m/s^2)."""

@@ -45,6 +45,7 @@ import numpy as np
 
 from slam.commands.calibrate.fit import RateFit, fit_offset, fit_rates, fit_slopes, motion_scale, robust_sd
 from slam.commands.calibrate.runs import CalibrationRun
+from validation.base.bounds import MAX_SIGMA_REL
 from validation.config import ValidationConfig
 from validation.observers import evidence, observe, observe_steps
 from validation.observers.config import FieldGyroCheckConfig, MagnetometerCheckConfig, RelationConfig
@@ -197,10 +198,13 @@ def _learn(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg: Validation
     if rel.kind in ("residual", "cusum"):
         floor = RESOLUTION * abs(fit.gain) * motion_scale(runs, scale_stream, w, vcfg.window, fit.inliers)
         noise = max(fit.noise, floor)
+        # Streams that do not move together fit a relative sigma of up to
+        # 1e9: any change passes at MAX_SIGMA_REL already, so the config
+        # holds the bound (the support test then drops the relation).
 
         def make(m: float, th: int) -> RelationConfig:
             return _updated(rel, **base, gain=sig(fit.gain), rate_offset=sig(fit.rate_offset),
-                            sigma_floor=sig(noise), sigma_rel=sig(fit.sigma_rel), k_sigma=m,
+                            sigma_floor=sig(noise), sigma_rel=sig(min(fit.sigma_rel, MAX_SIGMA_REL)), k_sigma=m,
                             threshold=th, max_counter=th + COUNTER_HEADROOM)
 
         return _Learnt(fit, noise, make, resolution=floor > fit.noise)
