@@ -588,6 +588,17 @@ ERRORS: list[Case] = [
           ("backend.factors.gps.sigma_scale", "1e300", "backend.factors.gps.sigma_scale: 1e+300 is above 1000"),
           ("backend.factors.odometry.sigma_xy_m", "1e-300", "backend.factors.odometry.sigma_xy_m: 1e-300 m is below 0.0001 m"),
           ("validation.observers.magnetometer.hold_s", "1e12", "validation.observers: magnetometer.hold_s: 1e+12 s is above 86400 s"),
+          ("submaps.refine.max_sigma_m", "1e-300", "submaps.refine.max_sigma_m: 1e-300 m is below 0.0001 m"),
+          ("submaps.refine.max_sigma_m", "1e300", "submaps.refine.max_sigma_m: 1e+300 m is above 1e+06 m"),
+          ("loops.file.sigma_m", "1e-300", "loops.file.sigma_m: 1e-300 m is below 0.0001 m"),
+          ("loops.file.sigma_m", "1e300", "loops.file.sigma_m: 1e+300 m is above 1e+06 m"),
+          ("submaps.refine.information_scale", "1e-300", "submaps.refine.information_scale: 1e-300 is below 1e-06"),
+          ("loops.information_scale", "1e300", "loops.information_scale: 1e+300 is above 1e+06"),
+          ("backend.robust_param", "1e-300", "backend.robust_param: 1e-300 sigmas is below 0.01 sigmas"),
+          ("backend.factors.gps.robust_param", "1e300", "backend.factors.gps.robust_param: 1e+300 sigmas is above 100"),
+          ("loops.robust_param", "1e-300", "loops.robust_param: 1e-300 sigmas is below 0.01 sigmas"),
+          ("submaps.constraints.robust_scale", "1e-300", "submaps.constraints.robust_scale: 1e-300 sigmas is below"),
+          ("backend.fallback_inflation", "1e300", "backend.fallback_inflation: 1e+300 is above 1000"),
       )),
     *(Case(f"relation-{name}", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), says, config(relation(i, **values)))
       for name, i, values, says in (

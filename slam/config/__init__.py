@@ -253,7 +253,7 @@ class FactorConfig(Strict):
 
     enabled: bool = True
     robust_kernel: Kernel | None = None
-    robust_param: float | None = Field(None, gt=0.0)
+    robust_param: bounds.RobustParam | None = Field(None, gt=0.0)
 
 
 class OdometryFactorConfig(FactorConfig):
@@ -341,9 +341,9 @@ class BackendConfig(Strict):
     max_iterations: bounds.Iterations = Field(100, ge=1)
     relative_error_tol: float = Field(1e-6, gt=0.0)
     robust_kernel: Kernel = "none"
-    robust_param: float = Field(1.345, gt=0.0)
+    robust_param: bounds.RobustParam = Field(1.345, gt=0.0)
     gnc_inlier_probability: float | None = Field(None, gt=0.0, lt=1.0)
-    fallback_inflation: float = Field(10.0, ge=1.0)
+    fallback_inflation: Annotated[float, bounds.INFLATION] = Field(10.0, ge=1.0)
     factors: FactorsConfig = FactorsConfig()
 
 

@@ -100,7 +100,7 @@ class FileLoopsConfig(Strict):
     ``sigma_m / sqrt(weight)`` per axis; lines with a weight below
     ``min_weight`` are dropped (libRSF's own threshold is 0.43)."""
 
-    sigma_m: float = Field(0.5, gt=0.0)
+    sigma_m: bounds.Sigma_m = Field(0.5, gt=0.0)
     min_weight: float = Field(0.43, ge=0.0)
 
 
@@ -153,9 +153,9 @@ class LoopsConfig(Strict):
     search_yaw_per_m_deg: float = Field(0.5, ge=0.0)
     max_search_yaw_deg: float = Field(20.0, ge=0.0)
     max_candidates: bounds.Count = Field(2, ge=1)
-    information_scale: float = Field(1.0, gt=0.0)
+    information_scale: bounds.InformationScale = Field(1.0, gt=0.0)
     robust_kernel: Literal["none", "huber", "cauchy", "dcs"] | None = None
-    robust_param: float | None = Field(None, gt=0.0)
+    robust_param: bounds.RobustParam | None = Field(None, gt=0.0)
     gnc: bool = False
     descriptor: DescriptorConfig = DescriptorConfig()
     correlative: CorrelativeConfig = CorrelativeConfig()

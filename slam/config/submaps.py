@@ -71,9 +71,9 @@ class RefineConfig(_Strict):
     max_shift_m: float = Field(0.2, gt=0.0)
     max_turn_deg: float = Field(3.0, gt=0.0)
     min_inliers: float = Field(0.3, ge=0.0, le=1.0)
-    information_scale: float = Field(0.1, gt=0.0)
+    information_scale: bounds.InformationScale = Field(0.1, gt=0.0)
     weak_length_m: float = Field(5.0, gt=0.0)
-    max_sigma_m: float = Field(0.1, gt=0.0)
+    max_sigma_m: bounds.Sigma_m = Field(0.1, gt=0.0)
 
 
 class ConstraintSearchConfig(_Strict):
@@ -117,7 +117,7 @@ class ConstraintSearchConfig(_Strict):
     loop_min_score: float = Field(0.55, ge=0.0, le=1.0)
     sigma_xy_m: bounds.Sigma_m = Field(0.03, gt=0.0)
     sigma_yaw_deg: bounds.Sigma_deg = Field(0.5, gt=0.0)
-    robust_scale: float = Field(1.0, gt=0.0)
+    robust_scale: bounds.RobustParam = Field(1.0, gt=0.0)
     inlier_probability: float = Field(0.99, gt=0.0, lt=1.0)
     optimise_every: bounds.Count = Field(10, ge=1)
     refine_near: bool = True

@@ -54,6 +54,18 @@ SIGMA_GROWTH = within(None, 100.0, "", high="a sigma that grows by more than 100
 SIGMA_SCALE = within(1e-3, 1e3, "", "a receiver a thousand times better than it says is none (and the square "
                      "of the sigma underflows)", "a fix a thousand times worse than its receiver says is no fix")
 """A multiple of a measured sigma (GPS)."""
+INFORMATION_SCALE = within(1e-6, 1e6, "", "the measurement's sigma a thousand times what it measured says nothing "
+                           "(and the information underflows)", "a sigma a thousandth of what it measured is no "
+                           "measurement's (and the information overflows)")
+"""A multiple of a measured information (the inverse square of a sigma scaled
+by 1e-3 to 1e3, as :data:`SIGMA_SCALE`)."""
+INFLATION = within(None, 1e3, "", high="a sigma a thousand times its own holds the graph together no better, and "
+                   "its information underflows")
+"""How much a kept factor's sigma is inflated (a multiple, at least 1)."""
+ROBUST_PARAM = within(1e-2, 100.0, "sigmas", "every good measurement would be an outlier",
+                      "it would down-weight nothing a Gaussian error makes (robust_kernel: none says so)")
+"""An M-estimator's parameter, in sigmas of the factor's noise (Huber's and
+Cauchy's width, DCS's phi)."""
 K_SIGMA = within(0.5, 100.0, "sigmas", "it would flag 62 % of good observations",
                  "it would flag nothing a Gaussian error makes")
 """The multiple of sigma beyond which an observer sees a mismatch."""
@@ -104,6 +116,8 @@ ORACLE_K_SIGMA = within(0.5, 100.0, "sigmas", "it would exclude 62 % of good mea
 
 
 Sigma_m = Annotated[float, SIGMA_M]
+RobustParam = Annotated[float, ROBUST_PARAM]
+InformationScale = Annotated[float, INFORMATION_SCALE]
 SearchWindow_m = Annotated[float, SEARCH_WINDOW_M]
 Sigma_deg = Annotated[float, SIGMA_DEG]
 
