@@ -16,7 +16,7 @@ import warnings
 from pathlib import Path
 
 from slam import __version__
-from slam.errors import Terminated
+from slam.errors import Terminated, reader_left
 from slam.processes.signals import STOPS, as_interrupt
 from validation.base.errors import InputError
 from validation.base.modes import GatingMode
@@ -469,8 +469,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"gslam: error: {_one_line(str(e))}", file=sys.stderr)
         return 1
     except BrokenPipeError:  # the reader left (gslam inspect ... | head): no more to say
-        sys.stdout = open(os.devnull, "w")  # the interpreter's last flush must not fail either
-        return 141  # as if killed by SIGPIPE, what a shell reports for the other commands of a pipe
+        return reader_left()
     except OSError as e:  # the machine, not the input: a full disk, a vanished folder
         if e.filename is None and getattr(sys.stdout, "failed", False):  # gslam ... > /dev/full
             sys.stdout = open(os.devnull, "w")  # the interpreter's last flush must not fail either

@@ -326,6 +326,22 @@ def test_a_reader_that_leaves_early_gets_no_error(short_run):
     assert stderr == ""
 
 
+@pytest.mark.parametrize("argv", [
+    ["scripts/datasets.py", "list"],
+    ["-m", "slam.cli", "--help"],
+    ["-m", "slam.cli", "map", "--help"],
+], ids=["datasets-list", "gslam-help", "gslam-map-help"])
+def test_a_script_whose_reader_leaves_early_ends_quietly(argv):
+    """``python scripts/datasets.py list | head -1``: no BrokenPipeError
+    traceback, and the code of a process a closed pipe ended (141) or 0."""
+    proc = subprocess.Popen([sys.executable, *argv], cwd=REPO, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()  # long before the interpreter has imported anything
+    stderr = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) in (0, 141), stderr
+    assert stderr == ""
+
+
 def test_a_full_or_closed_standard_output_is_named_or_harmless(short_run, tmp_path):
     """``gslam ... > /dev/full`` says that standard output failed, in one
     line; ``gslam ... >&-`` (no standard output at all) maps as usual."""
