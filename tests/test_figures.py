@@ -11,8 +11,9 @@ from matplotlib.colors import to_hex
 
 import slam.outputs.plots
 import slam.outputs.validation_figures
-from slam.outputs.plots import fault_shading, plot_trajectories
+from slam.outputs.plots import fault_color, fault_shading, plot_trajectories
 from slam.outputs.validation_figures import plot_observer_alarms
+from slam.recording import COMPONENTS, SENSOR_MODALITIES, expand_sensor_labels
 
 
 def capture(monkeypatch) -> list:
@@ -46,6 +47,18 @@ def test_observer_alarms_colours_rows_and_legend(mapped, monkeypatch):
     assert all(c.get_alpha() in (None, 1.0) for c in bars)
     legend = [t.get_text() for t in ax.get_legend().get_texts()]
     assert legend == ["true IMU_YAW fault", "true SM fault", "any true fault"]
+
+
+def test_every_component_of_the_fault_truth_has_its_own_colour():
+    """The truth a reader gives (truth.json's components, a whole sensor's
+    label spread over its modalities) is drawn in one colour per component,
+    none the grey of an unknown one or of "any true fault"."""
+    truth = expand_sensor_labels({"SM": [(1.0, 2.0)], "ODO": [(3.0, 4.0)], **{c: [(5.0, 6.0)] for c in COMPONENTS}})
+    colours = {label: to_hex(colour) for label, _, colour in fault_shading(truth)}
+    assert len(colours) == len(COMPONENTS) and len(set(colours.values())) == len(COMPONENTS), colours
+    assert not {to_hex("lightgrey"), to_hex("0.88")} & set(colours.values()), colours
+    for sensor, modalities in SENSOR_MODALITIES.items():  # a whole sensor (a system model's node): its first modality's
+        assert fault_color(sensor) == fault_color(modalities[0])
 
 
 @pytest.mark.slow

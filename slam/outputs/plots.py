@@ -19,14 +19,16 @@ from matplotlib.figure import Figure
 
 from slam.results.atomic import atomic_path
 from slam.outputs.occupancy import GridMap
-from slam.recording import Interval, Trajectory
+from slam.recording import SENSOR_MODALITIES, Interval, Trajectory
 
 logger = logging.getLogger(__name__)
 
 DPI = 120
 # Pale colours, apart from the default line cycle, so bands never look like a
-# path; one per component, the same in every figure.
-FAULT_COLORS = {"SM": "gold", "GPS": "violet", "IMU_YAW": "lightgreen", "ODO": "wheat", "IMU_GYRO": "lightskyblue"}
+# path; one per component of the fault truth (slam.recording.COMPONENTS), the
+# same in every figure, a sensor's modalities in neighbouring hues.
+FAULT_COLORS = {"ODO_DIST": "wheat", "ODO_YAW": "burlywood", "IMU_GYRO": "lightskyblue", "IMU_YAW": "lightgreen",
+                "SM_DIST": "gold", "SM_LAT": "khaki", "SM_YAW": "darkkhaki", "GPS": "violet"}
 _SHADE_COLORS = tuple(FAULT_COLORS.values())
 # Drawn on top of the other variants, in colours the default cycle then skips.
 HIGHLIGHT_STYLES = (
@@ -38,8 +40,10 @@ Shade = tuple[str, Sequence[Interval]] | tuple[str, Sequence[Interval], str]
 
 
 def fault_color(component: str) -> str:
-    """The pale colour of a component's true faults."""
-    return FAULT_COLORS.get(component, "lightgrey")
+    """The pale colour of a component's true faults; a whole sensor's
+    (``SM``, ``ODO``) is its first modality's, any other (``LOOP``) grey."""
+    first = SENSOR_MODALITIES.get(component, (component,))[0]
+    return FAULT_COLORS.get(first, "lightgrey")
 
 
 def fault_shading(faults: Mapping[str, Sequence[Interval]]) -> list[Shade]:
