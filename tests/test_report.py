@@ -114,11 +114,17 @@ def test_compare_report_has_the_gating_timeline(compared, short_run):
     assert alt == "gating timeline" and base64.b64decode(data) == (folder / "gating_timeline.png").read_bytes()
 
 
-@pytest.mark.slow
-def test_gating_timeline_without_truth_has_no_true_fault(short_run, tmp_path):
-    # The run folder's bag alone: the same data, no truth.json.
-    res = run_compare(short_run.run_dir / "bag", TELEMAX_CONFIG, tmp_path / "c", only=["gated"])
+@pytest.fixture(scope="module")
+def compared_without_truth(short_run, tmp_path_factory):
+    """The run folder's bag alone: the same data, no truth.json."""
+    res = run_compare(short_run.run_dir / "bag", TELEMAX_CONFIG, tmp_path_factory.mktemp("c") / "c", only=["gated"])
     assert res.results["gated"].recording is None or res.results["gated"].recording.fault_truth is None
+    return res
+
+
+@pytest.mark.slow
+def test_gating_timeline_without_truth_has_no_true_fault(compared_without_truth):
+    res = compared_without_truth
     timeline = _section((res.out_dir / "report.html").read_text(), "Gating timeline")
     spans = _csv_spans(res.out_dir / "gated" / "validation.csv")
     assert spans
@@ -126,6 +132,16 @@ def test_gating_timeline_without_truth_has_no_true_fault(short_run, tmp_path):
         assert f"<td>{factor}</td><td>{dof}</td><td>{action}</td><td>{a:.1f}</td>" in timeline
     assert "true fault" not in timeline.lower() and "missed" not in timeline and "false alarm" not in timeline
     assert len(IMAGE.findall(timeline)) == 1
+
+
+@pytest.mark.slow
+def test_observer_timelines_name_true_faults_only_with_truth(compared, compared_without_truth):
+    heading = "Observer timelines (the paper&#x27;s Fig. 3)"
+    with_truth = _section((compared.out_dir / "report.html").read_text(), heading)
+    assert "over the true faults" in with_truth
+    without = _section((compared_without_truth.out_dir / "report.html").read_text(), heading)
+    assert "true fault" not in without.lower() and "no fault truth" in without
+    assert len(IMAGE.findall(without)) == 1
 
 
 @pytest.mark.slow

@@ -202,7 +202,7 @@ def run_compare(
         _figures(tmp, results, recording, timelines)
         if base.output.report:
             made = collect(input_path, config_path, dump_config(base), command)
-            report_s = _report(tmp, rows, recording.name, made.rows(), results, timelines)
+            report_s = _report(tmp, rows, recording, made.rows(), results, timelines)
         else:
             report_s = 0.0
     for name, res in results.items():
@@ -263,13 +263,14 @@ def _timelines(results: dict[str, MapResult], recording) -> list:
             for name, r in results.items() if has_timeline(r.validation)]
 
 
-def _report(folder: Path, rows: list[dict[str, Any]], name: str, provenance: list[tuple[str, str]],
+def _report(folder: Path, rows: list[dict[str, Any]], recording, provenance: list[tuple[str, str]],
             results: dict[str, MapResult], timelines: list) -> float:
     """``report.html``: its provenance, the table, each variant's self-check,
     the comparison's figures, the gating timeline and each variant's map;
     the seconds it took."""
     from slam.outputs.gating_timeline import timeline_note, timeline_tables
     from slam.outputs.self_check import SELF_CHECK_NOTE, self_check_table
+    from slam.outputs.validation_figures import observer_alarms_note
 
     t = time.perf_counter()
     variants = [row["variant"] for row in rows]
@@ -284,8 +285,8 @@ def _report(folder: Path, rows: list[dict[str, Any]], name: str, provenance: lis
         ]),
         Section("Yaw trends (the paper's Fig. 2)", "The gated variant's yaw streams and their trend symbols.",
                 figures=[Figure(folder / "compass_trends.png", "yaw streams and trends")]),
-        Section("Observer timelines (the paper's Fig. 3)", "The gated variant's observer alarms and blamed "
-                "sensors over the true faults.", figures=[Figure(folder / "observer_alarms.png", "observers")]),
+        Section("Observer timelines (the paper's Fig. 3)", observer_alarms_note(recording.fault_truth),
+                figures=[Figure(folder / "observer_alarms.png", "observers")]),
     ]
     if timelines:
         metrics = {tl.variant: results[tl.variant].metrics for tl in timelines}
@@ -295,7 +296,7 @@ def _report(folder: Path, rows: list[dict[str, Any]], name: str, provenance: lis
         Section("Maps", "Each variant's occupancy grid and trajectory (map.png).", small=True,
                 figures=[Figure(folder / v / "map.png", v) for v in variants]),
     ]
-    write_report(folder / "report.html", f"{name}: variants compared", sections, provenance=provenance)
+    write_report(folder / "report.html", f"{recording.name}: variants compared", sections, provenance=provenance)
     elapsed = time.perf_counter() - t
     log.info("report.html in %.2f s", elapsed)
     return elapsed

@@ -149,6 +149,17 @@ def plot_observer_alarms(path: str | Path, recording: Recording, validation) -> 
     save_figure(fig, path)
 
 
+def observer_alarms_note(fault_truth) -> str:
+    """What a report says :func:`plot_observer_alarms` shows (of the gated
+    variant); it names the true faults only where the figure draws some."""
+    note = "The gated variant's observer alarms and blamed sensors"
+    if fault_truth is None:
+        return note + "; the recording has no fault truth to hold them against."
+    if not any(fault_truth.values()):
+        return note + "; the recording's fault truth has no fault."
+    return note + " over the true faults."
+
+
 _KIND_LETTER = {"trend": "T", "residual": "R", "cusum": "C", "offset": "O"}
 
 
