@@ -235,6 +235,41 @@ class BagBuilder:
         return path
 
 
+def with_foreign_channel(source: Path, dest: Path, topic: str, encoding: str = "json",
+                         schema_encoding: str = "jsonschema") -> Path:
+    """A copy of the MCAP file ``source`` (a ROS 2 bag's) into ``dest`` with a
+    channel of another encoding on ``topic``, as a tool other than rosbag2
+    adds one: a new channel, a message beside each of the first channel's;
+    or, if ``source`` has ``topic``, that channel's messages re-encoded
+    (``schema_encoding`` "": no schema at all)."""
+    import json
+
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(source, "rb") as f, open(dest, "wb") as g:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        writer = Writer(g)
+        writer.start(profile="ros2", library="tests.bagfactory")
+        schemas = {s.id: writer.register_schema(s.name, s.encoding, s.data) for s in summary.schemas.values()}
+        foreign = (writer.register_schema("Diagnostics", schema_encoding, b'{"type": "object"}') if schema_encoding
+                   else 0)
+        replaced = {c.id for c in summary.channels.values() if c.topic == topic}
+        channels = {c.id: writer.register_channel(c.topic, encoding if c.id in replaced else c.message_encoding,
+                                                  foreign if c.id in replaced else schemas[c.schema_id], c.metadata)
+                    for c in summary.channels.values()}
+        added = writer.register_channel(topic, encoding, foreign) if not replaced else None
+        beside = min(summary.channels)
+        for _, channel, message in reader.iter_messages(log_time_order=True):
+            data = json.dumps({"ok": True}).encode() if channel.id in replaced else message.data
+            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time, message.sequence)
+            if added is not None and channel.id == beside:
+                writer.add_message(added, message.log_time, json.dumps({"ok": True}).encode(), message.publish_time)
+        writer.finish()
+    return dest
+
+
 def driving_bag(
     ros: int = 2,
     t0: float = 1_700_000_000.0,

@@ -4,6 +4,7 @@ true intervals beside them (slam/commands/inject/)."""
 from __future__ import annotations
 
 import json
+import logging
 
 import numpy as np
 import pytest
@@ -16,8 +17,9 @@ from slam.commands.inject import inject, parse_fault
 from slam.commands.inject import physics
 from slam.commands.inject.spec import DipoleFault, SlipFault
 from slam.readers.read import read_recording
+from slam.readers.rosbag import open_bag
 from slam.recording import Trajectory
-from tests.bagfactory import ned_driving_bag
+from tests.bagfactory import driving_bag, ned_driving_bag, with_foreign_channel
 from tests.conftest import CONFIGS, real_data
 from tests.synthetic import wall_ranges
 
@@ -162,6 +164,25 @@ def test_a_ned_bag_takes_a_heading_fault_in_its_own_frame(tmp_path):
     assert wrap_angle(after.compass.yaw - before.compass.yaw) == pytest.approx(expected, abs=1e-6)
     assert np.degrees(np.abs(expected)).max() > 5.0
     assert np.array_equal(after.odometry.x, before.odometry.x)
+
+
+def test_an_mcap_file_with_a_json_channel_takes_faults_and_the_copy_leaves_the_channel_out(tmp_path, caplog):
+    pytest.importorskip("mcap.writer", reason="the test extra installs mcap")
+    drive = next(driving_bag(ros=2, duration_s=1.0).write(tmp_path / "drive", storage="mcap").glob("*.mcap"))
+    mixed = with_foreign_channel(drive, tmp_path / "mixed.mcap", "/diagnostics")
+    with caplog.at_level(logging.WARNING):
+        inject(mixed, ["gyro_bias@0.2:0.6"], tmp_path / "run", InputConfig())
+    said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert f"{mixed}: topic '/diagnostics' not copied: its messages are json, not ROS 2's CDR" in said
+    reader = open_bag(tmp_path / "run" / "bag")
+    try:
+        topics = {c.topic for c in reader.connections}
+    finally:
+        reader.close()
+    assert "/diagnostics" not in topics and {"/imu/data", "/odom", "/scan"} <= topics
+    before, after = read_recording(drive, InputConfig()), read_recording(tmp_path / "run", InputConfig())
+    assert np.array_equal(after.odometry.x, before.odometry.x)
+    assert not np.array_equal(after.gyro.rate, before.gyro.rate)
 
 
 def test_faults_a_recording_cannot_have_are_refused(short_run, tmp_path):

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bagfactory import IMU, BagBuilder, driving_bag
+from bagfactory import IMU, BagBuilder, driving_bag, with_foreign_channel
 from conftest import real_data
 from slam.config import InputConfig
 from slam.errors import GslamError
@@ -209,6 +209,40 @@ def test_default_topics_and_every_rosbag2_form(tmp_path):
         np.testing.assert_allclose(rec.gps.x, rec.groundtruth.x[::20], atol=1e-6)
         np.testing.assert_allclose(rec.gps.y, rec.groundtruth.y[::20], atol=1e-6)
     assert guess_format(driving_bag(ros=1, duration_s=0.1).write(tmp_path / "a.bag")) == "rosbag"
+
+
+@pytest.fixture
+def drive_mcap(tmp_path) -> Path:
+    """The MCAP file of a short ROS 2 drive."""
+    pytest.importorskip("mcap.writer", reason="the test extra installs mcap")
+    return next(driving_bag(ros=2, duration_s=1.0).write(tmp_path / "drive", storage="mcap").glob("*.mcap"))
+
+
+@pytest.mark.parametrize("encoding, schema", [("json", "jsonschema"), ("json", ""), ("protobuf", "protobuf")],
+                         ids=["json", "json-schemaless", "protobuf"])
+def test_an_mcap_channel_of_another_encoding_is_skipped_with_one_warning(drive_mcap, tmp_path, caplog, encoding,
+                                                                         schema):
+    """A tool's own channel in a ROS 2 MCAP file (rosbags refuses the file
+    when the channel has a schema that is not a ROS 2 definition): the
+    needed topics are read as without it, the channel named in a warning."""
+    mixed = with_foreign_channel(drive_mcap, tmp_path / "mixed.mcap", "/diagnostics", encoding, schema)
+    plain = read_recording(drive_mcap, InputConfig())
+    with caplog.at_level(logging.WARNING):
+        rec = read_recording(mixed, InputConfig())
+    said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert said == [f"{mixed}: topic '/diagnostics' skipped: its messages are {encoding}, not ROS 2's CDR"]
+    assert rec.t0 == plain.t0 and len(rec.scans) == len(plain.scans)
+    for a, b in ((rec.gyro.t, plain.gyro.t), (rec.compass.yaw, plain.compass.yaw), (rec.odometry.x, plain.odometry.x),
+                 (rec.gps.x, plain.gps.x), (rec.groundtruth.y, plain.groundtruth.y)):
+        assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("schema", ["jsonschema", ""], ids=["json", "json-schemaless"])
+def test_a_needed_mcap_topic_of_another_encoding_is_one_error(drive_mcap, tmp_path, schema):
+    mixed = with_foreign_channel(drive_mcap, tmp_path / "mixed.mcap", "/odom", "json", schema)
+    msg = error_of(read_recording, mixed, InputConfig())
+    assert msg == (f"{mixed}: odometry topic '/odom': its messages are json, expected ROS 2's CDR "
+                   "(a nav_msgs/msg/Odometry)")
 
 
 def test_topic_remapping_by_config_alone(tmp_path, ros):

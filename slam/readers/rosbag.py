@@ -1,6 +1,10 @@
 """Reader for recorded runs in ROS 1 bags and ROS 2 bags (sqlite3 or mcap).
 
-Both are read through ``rosbags.highlevel.AnyReader``. Only the topics named
+Both are read through ``rosbags.highlevel.AnyReader``; an MCAP file with
+channels besides ROS 2's, which rosbags refuses, through
+:mod:`slam.readers.rosbag_mcap`. A channel whose messages are not CDR (JSON,
+protobuf) is skipped with a warning naming its topic and encoding, and is an
+error if a stream needs it. Only the topics named
 in :class:`slam.config.TopicsConfig` are read; each message is deserialised
 once even when two streams share a topic (gyro and compass from one Imu).
 In ROS 2 bags, topics whose messages share one layout are decoded in bulk,
@@ -40,7 +44,7 @@ from typing import Any
 
 from slam.config import InputConfig
 from slam.errors import GslamError
-from slam.readers import cdr, rosbag2_sqlite
+from slam.readers import cdr, rosbag2_sqlite, rosbag_mcap
 from slam.readers.rosbag_imu import _CompassImuStream, _CompassMagStream, _GyroStream, world_yaw_rate
 from slam.readers.rosbag_poses import _GpsStream, _PoseStream
 from slam.readers.rosbag_scans import _ScanStream
@@ -166,7 +170,11 @@ def _open_reader(path: Path) -> Any:
         reader = AnyReader([path], default_typestore=store)
         reader.open()
     except Exception as err:  # rosbags raises many types for foreign or broken files
-        raise GslamError(f"{path}: not a readable ROS bag ({_first_line(err)})") from None
+        mcap = rosbag_mcap.mcap_file(path)
+        mixed = rosbag_mcap.open_mixed_mcap(mcap, _first_line(err)) if mcap is not None else None
+        if mixed is None:
+            raise GslamError(f"{path}: not a readable ROS bag ({_first_line(err)})") from None
+        return mixed
     return reader
 
 
@@ -175,8 +183,16 @@ def _connections(reader: Any, path: Path, streams: list[_Stream]) -> dict[str, l
     by_topic: dict[str, list[Any]] = {}
     for conn in reader.connections:
         by_topic.setdefault(conn.topic, []).append(conn)
+    foreign = rosbag_mcap.foreign_channels(reader.connections)
+    needed = {stream.topic for stream in streams}
+    for topic, encoding in sorted(foreign.items()):
+        if topic not in needed:
+            log.warning("%s: topic '%s' skipped: its messages are %s, not ROS 2's CDR", path, topic, encoding)
     wanted: dict[str, list[Any]] = {}
     for stream in list(streams):
+        if stream.topic in foreign:
+            raise GslamError(f"{stream.where}: its messages are {foreign[stream.topic]}, expected ROS 2's CDR "
+                             f"(a {' or '.join(stream.msgtypes)})")
         conns = by_topic.get(stream.topic)
         if not conns:
             if stream.name == "groundtruth":

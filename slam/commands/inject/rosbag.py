@@ -26,6 +26,7 @@ from slam.commands.inject.labels import Labels
 from slam.commands.inject.spec import DipoleFault, Fault, GyroBiasFault, LaserCutFault, MultipathFault, SlipFault
 from slam.readers import frames
 from slam.readers.rosbag import open_bag, resolve_bag_path
+from slam.readers.rosbag_mcap import foreign_channels
 from slam.recording import Recording
 
 log = logging.getLogger(__name__)
@@ -159,7 +160,12 @@ def inject_rosbag(source: Path, dest: Path, rec: Recording, config: InputConfig,
     bag_path = resolve_bag_path(source)
     reader = open_bag(source)
     try:
-        conns = list(reader.connections)
+        # A channel of another encoding (an MCAP file's JSON) has no ROS 2
+        # definition to write it with: the copy is of the ROS 2 ones.
+        foreign = foreign_channels(reader.connections)
+        for topic, encoding in sorted(foreign.items()):
+            log.warning("%s: topic '%s' not copied: its messages are %s, not ROS 2's CDR", bag_path, topic, encoding)
+        conns = [c for c in reader.connections if c.topic not in foreign]
         present = {c.topic for c in conns}
         for topic, fs in by_topic.items():
             if topic not in present:
@@ -172,7 +178,7 @@ def inject_rosbag(source: Path, dest: Path, rec: Recording, config: InputConfig,
         for topic, fs in by_topic.items():
             for fault in fs:
                 _apply(edits[topic], fault, rec, config, datum, labels)
-        _write(reader, bag_path, dest, messages, edits)
+        _write(reader, bag_path, dest, conns, messages, edits)
     finally:
         reader.close()
     return labels
@@ -204,7 +210,7 @@ def _apply(e: _Edits, fault: Fault, rec: Recording, config: InputConfig, datum, 
         _multipath(e, fault, datum, labels)
 
 
-def _write(reader: Any, source: Path, dest: Path, messages: list, edits: dict[str, _Edits]) -> None:
+def _write(reader: Any, source: Path, dest: Path, conns: list, messages: list, edits: dict[str, _Edits]) -> None:
     changed = {topic: iter(e.msgs) for topic, e in edits.items()}
     store = reader.typestore
     if source.suffix == ".bag":
@@ -214,7 +220,7 @@ def _write(reader: Any, source: Path, dest: Path, messages: list, edits: dict[st
         with Writer(dest / source.name) as writer:
             out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest,
                                                callerid=c.ext.callerid, latching=c.ext.latching)
-                   for c in reader.connections}
+                   for c in conns}
             for c, ts, raw in messages:
                 if c.topic in changed:
                     raw = store.serialize_ros1(next(changed[c.topic]), c.msgtype)
@@ -224,7 +230,7 @@ def _write(reader: Any, source: Path, dest: Path, messages: list, edits: dict[st
 
     plugin = StoragePlugin.MCAP if any(p.suffix == ".mcap" for p in _files(source)) else StoragePlugin.SQLITE3
     with Writer(dest, version=9, storage_plugin=plugin) as writer:
-        out = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
+        out = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in conns}
         for c, ts, raw in messages:
             if c.topic in changed:
                 raw = store.serialize_cdr(next(changed[c.topic]), c.msgtype)
