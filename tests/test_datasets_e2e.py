@@ -42,7 +42,9 @@ def gslam_map(tmp_path: Path, relative: str, config: str, gating: str = "off", *
 def test_carmen_intel_graph_and_validation(tmp_path):
     m = gslam_map(tmp_path, "carmen/intel-corrected.log.gz", "carmen.yaml", "on")
     assert m["n_poses"] == 910
-    assert m["factor_counts"]["scan_matching"] == 909
+    # Every step but those whose scans leave every direction free, which the
+    # scan check blames in all three (measured: 4 of 909).
+    assert 895 <= m["factor_counts"]["scan_matching"] < 909
     # Measured: 8.0 % over 1 m and 9.2 % over 10 m of the corrected path.
     assert m["rpe_trans_pct_1m"] < 12.0 and m["rpe_trans_pct_10m"] < 14.0
     # One scan every 2.9 s: each stream is judged by its own sample period,
@@ -67,13 +69,14 @@ def test_carmen_intel_graph_and_validation(tmp_path):
 def test_carmen_intel_judged_by_a_fixed_gap_observes_nothing_and_says_so(tmp_path, capsys):
     """With every gap judged against 0.5 s (no observers.gap_periods), no
     relation observer of the thinned log ever observes: with the scan
-    ceiling check off too, --gating on is an error naming the relation and
+    checks off too, --gating on is an error naming the relation and
     why, not a silently ungated map."""
     out = tmp_path / "o"
     code = main(["-q", "map", str(real_data("carmen/intel-corrected.log.gz")), "--config",
                  str(ROOT / "configs/datasets/carmen.yaml"), "--out", str(out), "--gating", "on",
                  "--set", "output.plots=false", "--set", "validation.observers.gap_periods=null",
-                 "--set", "validation.observers.scan_ceiling.enabled=false"])
+                 "--set", "validation.observers.scan_ceiling.enabled=false",
+                 "--set", "validation.observers.scan.enabled=false"])
     err = capsys.readouterr().err
     assert code == 1 and not out.exists()
     assert "gslam: error:" in err and "yaw_odo_sm" in err and "gaps longer than the 0.5 s" in err
