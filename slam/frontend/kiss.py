@@ -217,13 +217,13 @@ def odometry_guesses(
     return [g if u else None for g, u in zip(guesses, usable)]
 
 
-def progress_bar(total: int, enabled: bool):
-    """A tqdm bar over ``total`` scans (shown only on a terminal), or None."""
+def progress_bar(total: int, enabled: bool, desc: str = "scan matching"):
+    """A tqdm bar ``desc`` over ``total`` scans (shown only on a terminal), or None."""
     if not enabled:
         return None
     from tqdm import tqdm
 
-    return tqdm(total=total, desc="scan matching", unit="scan", leave=False, disable=None)
+    return tqdm(total=total, desc=desc, unit="scan", leave=False, disable=None)
 
 
 def run_frontend(

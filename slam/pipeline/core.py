@@ -201,7 +201,8 @@ class Mapping:
         steps, step_cov = fuse_steps(meas, self.weights)
         blamed = blamed_scans(self.weights, len(meas)) if cfg.blamed_scans == "leave_out" else None
         self.submaps = build_submap_constraints(
-            self.recording.scans, meas.scan_index, steps, step_cov, self.config.frontend, cfg, before_judging, blamed
+            self.recording.scans, meas.scan_index, steps, step_cov, self.config.frontend, cfg, before_judging, blamed,
+            self.progress,
         )
         self.constraints = [*self.constraints, *submap_factors(self.submaps, self.weights, len(meas), blamed)]
         self.timings.submaps_s = time.perf_counter() - t

@@ -66,6 +66,7 @@ def build_submap_constraints(
     config: SubmapsConfig,
     before_judging: Callable[[list[Constraint]], list[Constraint]] | None = None,
     blamed: np.ndarray | None = None,
+    progress: bool = False,
 ) -> SubmapResult:
     """Scan-to-submap constraints over the keyframes whose scans are
     ``scans[scan_index]`` (K,); ``steps`` (K, 3) and ``step_cov`` (K, 3, 3):
@@ -75,7 +76,7 @@ def build_submap_constraints(
     ``blamed`` (K,) bool: keyframes whose scan the gating excluded; such a
     scan leaves no trace here: it is neither matched nor inserted into a
     submap (its node keeps the chain's pose), so no constraint, submap or
-    loop rests on it."""
+    loop rests on it. ``progress``: a bar on a terminal."""
     start = time.perf_counter()
     nodes = select_nodes(steps, config.node_spacing_m, np.radians(config.node_turn_deg))
     chain = integrate(np.zeros(3), steps)
@@ -88,7 +89,7 @@ def build_submap_constraints(
                         search_voxel_m=config.resolution_m)
     if blamed is not None:
         points.leave_out(np.flatnonzero(np.asarray(blamed)[nodes]))
-    local = run_local_slam(points, node_steps, node_cov, config)
+    local = run_local_slam(points, node_steps, node_cov, config, progress)
     found: GlobalResult = GlobalSlam(points, local, config, node_steps, node_cov, before_judging).run()
     # Back to keyframes: every keyframe hangs off the node before it by the chain.
     owner = np.searchsorted(nodes, np.arange(len(steps)), side="right") - 1

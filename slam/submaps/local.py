@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from slam.config.submaps import SubmapsConfig
+from slam.frontend.kiss import progress_bar
 from slam.matching.grid import ScorePyramid, score_pyramid
 from slam.matching.icp import pose_uncertainty, refine
 from slam.matching.points import PointMap, point_map
@@ -249,10 +250,12 @@ def search_windows(step_cov: np.ndarray, cfg: SubmapsConfig) -> tuple[np.ndarray
     return lin, ang
 
 
-def run_local_slam(points: ScanPoints, steps: np.ndarray, step_cov: np.ndarray, cfg: SubmapsConfig) -> LocalResult:
+def run_local_slam(points: ScanPoints, steps: np.ndarray, step_cov: np.ndarray, cfg: SubmapsConfig,
+                   progress: bool = False) -> LocalResult:
     """Local SLAM over all scans; ``steps`` (n, 3): each scan's motion since
     the previous in the previous one's frame (the dead-reckoning chain),
-    ``step_cov`` (n, 3, 3) its covariance (row 0 unused)."""
+    ``step_cov`` (n, 3, 3) its covariance (row 0 unused); ``progress``: a
+    bar on a terminal."""
     start = time.perf_counter()
     n = len(points)
     poses = np.zeros((n, 3))
@@ -262,7 +265,10 @@ def run_local_slam(points: ScanPoints, steps: np.ndarray, step_cov: np.ndarray, 
     matches: list[Match | None] = [None]
     lin, ang = search_windows(step_cov, cfg)
     half = 0.5 * cfg.length_m
+    bar = progress_bar(n - 1, progress, "submaps")
     for i in range(1, n):
+        if bar is not None:
+            bar.update()
         predicted = compose(poses[i - 1], steps[i])
         sm_id = active[0]
         sm = submaps[sm_id]
@@ -286,6 +292,8 @@ def run_local_slam(points: ScanPoints, steps: np.ndarray, step_cov: np.ndarray, 
         while submaps[active[0]].path_m >= cfg.length_m or len(submaps[active[0]].scans) >= cfg.max_scans:
             submaps[active[0]].finished = True
             active.pop(0)
+    if bar is not None:
+        bar.close()
     for k in active:
         submaps[k].finished = True
     return LocalResult(poses, submaps, matches, time.perf_counter() - start)
