@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from scripts.bench.real_faults import KERNELS, METHODS, fault_specs, summarise
+from scripts.bench.real_faults import HUSKY, KERNELS, METHODS, fault_specs, injected_specs, log_faults, summarise
 
 
 def _rows(log: str, fault: str, ates: dict[str, float], **gated) -> list[dict]:
@@ -39,3 +39,23 @@ def test_the_summary_holds_gated_against_the_best_kernel_and_the_interval_oracle
 def test_faults_are_placed_as_shares_of_the_log():
     assert fault_specs("cut2", 100.0, [0.2, 0.5], 0.1) == ["laser_cut@20.0:30.0,range_m=2", "laser_cut@50.0:60.0,range_m=2"]
     assert fault_specs("yaw_slip", 10.0, [0.0], 0.5) == ["slip@0.0:5.0,scale=1.0,yaw_scale=1.5"]
+
+
+def test_the_husky_bag_takes_its_own_sensors_faults_after_what_its_config_learnt_from():
+    assert "cut3" not in log_faults(HUSKY) and {"gyro_bias", "dipole", "slip"} <= set(log_faults(HUSKY))
+    assert "gyro_bias" not in log_faults("intel")
+    specs = injected_specs(HUSKY, "gyro_bias", 395.0, None)
+    starts = [float(s.split("@")[1].split(":")[0]) for s in specs]
+    assert len(specs) == 3 and min(starts) > 215.0 and all(s.endswith("bias_deg_s=2") for s in specs)
+
+
+def test_a_log_without_ground_truth_has_no_tight_oracle_and_its_own_summary_column():
+    rows = _rows("intel", "cut3", {"gated": 0.5, "cauchy": 1.0, "interval_oracle": 0.5}, detected=1, missed=0)
+    husky = _rows(HUSKY, "slip", {"gated": 2.0, **{k: 5.0 for k in KERNELS}, "gnc_gm": 4.0, "interval_oracle": 1.0},
+                  detected=0, missed=1)
+    rows += [r for r in husky if r["method"] != "oracle"]
+    text, f = summarise(rows)
+    assert f["gated / best kernel, geometric mean"] == pytest.approx((0.5 * 0.5) ** 0.5)
+    assert f["stretches detected"] == pytest.approx(0.5)
+    assert "| husky | slip | 1.000 | 2.000 | 1.000 | gnc_gm 4.000 | – |" in text
+    assert "| figure | measured, every log | CARMEN | Husky | target |  |" in text
