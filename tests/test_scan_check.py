@@ -20,7 +20,7 @@ from tests.synthetic import wall_ranges
 from validation.diagnosis.model import Plausibility
 from validation.base.errors import ValidationError
 from validation.observers import ObserversConfig, observe_steps
-from validation.observers.checks import ScanCeilingCheck, ScanDegeneracyCheck, bridged, scan_streams, unary_checks
+from validation.observers.checks import ScanCeilingCheck, ScanDegeneracyCheck, bridged, scan_streams, settled, unary_checks
 from validation.observers.config import observers_config
 from validation.streams import resample_streams
 
@@ -127,6 +127,9 @@ def test_the_ceiling_check_flags_cut_scans_and_bridges_short_gaps():
     # Scan 2 lies between two cut scans 2 s apart: a range limit persists.
     assert _ceiling_check(fill_s=2.0).flags(q).tolist() == [False, True, True, True, True, False]
     assert bridged(np.arange(5.0), np.array([1, 0, 0, 0, 1], bool), 3.0).tolist() == [True, False, False, False, True]
+    # The scan matcher settles for 1.5 s after the laser sees again: scan 5 is 1 s after scan 4.
+    assert _ceiling_check(settle_s=1.5).flags(q).tolist() == [False, True, True, True, True, True]
+    assert settled(np.arange(6.0), np.array([0, 1, 0, 0, 0, 0], bool), 2.0).tolist() == [False, True, True, False, False, False]
     # The same room ten times larger, cut at 18 m: the laser still sees a hall.
     hall = Scans(scans.t, 10.0 * scans.ranges, scans.angles, 0.1, 80.0)
     hall.ranges[[1, 3, 4]] = np.where(hall.ranges[[1, 3, 4]] > 18.0, np.inf, hall.ranges[[1, 3, 4]])

@@ -143,8 +143,10 @@ class ScanCeilingCheck:
     edges at the scan's farthest return) cannot give scan matching the
     surfaces beyond it (:class:`~validation.observers.config.ScanCeilingConfig`).
     Scans between two cut-off ones at most ``fill_s`` apart are cut off too:
-    a range limit persists. Its stream is the verdict per scan, as the scan
-    degeneracy check's."""
+    a range limit persists. The scans of the ``settle_s`` after a cut-off one
+    count too: the scan matcher's local map still holds the cut scans'
+    points. Its stream is the verdict per scan, as the scan degeneracy
+    check's."""
 
     name: str
     component: str
@@ -154,6 +156,7 @@ class ScanCeilingCheck:
     max_ceiling_m: float
     fill_s: float
     hold_s: float
+    settle_s: float = 0.0
     streams: tuple[str, ...] = ("scan_ceiling",)
 
     def flags(self, geometry: ScanGeometrySeries) -> np.ndarray:
@@ -162,7 +165,8 @@ class ScanCeilingCheck:
                & (np.asarray(geometry.gap_edges) >= self.min_edges)
                & (np.asarray(geometry.edges_at_ceiling) >= self.min_edge_share)
                & (np.asarray(geometry.farthest) <= self.max_ceiling_m))
-        return bridged(np.asarray(geometry.t, dtype=float), cut, self.fill_s)
+        t = np.asarray(geometry.t, dtype=float)
+        return settled(t, bridged(t, cut, self.fill_s), self.settle_s)
 
     def deviant(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
         """True where a cut-off scan is at either end of the interval."""
@@ -178,6 +182,14 @@ def bridged(t: np.ndarray, flags: np.ndarray, gap_s: float) -> np.ndarray:
         if b > a + 1 and t[b] - t[a] <= gap_s:
             out[a:b] = True
     return out
+
+
+def settled(t: np.ndarray, flags: np.ndarray, settle_s: float) -> np.ndarray:
+    """``flags`` with every sample less than ``settle_s`` after a flagged one flagged too."""
+    if settle_s <= 0.0 or not flags.any():
+        return flags
+    last = np.maximum.accumulate(np.where(flags, t, -np.inf))
+    return flags | (t - last < settle_s)
 
 
 UnaryCheck = MagnetometerCheck | FieldGyroCheck | GpsQualityCheck | ScanDegeneracyCheck | ScanCeilingCheck
@@ -218,7 +230,7 @@ def unary_checks(config: ObserversConfig, reference: MagneticReference | None = 
     if ceiling.enabled:
         checks.append(ScanCeilingCheck(ceiling.name, ceiling.component, ceiling.min_no_return, ceiling.min_edges,
                                        ceiling.min_edge_share, ceiling.max_ceiling_m, ceiling.fill_s,
-                                       ceiling.hold_s))
+                                       ceiling.hold_s, ceiling.settle_s))
     return checks
 
 

@@ -274,7 +274,10 @@ class ScanCeilingConfig(StrictFrozen):
     holds the matcher, one that sees 3 m of it does not (the laser blind
     altogether is the scan check's, ``scan.min_returns``). A range limit does not come and go
     from scan to scan: scans between two cut-off ones at most ``fill_s``
-    apart count as cut off too. Off unless enabled."""
+    apart count as cut off too. Nor does the scan matcher recover at once
+    when the laser sees again: its local map still holds the cut scans'
+    points, placed by registrations that could not hold, so the scans of the
+    ``settle_s`` after a cut-off one count too. Off unless enabled."""
 
     enabled: bool = False
     name: str = "scan_ceiling"
@@ -284,6 +287,7 @@ class ScanCeilingConfig(StrictFrozen):
     min_edge_share: float = Field(0.5, gt=0.0, le=1.0)
     max_ceiling_m: float = Field(10.0, gt=0.0)
     fill_s: float = Field(0.0, ge=0.0)
+    settle_s: float = Field(0.0, ge=0.0)
     hold_s: Annotated[float, bounds.HOLD_S] = Field(0.0, ge=0.0)
 
 
