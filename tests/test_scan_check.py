@@ -130,6 +130,10 @@ def test_the_ceiling_check_flags_cut_scans_and_bridges_short_gaps():
     # The scan matcher settles for 1.5 s after the laser sees again: scan 5 is 1 s after scan 4.
     assert _ceiling_check(settle_s=1.5).flags(q).tolist() == [False, True, True, True, True, True]
     assert settled(np.arange(6.0), np.array([0, 1, 0, 0, 0, 0], bool), 2.0).tolist() == [False, True, True, False, False, False]
+    # One scan cut off (a wall in front of the laser) is no cut to settle from; two seconds of them are.
+    assert not settled(np.arange(6.0), np.array([0, 1, 0, 0, 0, 0], bool), 2.0, 2.0)[2:].any()
+    assert settled(np.arange(6.0), np.array([1, 1, 1, 0, 0, 0], bool), 2.0, 2.0).tolist() == [True] * 4 + [False] * 2
+    assert _ceiling_check(settle_s=1.5, settle_after_s=1.0).flags(q).tolist() == [False, True, False, True, True, True]
     # The same room ten times larger, cut at 18 m: the laser still sees a hall.
     hall = Scans(scans.t, 10.0 * scans.ranges, scans.angles, 0.1, 80.0)
     hall.ranges[[1, 3, 4]] = np.where(hall.ranges[[1, 3, 4]] > 18.0, np.inf, hall.ranges[[1, 3, 4]])

@@ -143,9 +143,9 @@ class ScanCeilingCheck:
     edges at the scan's farthest return) cannot give scan matching the
     surfaces beyond it (:class:`~validation.observers.config.ScanCeilingConfig`).
     Scans between two cut-off ones at most ``fill_s`` apart are cut off too:
-    a range limit persists. The scans of the ``settle_s`` after a cut-off one
-    count too: the scan matcher's local map still holds the cut scans'
-    points. Its stream is the verdict per scan, as the scan degeneracy
+    a range limit persists. The scans of the ``settle_s`` after a cut that
+    lasted at least ``settle_after_s`` count too: the scan matcher's local
+    map still holds the cut scans' points. Its stream is the verdict per scan, as the scan degeneracy
     check's."""
 
     name: str
@@ -157,6 +157,7 @@ class ScanCeilingCheck:
     fill_s: float
     hold_s: float
     settle_s: float = 0.0
+    settle_after_s: float = 0.0
     streams: tuple[str, ...] = ("scan_ceiling",)
 
     def flags(self, geometry: ScanGeometrySeries) -> np.ndarray:
@@ -166,7 +167,7 @@ class ScanCeilingCheck:
                & (np.asarray(geometry.edges_at_ceiling) >= self.min_edge_share)
                & (np.asarray(geometry.farthest) <= self.max_ceiling_m))
         t = np.asarray(geometry.t, dtype=float)
-        return settled(t, bridged(t, cut, self.fill_s), self.settle_s)
+        return settled(t, bridged(t, cut, self.fill_s), self.settle_s, self.settle_after_s)
 
     def deviant(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
         """True where a cut-off scan is at either end of the interval."""
@@ -184,12 +185,18 @@ def bridged(t: np.ndarray, flags: np.ndarray, gap_s: float) -> np.ndarray:
     return out
 
 
-def settled(t: np.ndarray, flags: np.ndarray, settle_s: float) -> np.ndarray:
-    """``flags`` with every sample less than ``settle_s`` after a flagged one flagged too."""
+def settled(t: np.ndarray, flags: np.ndarray, settle_s: float, min_run_s: float = 0.0) -> np.ndarray:
+    """``flags`` with every sample less than ``settle_s`` after a run of
+    flagged ones that lasted at least ``min_run_s`` flagged too."""
     if settle_s <= 0.0 or not flags.any():
         return flags
-    last = np.maximum.accumulate(np.where(flags, t, -np.inf))
-    return flags | (t - last < settle_s)
+    edges = np.diff(np.concatenate(([0], flags.astype(np.int8), [0])))
+    first, last = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    out = flags.copy()
+    for a, b in zip(first, last):
+        if t[b] - t[a] >= min_run_s:
+            out |= (t > t[b]) & (t - t[b] < settle_s)
+    return out
 
 
 UnaryCheck = MagnetometerCheck | FieldGyroCheck | GpsQualityCheck | ScanDegeneracyCheck | ScanCeilingCheck
@@ -230,7 +237,7 @@ def unary_checks(config: ObserversConfig, reference: MagneticReference | None = 
     if ceiling.enabled:
         checks.append(ScanCeilingCheck(ceiling.name, ceiling.component, ceiling.min_no_return, ceiling.min_edges,
                                        ceiling.min_edge_share, ceiling.max_ceiling_m, ceiling.fill_s,
-                                       ceiling.hold_s, ceiling.settle_s))
+                                       ceiling.hold_s, ceiling.settle_s, ceiling.settle_after_s))
     return checks
 
 

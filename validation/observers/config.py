@@ -277,7 +277,9 @@ class ScanCeilingConfig(StrictFrozen):
     apart count as cut off too. Nor does the scan matcher recover at once
     when the laser sees again: its local map still holds the cut scans'
     points, placed by registrations that could not hold, so the scans of the
-    ``settle_s`` after a cut-off one count too. Off unless enabled."""
+    ``settle_s`` after a cut count too, if the cut lasted ``settle_after_s``
+    or more (one scan cut off by a wall in front of the laser leaves the map
+    whole). Off unless enabled."""
 
     enabled: bool = False
     name: str = "scan_ceiling"
@@ -288,6 +290,7 @@ class ScanCeilingConfig(StrictFrozen):
     max_ceiling_m: float = Field(10.0, gt=0.0)
     fill_s: float = Field(0.0, ge=0.0)
     settle_s: float = Field(0.0, ge=0.0)
+    settle_after_s: float = Field(0.0, ge=0.0)
     hold_s: Annotated[float, bounds.HOLD_S] = Field(0.0, ge=0.0)
 
 
