@@ -542,6 +542,12 @@ ERRORS: list[Case] = [
           ("negative-yaw-variance", "0.5 0 0.01 0.01 0.01 -1", "odom2 line #8: var_wz -1 is negative"),
           ("speed-1e9", "1e9 0 0.01 0.01 0.01 0.01", "odom2 line #8: speed 1e+09 m/s"),
       )),
+    *(Case(f"set-{key}-{value}", (*MAP, "--out", "{d}/o", "--set", f"validation.observers.{key}={value}"), says)
+      for key, value, says in (
+          ("scan_ceiling.settle_s", "1e300", "scan_ceiling.settle_s: 1e+300 s is above 86400 s"),
+          ("scan_ceiling.fill_s", "1e300", "scan_ceiling.fill_s: 1e+300 s is above 86400 s"),
+          ("gps.max_sigma_m", "1e-300", "gps.max_sigma_m: 1e-300 m is below 0.0001 m"),
+      )),
     # -- counts bounded before they reach C++ (KISS-ICP, GTSAM) or size an array --
     *(Case(f"set-{key}-{value}", (*MAP, "--out", "{d}/o", "--set", f"{key}={value}"), f"--set {key}={value}: {key}: {says}")
       for key, value, says in (

@@ -79,6 +79,8 @@ BOUNDARY = within(None, 1000.0, "(stream units per s)", high="no ground robot tu
 """A trend observer's boundary between flat and rising or falling (rad/s, m/s^2)."""
 HOLD_S = within(None, 86400.0, "s", high="a deviation held for a day before it counts is never seen")
 """How long a check's deviation must last before it counts (s)."""
+SPAN_S = within(None, 86400.0, "s", high="a verdict carried over a day reaches across any run")
+"""How far a check carries its verdict: across a gap, after a cut (s)."""
 
 # --- sizes of maps and keyframes --------------------------------------------
 

@@ -231,7 +231,7 @@ class GpsCheckConfig(StrictFrozen):
     enabled: bool = True
     name: str = "gps_plausible"
     component: Component = "GPS"
-    max_sigma_m: float = Field(5.0, gt=0.0)
+    max_sigma_m: Annotated[float, bounds.SIGMA_M] = Field(5.0, gt=0.0)
     hold_s: Annotated[float, bounds.HOLD_S] = Field(0.0, ge=0.0)
 
 
@@ -288,9 +288,9 @@ class ScanCeilingConfig(StrictFrozen):
     min_edges: bounds.Count = Field(2, ge=1)
     min_edge_share: float = Field(0.5, gt=0.0, le=1.0)
     max_ceiling_m: float = Field(10.0, gt=0.0)
-    fill_s: float = Field(0.0, ge=0.0)
-    settle_s: float = Field(0.0, ge=0.0)
-    settle_after_s: float = Field(0.0, ge=0.0)
+    fill_s: Annotated[float, bounds.SPAN_S] = Field(0.0, ge=0.0)
+    settle_s: Annotated[float, bounds.SPAN_S] = Field(0.0, ge=0.0)
+    settle_after_s: Annotated[float, bounds.SPAN_S] = Field(0.0, ge=0.0)
     hold_s: Annotated[float, bounds.HOLD_S] = Field(0.0, ge=0.0)
 
 
