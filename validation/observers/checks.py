@@ -145,8 +145,8 @@ class ScanCeilingCheck:
     Scans between two cut-off ones at most ``fill_s`` apart are cut off too:
     a range limit persists. The scans of the ``settle_s`` after a cut that
     lasted at least ``settle_after_s`` count too: the scan matcher's local
-    map still holds the cut scans' points. Its stream is the verdict per scan, as the scan degeneracy
-    check's."""
+    map still holds the cut scans' points. Its stream is the verdict per
+    scan, as the scan degeneracy check's."""
 
     name: str
     component: str
