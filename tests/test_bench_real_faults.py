@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from scripts.bench.real_faults import HUSKY, KERNELS, METHODS, fault_specs, injected_specs, log_faults, summarise
+from scripts.bench.real_faults import (
+    BROAD_REPORT, BROAD_TUNING, HUSKY, KERNELS, METHODS, fault_specs, injected_specs, log_faults, log_source, summarise,
+)
 
 
 def _rows(log: str, fault: str, ates: dict[str, float], **gated) -> list[dict]:
@@ -59,3 +61,26 @@ def test_a_log_without_ground_truth_has_no_tight_oracle_and_its_own_summary_colu
     assert f["stretches detected"] == pytest.approx(0.5)
     assert "| husky | slip | 1.000 | 2.000 | 1.000 | gnc_gm 4.000 | – |" in text
     assert "| figure | measured, every log | CARMEN | Husky | target |  |" in text
+
+
+def test_a_broad_trial_takes_an_imus_faults_and_is_judged_by_its_heading():
+    assert set(log_faults("broad-02")) == {"gyro_bias", "dipole"}
+    args = type("Args", (), {"placements": [0.2, 0.5], "length": 0.1})()
+    assert injected_specs("broad-02", "dipole", 100.0, args) == [
+        "dipole@20.0:30.0,target=magnetometer", "dipole@50.0:60.0,target=magnetometer"]
+    assert not set(BROAD_REPORT) & set(BROAD_TUNING)
+    rows = _rows("intel", "cut3", {"gated": 0.5, "cauchy": 1.0, "interval_oracle": 0.5}, detected=1, missed=0)
+    broad = _rows("broad-02", "dipole", {}, detected=1, missed=0)
+    for r in broad:  # its ATE is of positions it does not estimate: 1.0 for every method here
+        r["yaw_rmse_deg"] = {"gated": 8.0, "cauchy": 2.0, "interval_oracle": 4.0}.get(r["method"], 10.0)
+    text, f = summarise(rows + broad)
+    assert f["gated / best kernel, worst"] == pytest.approx(4.0)
+    assert "| broad-02 | dipole | 10.000 | 8.000 |" in text and "heading RMSE in deg" in text
+    assert "| CARMEN | BROAD | target |" in text
+
+
+def test_a_broad_trial_is_found_by_its_number(tmp_path):
+    (tmp_path / "broad").mkdir()
+    (tmp_path / "broad" / "02_undisturbed_slow_rotation_B.mat").write_bytes(b"")
+    assert log_source("broad-02", tmp_path).name == "02_undisturbed_slow_rotation_B.mat"
+    assert log_source("intel", tmp_path) == tmp_path / "carmen" / "intel-corrected.log.gz"

@@ -19,7 +19,7 @@ RESULTS = {  # name: what it measures (each writes docs/results/NAME.md)
     "loops": "loop closing on telemax_lab, false loops, the libRSF corridor, runtime",
     "carmen": "relative errors on the CARMEN logs against their corrected reference",
     "carmen_cuts": "CARMEN with the laser cut over stretches: gated against ungated and the kernels",
-    "real_faults": "the CARMEN report logs and the Husky bag with injected faults: gated against every kernel and oracle",
+    "real_faults": "the CARMEN report logs, the Husky bag and BROAD trials with injected faults: gated against every kernel and oracle",
     "broad": "BROAD: the compass observers, thresholds chosen leave-one-trial-out",
     "broad_loto": "BROAD: every trial mapped with observers calibrated on the other twelve",
     "husky": "the Husky bag ungated and gated, against GPS",
