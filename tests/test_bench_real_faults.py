@@ -6,7 +6,8 @@ from __future__ import annotations
 import pytest
 
 from scripts.bench.real_faults import (
-    BROAD_REPORT, BROAD_TUNING, HUSKY, KERNELS, METHODS, fault_specs, injected_specs, log_faults, log_source, summarise,
+    BROAD_REPORT, BROAD_TUNING, HUSKY, KERNELS, METHODS, fault_specs, injected_specs, log_faults, log_source,
+    stretch_faults, summarise,
 )
 
 
@@ -84,3 +85,18 @@ def test_a_broad_trial_is_found_by_its_number(tmp_path):
     (tmp_path / "broad" / "02_undisturbed_slow_rotation_B.mat").write_bytes(b"")
     assert log_source("broad-02", tmp_path).name == "02_undisturbed_slow_rotation_B.mat"
     assert log_source("intel", tmp_path) == tmp_path / "carmen" / "intel-corrected.log.gz"
+
+
+def test_the_stretch_oracle_gates_each_injected_sensor_over_its_whole_stretch():
+    got = stretch_faults(["laser_cut@10.0:20.0,range_m=3", "slip@30.0:40.0,scale=1.5",
+                          "slip@50.0:60.0,scale=1.0,yaw_scale=1.5", "gyro_bias@1.0:2.0,bias_deg_s=2",
+                          "dipole@3.0:4.0,target=heading"])
+    assert got == {"SM_DIST": [(10.0, 20.0)], "SM_LAT": [(10.0, 20.0)], "SM_YAW": [(10.0, 20.0)],
+                   "ODO_DIST": [(30.0, 40.0)], "ODO_YAW": [(50.0, 60.0)], "IMU_GYRO": [(1.0, 2.0)],
+                   "IMU_YAW": [(3.0, 4.0)]}
+    rows = _rows("a", "cut3", {"gated": 1.0, **{k: 3.0 for k in KERNELS}, "cauchy": 2.0, "interval_oracle": 0.5,
+                               "stretch_oracle": 4.0},
+                 detected=1, missed=0)
+    text, f = summarise(rows)
+    assert f["gated / stretch oracle, geometric mean"] == pytest.approx(0.25)
+    assert "| a | cut3 | 1.000 | 1.000 | 1.000 | cauchy 2.000 | 1.000 | 0.500 | 4.000 | 0.50 | 2.00 | 0.25 |" in text
