@@ -117,11 +117,43 @@ ORACLE_K_SIGMA = within(0.5, 100.0, "sigmas", "it would exclude 62 % of good mea
 """The multiple of sigma beyond which the oracle excludes a measurement."""
 
 
+# --- simulated sensors and the faults added to a recording ---------------------
+
+RATE_HZ = within(1e-3, 1e4, "Hz", "a stream of one message in a quarter of an hour holds nothing a run can use",
+                 "faster than any laser, odometry, GPS or IMU publishes (IMUs reach a few kHz)")
+"""A sensor's publishing rate (Hz)."""
+HEADING_ERROR_DEG = within(1e-2, 180.0, "deg", "below any compass's noise: every sample would be a fault",
+                           "a heading is never more than half a turn off: nothing would be a fault")
+"""A heading error beyond which a compass is faulty (deg)."""
+SLIP_FRACTION = within(1e-3, 10.0, "", "below any odometry's noise: every step would be a fault",
+                       "a slipping wheel or track reports a few times its travel: nothing would be a fault")
+"""A slip beyond which odometry is faulty, as a fraction of the motion."""
+SCAN_MIN_EIGENVALUE = within(None, 1.0, "", high="the smallest of the three eigenvalues of a scan's point-to-line "
+                             "information per beam (unit normals, turns over the mean range) stays below 1: every "
+                             "scan would be degenerate")
+"""The smallest eigenvalue below which a scan's geometry is degenerate."""
+DIPOLE_MOMENT_A_M2 = within(None, 1e6, "A m^2", high="ten times a ship's steel hull (about 1e5 A m^2)")
+"""A magnetic disturber's moment (A m^2)."""
+MULTIPATH_M = within(None, 1000.0, "m", high="a reflected signal biases a fix by metres to a few hundred, "
+                     "not a kilometre")
+"""A GPS multipath bias (m)."""
+AZIMUTH_DEG = within(-360.0, 360.0, "deg", "an azimuth is within a turn", "an azimuth is within a turn")
+"""A direction in the plane (deg)."""
+
+
 Sigma_m = Annotated[float, SIGMA_M]
 RobustParam = Annotated[float, ROBUST_PARAM]
 InformationScale = Annotated[float, INFORMATION_SCALE]
 SearchWindow_m = Annotated[float, SEARCH_WINDOW_M]
 Sigma_deg = Annotated[float, SIGMA_DEG]
+Rate_hz = Annotated[float, RATE_HZ]
+KSigma = Annotated[float, K_SIGMA]
+HeadingError_deg = Annotated[float, HEADING_ERROR_DEG]
+SlipFraction = Annotated[float, SLIP_FRACTION]
+ScanMinEigenvalue = Annotated[float, SCAN_MIN_EIGENVALUE]
+DipoleMoment_A_m2 = Annotated[float, DIPOLE_MOMENT_A_M2]
+Multipath_m = Annotated[float, MULTIPATH_M]
+Azimuth_deg = Annotated[float, AZIMUTH_DEG]
 
 # --- counts handed to loops and to C++ (KISS-ICP, GTSAM) ----------------------
 
