@@ -330,10 +330,13 @@ def test_a_reader_that_leaves_early_gets_no_error(short_run):
     ["scripts/datasets.py", "list"],
     ["-m", "slam.cli", "--help"],
     ["-m", "slam.cli", "map", "--help"],
-], ids=["datasets-list", "gslam-help", "gslam-map-help"])
-def test_a_script_whose_reader_leaves_early_ends_quietly(argv):
+    ["-m", "scripts.bench", "all", "--quick", "--only", "husky"],  # its first line is before any bench runs
+    ["-m", "scripts.bench.kiss_only", "{run}", "--threads", "1"],
+], ids=["datasets-list", "gslam-help", "gslam-map-help", "bench-all", "bench-kiss-only"])
+def test_a_script_whose_reader_leaves_early_ends_quietly(argv, short_run):
     """``python scripts/datasets.py list | head -1``: no BrokenPipeError
     traceback, and the code of a process a closed pipe ended (141) or 0."""
+    argv = [a.format(run=short_run.run_dir) for a in argv]
     proc = subprocess.Popen([sys.executable, *argv], cwd=REPO, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)
     proc.stdout.close()  # long before the interpreter has imported anything
