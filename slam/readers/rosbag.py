@@ -170,8 +170,8 @@ def _open_reader(path: Path) -> Any:
         reader = AnyReader([path], default_typestore=store)
         reader.open()
     except Exception as err:  # rosbags raises many types for foreign or broken files
-        mcap = rosbag_mcap.mcap_file(path)
-        mixed = rosbag_mcap.open_mixed_mcap(mcap, _first_line(err)) if mcap is not None else None
+        files = rosbag_mcap.mcap_files(path)
+        mixed = rosbag_mcap.open_mixed_mcap(path, files, _first_line(err)) if files else None
         if mixed is None:
             raise GslamError(f"{path}: not a readable ROS bag ({_first_line(err)})") from None
         return mixed
