@@ -250,6 +250,18 @@ def scenario_waypoints(points) -> Callable[[Path, World], None]:
     return scenario(set_in("robot", "waypoints", points))
 
 
+def finished_sweep(metrics: str) -> Callable[[Path, World], None]:
+    """The one-job sweep run into ``{d}/o``, its job's metrics.json then
+    replaced by ``metrics`` (as an edit, or a tool other than gslam, does)."""
+
+    def make(d: Path, world: World) -> None:
+        assert main(["-q", "ablate", str(world.spec), "--out", str(d / "o")]) == 0
+        (job,) = (d / "o" / "jobs").iterdir()
+        (job / "metrics.json").write_text(metrics)
+
+    return make
+
+
 # --- the error corpus -------------------------------------------------------------
 
 
@@ -661,6 +673,21 @@ ERRORS: list[Case] = [
           ("field-of-1-tesla", {"imu_mag": np.tile([0.0, 1e6, 0.0], (50, 1))}, "imu_mag: median magnitude 1e+06 uT"),
           ("gyro-1e6-rad-s", {"imu_gyr": np.vstack([np.zeros((10, 3)), [[1e6, 0.0, 0.0]], np.zeros((39, 3))])},
            "imu_gyr at sample 10 is 1e+06 rad/s"),
+      )),
+    # -- result markers and a sweep's own files, read back as input --
+    Case("marker-json-nested-100000-deep", (*MAP, *QUICK, "--out", "{d}/m"),
+         "--out is a folder that is not a gslam map result (its .gslam-result.json is not one gslam wrote)",
+         text("m/.gslam-result.json", "[" * 100_000 + "]" * 100_000)),
+    Case("marker-files-hold-numbers", (*MAP, *QUICK, "--out", "{d}/m"), "lists 1, which is not a file inside the folder",
+         text("m/.gslam-result.json", json.dumps({"command": "map", "files": [1, 2]}))),
+    Case("marker-files-is-a-path", (*MAP, *QUICK, "--out", "{d}/m"), "lists '../x', which is not a file inside the folder",
+         text("m/.gslam-result.json", json.dumps({"command": "map", "files": "../x"}))),
+    *(Case(f"ablate-resumed-{name}", ("ablate", "{spec}", "--out", "{d}/o"),
+           f"metrics.json: expected the JSON object gslam writes, found {says}", finished_sweep(content))
+      for name, content, says in (
+          ("metrics-cut-short", '{"ate_rmse_m": ', "invalid JSON (Expecting value: line 1 column 16"),
+          ("metrics-a-list", "[1, 2]", "a JSON list"),
+          ("metrics-nested-100000-deep", "[" * 100_000, "JSON nested too deeply"),
       )),
 ]
 

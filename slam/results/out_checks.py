@@ -99,7 +99,12 @@ def classify(out: str | Path, command: str, inputs: Iterable[str | Path] = (), f
         return Existing.NEW
     if force:
         return Existing.FORCED
-    what = f"a gslam {found} result, not a {command} result" if found else f"not a gslam {command} result (no {RESULT_MARKER})"
+    if found:
+        what = f"a gslam {found} result, not a {command} result"
+    elif (out / RESULT_MARKER).exists():
+        what = f"not a gslam {command} result (its {RESULT_MARKER} is not one gslam wrote)"
+    else:
+        what = f"not a gslam {command} result (no {RESULT_MARKER})"
     raise refuse(
         out, f"is a folder that is {what}; give a new folder name, or --force to add the {command} files "
         "to it (nothing of yours there is replaced)"
