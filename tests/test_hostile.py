@@ -250,6 +250,15 @@ def scenario_waypoints(points) -> Callable[[Path, World], None]:
     return scenario(set_in("robot", "waypoints", points))
 
 
+def link_loop(name: str) -> Callable[[Path, World], None]:
+    """A link ``{d}/name`` to itself."""
+
+    def make(d: Path, world: World) -> None:
+        (d / name).symlink_to(d / name)
+
+    return make
+
+
 def finished_sweep(metrics: str) -> Callable[[Path, World], None]:
     """The one-job sweep run into ``{d}/o``, its job's metrics.json then
     replaced by ``metrics`` (as an edit, or a tool other than gslam, does)."""
@@ -689,6 +698,28 @@ ERRORS: list[Case] = [
           ("metrics-a-list", "[1, 2]", "a JSON list"),
           ("metrics-nested-100000-deep", "[" * 100_000, "JSON nested too deeply"),
       )),
+    # -- a loop of links, above --out or as the input --
+    *(Case(f"{command}-out-under-a-link-loop", (*argv, "{d}/a/x"), "a/x: too many levels of symbolic links", link_loop("a"))
+      for command, argv in (
+          ("map", (*MAP, *QUICK, "--out")),
+          ("simulate", ("simulate", "{scen}", "--out")),
+          ("compare", ("compare", "{run}", "--config", "{cfg}", "--out")),
+          ("inject", ("inject", "{run}", "--fault", "gyro_bias@2:4", "--out")),
+          ("calibrate", (*CAL, "--out")),
+          ("inspect", ("inspect", "{run}", "--config-out")),
+          ("demo", ("demo", "--out")),
+          ("ablate", ("ablate", "{spec}", "--out")),
+      )),
+    Case("ablate-scenario-a-link-loop", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "a: too many levels of symbolic links",
+         both(link_loop("a"), lambda d, w: spec_in(d, w, inputs={"scenarios": [{"path": str(d / "a"), "seeds": [1]}]}))),
+    Case("map-input-a-link-loop", ("map", "{d}/a", "--config", "{cfg}", "--out", "{d}/o"),
+         "a: too many levels of symbolic links", link_loop("a")),
+    Case("inspect-input-a-link-loop", ("inspect", "{d}/a"), "a: too many levels of symbolic links", link_loop("a")),
+    Case("calibrate-input-a-dangling-link", ("calibrate", "{d}/a", "--config", "{cfg}", "--clean", "0:10", "--out", "{d}/c.yaml"),
+         "a: a symbolic link to ", lambda d, w: (d / "a").symlink_to(d / "nowhere")),
+    Case("config-model-a-link-loop", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "m.yaml: cannot read YAML file (Too many levels of symbolic links)",
+         both(link_loop("m.yaml"), text("c.yaml", "validation: {model: m.yaml}\n"))),
 ]
 
 

@@ -39,7 +39,7 @@ from slam.config import InputConfig
 from slam.errors import GslamError
 from validation.base.geometry import wrap_angle
 from slam.readers.carmen import chain_steps
-from slam.readers.files import SNIFF_BYTES, decode_log, sniff_log
+from slam.readers.files import SNIFF_BYTES, check_exists, decode_log, sniff_log
 from validation.base.yamlio import check_regular_file
 from slam.recording import Gyro, PlaceMatches, Recording, Trajectory
 
@@ -59,8 +59,7 @@ def dataset_files(path: str | Path) -> tuple[Path, Path | None]:
     """``(input, groundtruth or None)`` for a ``*_Input.txt``, a ``*_GT.txt``
     or a folder holding exactly one ``*_Input.txt``."""
     path = Path(path)
-    if not path.exists():
-        raise GslamError(f"{path}: no such file or directory")
+    check_exists(path)
     if path.is_dir():
         inputs = sorted(path.glob(f"*{INPUT_SUFFIX}"))
         if len(inputs) != 1:

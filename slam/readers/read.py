@@ -35,6 +35,7 @@ from validation.base.yamlio import read_text
 from validation.base.yamlio import check_regular_file
 from slam.errors import GslamError
 from slam.readers import broad, carmen, librsf
+from slam.readers.files import check_exists
 from slam.readers.rosbag import BAG_SUFFIXES, RosbagReader, ScansHook, is_rosbag
 from slam.recording import COMPONENTS, SENSOR_MODALITIES, MagneticReference, Recording, expand_sensor_labels
 
@@ -98,8 +99,7 @@ def run_recording(path: Path) -> Path:
 def guess_format(path: str | Path) -> str:
     """The registry key of the reader for ``path`` (a run folder's recording)."""
     path = Path(path)
-    if not path.exists():
-        raise GslamError(f"{path}: no such file or directory")
+    check_exists(path)
     if not path.is_dir():
         check_regular_file(path, "recording")
     if is_run_folder(path):

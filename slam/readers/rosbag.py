@@ -45,6 +45,7 @@ from typing import Any
 from slam.config import InputConfig
 from slam.errors import GslamError
 from slam.readers import cdr, rosbag2_sqlite, rosbag_mcap
+from slam.readers.files import check_exists
 from slam.readers.rosbag_imu import _CompassImuStream, _CompassMagStream, _GyroStream, world_yaw_rate
 from slam.readers.rosbag_poses import _GpsStream, _PoseStream
 from slam.readers.rosbag_scans import _ScanStream
@@ -89,8 +90,7 @@ def resolve_bag_path(path: Path) -> Path:
     """The path to hand to rosbags: ``path`` itself, or the single bag file in
     a directory that is not a rosbag2 directory (as a run folder's ``bag/``
     may be)."""
-    if not path.exists():
-        raise GslamError(f"{path}: no such file or directory")
+    check_exists(path)
     if not path.is_dir():
         check_regular_file(path, "ROS bag")
         return path
