@@ -720,6 +720,14 @@ ERRORS: list[Case] = [
     Case("config-model-a-link-loop", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
          "m.yaml: cannot read YAML file (Too many levels of symbolic links)",
          both(link_loop("m.yaml"), text("c.yaml", "validation: {model: m.yaml}\n"))),
+    # -- command-line values no run can use --
+    Case("ablate-workers-1e11", ("ablate", "{spec}", "--out", "{d}/o", "--workers", "100000000000"),
+         "argument --workers: expected at most 1024, got 1e+11", code=2),
+    Case("compare-only-empty", ("compare", "{run}", "--config", "{cfg}", "--only", "", "--out", "{d}/o"),
+         "argument --only: expected comma-separated variant names, got ''", code=2),
+    Case("compare-only-an-empty-name", ("compare", "{run}", "--config", "{cfg}", "--only", "gated,,ungated", "--out", "{d}/o"),
+         "argument --only: expected comma-separated variant names, got 'gated,,ungated'", code=2),
+    Case("demo-only-blank", ("demo", "--only", " ", "--out", "{d}/o"), "argument --only: expected comma-separated", code=2),
 ]
 
 
