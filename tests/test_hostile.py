@@ -271,6 +271,31 @@ def finished_sweep(metrics: str) -> Callable[[Path, World], None]:
     return make
 
 
+def librsf_with(loops: str, groundtruth: str | None = None) -> Callable[[Path, World], None]:
+    """A libRSF log of 10 s (odom2 lines, a turn in the middle), ``loops``
+    lines after them, and ``groundtruth`` as its X_GT.txt if given."""
+
+    def make(d: Path, world: World) -> None:
+        rows = "".join(f"odom2 {0.1 * k:.1f} 0.5 0 {0.3 if 20 <= k < 30 else 0.0} 0.01 0.01 0.01\n" for k in range(100))
+        (d / "X_Input.txt").write_text(rows + loops + "\n")
+        if groundtruth is not None:
+            (d / "X_GT.txt").write_text(groundtruth)
+
+    return make
+
+
+def _covariance(variance: float) -> Callable[[float, object], None]:
+    def change(t: float, msg) -> None:
+        msg.position_covariance[0] = msg.position_covariance[4] = variance
+        msg.position_covariance_type = 2
+
+    return change
+
+
+LIBRSF = ("map", "{d}/X_Input.txt", "--config", str(CONFIGS / "datasets" / "librsf_corridor.yaml"), *QUICK, "--out", "{d}/o")
+MAG_BAG = ("map", "{d}/b", "--config", "{cfg}", "--set", "input.compass.source=magnetic_field", *QUICK, "--out", "{d}/o")
+
+
 # --- the error corpus -------------------------------------------------------------
 
 
@@ -728,6 +753,30 @@ ERRORS: list[Case] = [
     Case("compare-only-an-empty-name", ("compare", "{run}", "--config", "{cfg}", "--only", "gated,,ungated", "--out", "{d}/o"),
          "argument --only: expected comma-separated variant names, got 'gated,,ungated'", code=2),
     Case("demo-only-blank", ("demo", "--only", " ", "--out", "{d}/o"), "argument --only: expected comma-separated", code=2),
+    # -- physics of what the readers read --
+    Case("bag-gps-covariance-1e300", BAG, "gps fix 0 has a sigma of 1e+150 m; one beyond 1e+06 m says nothing",
+         bag(each("/gps/fix", _covariance(1e300)))),
+    Case("bag-magnetic-field-of-1-tesla", MAG_BAG, "compass: median field 1e+06 uT, expected the Earth's",
+         bag(each("/imu/mag", lambda t, m: setattr(m.magnetic_field, "x", 1.0)))),
+    Case("bag-magnetic-field-zero", MAG_BAG, "compass: median field 0 uT, expected the Earth's",
+         bag(each("/imu/mag", lambda t, m: [setattr(m.magnetic_field, k, 0.0) for k in "xyz"]))),
+    Case("broad-sampling-rate-a-word", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"),
+         "sampling_rate: expected an IMU's rate in Hz (1 to 100000; BROAD's is 285.7), got 'fast'",
+         broad_mat(sampling_rate="fast")),
+    Case("broad-magnetometer-nan", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"),
+         "imu_gyr/imu_acc/imu_mag: expected finite samples", broad_mat(imu_mag=np.full((50, 3), np.nan))),
+    *(Case(f"librsf-{name}", LIBRSF, says, librsf_with(loop)) for name, loop, says in (
+        ("loop-weight-1e300", "loop 9.0 1.0 1e300", "loop line #1: weight 1e+300; expected 0 to 1e+06"),
+        ("loop-weight-negative", "loop 9.0 1.0 -1", "loop line #1: weight -1; expected 0 to 1e+06"),
+        ("loop-after-the-log", "loop 9.0 1e6 1", "loop line #1: t_other 1e+06 s is outside the odom2 lines' 0 to 9.9 s"),
+        ("loop-weight-nan", "loop 9.0 1.0 nan", "X_Input.txt:101: expected loop t t_other weight"),
+    )),
+    Case("librsf-ground-truth-goes-back", LIBRSF, "X_GT.txt: point2 line #51: expected increasing times",
+         librsf_with("loop 9.0 1.0 1", "".join(f"point2 {0.1 * (k % 50):.1f} {0.05 * k} 0 0.1 0 0 0.1\n" for k in range(100)))),
+    Case("carmen-a-billion-beams", CARMEN, "c.log:1: expected FLASER n r_1..r_n", text("c.log", "FLASER 1000000000 1 2 3 "
+                                                                                        "0 0 0 0 0 0 1.0 host 1.0\n")),
+    Case("carmen-negative-beam-count", CARMEN, "c.log:1: expected a positive beam count",
+         text("c.log", "FLASER -3 1 2 3 0 0 0 0 0 0 1.0 host 1.0\n")),
 ]
 
 
@@ -792,6 +841,8 @@ WARNINGS: list[Warned] = [
            scenario(lambda t: t["world"]["obstacles"].append([[4, 1.0], [4.4, 1.0], [4.4, 1.4], [4, 1.4]]))),
     Warned("scenario-leg-through-a-wall", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "crosses world.walls.",
            scenario(lambda t: t["world"]["walls"].append([[5, 0.5], [5, 2.0]]))),
+    Warned("carmen-range-limit-param-1e300", CARMEN, "the laser's range limit is 1e+300 m, beyond 10000 m",
+           carmen(head="PARAM robot_front_laser_max 1e300")),
 ]
 
 
