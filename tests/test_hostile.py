@@ -843,6 +843,8 @@ WARNINGS: list[Warned] = [
            scenario(lambda t: t["world"]["walls"].append([[5, 0.5], [5, 2.0]]))),
     Warned("carmen-range-limit-param-1e300", CARMEN, "the laser's range limit is 1e+300 m, beyond 10000 m",
            carmen(head="PARAM robot_front_laser_max 1e300")),
+    Warned("librsf-without-ground-truth-anchored-once", LIBRSF, "no ground truth to anchor the first pose",
+           librsf_with("loop 9.0 1.0 1")),
 ]
 
 
