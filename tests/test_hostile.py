@@ -753,6 +753,8 @@ ERRORS: list[Case] = [
     Case("compare-only-an-empty-name", ("compare", "{run}", "--config", "{cfg}", "--only", "gated,,ungated", "--out", "{d}/o"),
          "argument --only: expected comma-separated variant names, got 'gated,,ungated'", code=2),
     Case("demo-only-blank", ("demo", "--only", " ", "--out", "{d}/o"), "argument --only: expected comma-separated", code=2),
+    Case("scenario-door-1e300-wide", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "world.doors.0.width_m: 1e+300 m is above 100 m",
+         scenario(lambda t: t["world"].update(doors=[{"center": [0, 0], "width_m": 1e300}]))),
     # -- physics of what the readers read --
     Case("bag-gps-covariance-1e300", BAG, "gps fix 0 has a sigma of 1e+150 m; one beyond 1e+06 m says nothing",
          bag(each("/gps/fix", _covariance(1e300)))),

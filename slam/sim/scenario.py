@@ -46,7 +46,8 @@ class Door(Strict):
     """An opening cut into every wall segment that passes through ``center``."""
 
     center: Point
-    width_m: float = Field(gt=0.0)
+    width_m: Annotated[float, within(None, 100.0, "m", high="a door that wide is no door: it cuts every wall it "
+                                     "passes through")] = Field(gt=0.0)
 
 
 class Region(Strict):
