@@ -708,6 +708,21 @@ ERRORS: list[Case] = [
           ("gyro-1e6-rad-s", {"imu_gyr": np.vstack([np.zeros((10, 3)), [[1e6, 0.0, 0.0]], np.zeros((39, 3))])},
            "imu_gyr at sample 10 is 1e+06 rad/s"),
       )),
+    # -- distances, reaches and tolerances a run cannot use (validation/base/bounds.py) --
+    *(Case(f"set-{key}-{value}", (*MAP, "--out", "{d}/o", "--set", f"{key}={value}"), f"--set {key}={value}: {key}: {says}")
+      for key, value, says in (
+          ("frontend.max_range_m", "1e300", "1e+300 m is above 1000 m"),
+          ("frontend.initial_threshold_m", "1e300", "1e+300 m is above 100 m"),
+          ("frontend.initial_threshold_m", "1e-300", "1e-300 m is below 0.001 m"),
+          ("backend.relative_error_tol", "1e300", "1e+300 is above 1"),
+          ("backend.relative_error_tol", "1e-300", "1e-300 is below 1e-15"),
+          ("evaluation.sm_fault_window_s", "1e-300", "1e-300 s is below 0.01 s"),
+          ("evaluation.sm_fault_trans_m", "1e300", "1e+300 m is above 100 m"),
+          ("output.grid_no_return_m", "1e300", "1e+300 m is above 1000 m"),
+          ("submaps.refine.kernel_m", "1e-300", "1e-300 m is below 0.001 m"),
+          ("submaps.refine.max_distance_m", "1e300", "1e+300 m is above 100 m"),
+          ("loops.registration.kernel_m", "1e-300", "1e-300 m is below 0.001 m"),
+      )),
     # -- result markers and a sweep's own files, read back as input --
     Case("marker-json-nested-100000-deep", (*MAP, *QUICK, "--out", "{d}/m"),
          "--out is a folder that is not a gslam map result (its .gslam-result.json is not one gslam wrote)",

@@ -206,10 +206,10 @@ class FrontendConfig(Strict):
     enabled: bool = True
     initial_guess: Literal["constant_velocity", "odometry"] = "constant_velocity"
     min_range_m: float = Field(0.1, ge=0.0)
-    max_range_m: float = Field(30.0, gt=0.0)
+    max_range_m: bounds.LaserRange_m = Field(30.0, gt=0.0)
     voxel_size_m: float = Field(0.1, gt=0.0)
     max_points_per_voxel: bounds.Count = Field(20, ge=1)
-    initial_threshold_m: float = Field(0.5, gt=0.0)
+    initial_threshold_m: bounds.MatchDistance_m = Field(0.5, gt=0.0)
     min_motion_m: float = Field(0.05, ge=0.0)
     max_iterations: bounds.Iterations = Field(500, ge=1)
     threads: bounds.Threads = Field(1, ge=0)
@@ -339,7 +339,7 @@ class BackendConfig(Strict):
     initial_sigma_xy_m: bounds.Sigma_m = Field(0.01, gt=0.0)
     initial_sigma_yaw_deg: bounds.Sigma_deg = Field(0.5, gt=0.0)
     max_iterations: bounds.Iterations = Field(100, ge=1)
-    relative_error_tol: float = Field(1e-6, gt=0.0)
+    relative_error_tol: Annotated[float, bounds.RELATIVE_TOLERANCE] = Field(1e-6, gt=0.0)
     robust_kernel: Kernel = "none"
     robust_param: bounds.RobustParam = Field(1.345, gt=0.0)
     gnc_inlier_probability: float | None = Field(None, gt=0.0, lt=1.0)
@@ -363,9 +363,10 @@ class EvaluationConfig(Strict):
     rpe_deltas_m: list[float] = Field(default_factory=lambda: [5.0])
     max_time_offset_s: Annotated[float, bounds.MATCH_OFFSET_S] = Field(0.05, gt=0.0)
     sm_output_faults: bool = True
-    sm_fault_window_s: float = Field(1.0, gt=0.0)
-    sm_fault_trans_m: float = Field(0.15, gt=0.0)
-    sm_fault_yaw_deg: float = Field(3.0, gt=0.0)
+    sm_fault_window_s: Annotated[float, bounds.within(1e-2, 3600.0, "s", "shorter than any scan period",
+                                                      "an hour of scan matching judged as one motion")] = Field(1.0, gt=0.0)
+    sm_fault_trans_m: bounds.MatchDistance_m = Field(0.15, gt=0.0)
+    sm_fault_yaw_deg: bounds.HeadingError_deg = Field(3.0, gt=0.0)
 
 
 class OutputConfig(Strict):
@@ -387,7 +388,7 @@ class OutputConfig(Strict):
     grid_resolution_m: Annotated[float, bounds.GRID_CELL_M] = Field(0.05, gt=0.0)
     grid_hit_probability: float = Field(0.7, gt=0.5, lt=1.0)
     grid_miss_probability: float = Field(0.4, gt=0.0, lt=0.5)
-    grid_no_return_m: float = Field(5.0, ge=0.0)
+    grid_no_return_m: bounds.LaserRange_m = Field(5.0, ge=0.0)
     mcap: bool = True
     report: bool = True
 

@@ -152,7 +152,7 @@ class LaserConfig(Strict):
     beams: bounds.Count = Field(541, ge=2)
     fov_deg: float = Field(270.0, gt=0.0, le=360.0)
     min_range_m: float = Field(0.1, ge=0.0)
-    max_range_m: Annotated[float, within(None, 1000.0, "m", high="beyond any 2D laser's reach")] = Field(10.0, gt=0.0)
+    max_range_m: bounds.LaserRange_m = Field(10.0, gt=0.0)
     # A 2D laser ranges to 1-3 cm; a metre is no laser's noise.
     range_noise_m: Annotated[float, within(None, 1.0, "m", high="no laser ranges that noisily")] = Field(0.01, ge=0.0)
 

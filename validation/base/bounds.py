@@ -99,6 +99,16 @@ KEYFRAME_YAW_DEG = within(1e-3, 360.0, "deg", "each keyframe would be the last o
                           "a turn that is never reached")
 """The turn between keyframes (deg)."""
 
+LASER_RANGE_M = within(None, 1000.0, "m", high="beyond any 2D laser's reach")
+"""A range of a 2D laser (m): a limit of the scans used, a free-space trace."""
+MATCH_DISTANCE_M = within(1e-3, 100.0, "m", "finer than any laser's range noise: no point would find its match",
+                          "a point matched that far off is another wall's")
+"""A distance within which a scan's point matches the map (m): ICP's
+correspondence limits and kernels, KISS-ICP's first threshold."""
+RELATIVE_TOLERANCE = within(1e-15, 1.0, "", "below double precision: the optimiser would never stop early",
+                            "a relative decrease is at most 1: the optimiser would stop before its first step")
+"""An optimiser's relative error decrease that counts as converged."""
+
 SEARCH_WINDOW_M = within(None, 100.0, "m", high="a scan searched for that far from its guess is looked for in "
                          "the whole building, not corrected (and the search grid is padded by the window)")
 """The half-width of a scan matcher's linear search window (m)."""
@@ -154,6 +164,8 @@ ScanMinEigenvalue = Annotated[float, SCAN_MIN_EIGENVALUE]
 DipoleMoment_A_m2 = Annotated[float, DIPOLE_MOMENT_A_M2]
 Multipath_m = Annotated[float, MULTIPATH_M]
 Azimuth_deg = Annotated[float, AZIMUTH_DEG]
+LaserRange_m = Annotated[float, LASER_RANGE_M]
+MatchDistance_m = Annotated[float, MATCH_DISTANCE_M]
 
 # --- counts handed to loops and to C++ (KISS-ICP, GTSAM) ----------------------
 
