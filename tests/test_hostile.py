@@ -513,6 +513,10 @@ ERRORS: list[Case] = [
     Case("config-datum-latitude-100", (*MAP, "--out", "{d}/o", "--set", "input.gps.datum_lat_deg=100",
                                        "--set", "input.gps.datum_lon_deg=11"), "input.gps.datum_lat_deg"),
     Case("bag-gyro-on-another-clock", BAG, "gyro stamps", bag(restamp("/imu/data", lambda k: -1e9))),
+    Case("bag-gyro-nanosec-3e9", BAG, "gyro topic '/imu/data': header stamp at message 0 has nanosec 3000000000, beyond "
+         "999999999: not a ROS time", bag(each("/imu/data", lambda t, m: setattr(m.header.stamp, "nanosec", 3_000_000_000)))),
+    Case("bag-scan-nanosec-1.5e9", BAG, "scan topic '/scan': header stamp at message 0 has nanosec 1500000000",
+         bag(each("/scan", lambda t, m: setattr(m.header.stamp, "nanosec", 1_500_000_000)))),
     Case("bag-odometry-jumps-a-day", BAG, "odometry stamps jump forward by 86400",
          bag(restamp("/odom", lambda k: 86400.0 if k >= 40 else 0.0))),
     # -- other formats --
