@@ -517,6 +517,9 @@ ERRORS: list[Case] = [
          "999999999: not a ROS time", bag(each("/imu/data", lambda t, m: setattr(m.header.stamp, "nanosec", 3_000_000_000)))),
     Case("bag-scan-nanosec-1.5e9", BAG, "scan topic '/scan': header stamp at message 0 has nanosec 1500000000",
          bag(each("/scan", lambda t, m: setattr(m.header.stamp, "nanosec", 1_500_000_000)))),
+    Case("run-truth-t0-of-another-recording", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"),
+         "s after t0 1e+300 lies outside the recording", copy_run(lambda r: (r / "truth.json").write_text(
+             json.dumps({**json.loads((r / "truth.json").read_text()), "t0": 1e300})))),
     Case("bag-odometry-jumps-a-day", BAG, "odometry stamps jump forward by 86400",
          bag(restamp("/odom", lambda k: 86400.0 if k >= 40 else 0.0))),
     # -- other formats --
