@@ -730,6 +730,21 @@ ERRORS: list[Case] = [
           ("submaps.refine.max_distance_m", "1e300", "1e+300 m is above 100 m"),
           ("loops.registration.kernel_m", "1e-300", "1e-300 m is below 0.001 m"),
       )),
+    # -- a system model's errors name its file, not the config or a --set that did not touch it --
+    *(Case(f"model-{name}", (*MAP[:2], "--config", "{d}/c.yaml", *extra, "--out", "{d}/o"), f"m.yaml: validation: {says}",
+           both(text("m.yaml", change((CONFIGS / "validation" / "telemax_model.yaml").read_text())),
+                config(lambda t: t["validation"].update(model="m.yaml"))))
+      for name, extra, change, says in (
+          ("prior-1-with-gating-on", ("--gating", "on"), lambda m: m.replace("LOOP: 0.05", "LOOP: 1.0"),
+           "model.priors: prior of 'LOOP' must be in (0, 1), got 1.0"),
+          ("prior-negative", (), lambda m: m.replace("LOOP: 0.05", "LOOP: -0.5"), "model.priors: prior of 'LOOP'"),
+          ("relation-of-one-component", ("--gating", "on"),
+           lambda m: m.replace("yaw_compass_gyro: [IMU_YAW, IMU_GYRO]   #", "yaw_compass_gyro: [IMU_YAW, IMU_YAW]   #"),
+           "model: relations.yaw_compass_gyro: a relation needs two different components"),
+          ("masking-probability-2", ("--set", "validation.mode=on"), lambda m: m.replace(
+              "failure_masking: []", "failure_masking:\n  - {relation: yaw_compass_gyro, corr: true, masking_prob: 2.0}"),
+           "model.failure_masking.0.masking_prob: Input should be less than 1"),
+      )),
     # -- result markers and a sweep's own files, read back as input --
     Case("marker-json-nested-100000-deep", (*MAP, *QUICK, "--out", "{d}/m"),
          "--out is a folder that is not a gslam map result (its .gslam-result.json is not one gslam wrote)",

@@ -552,9 +552,10 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
     applied = [(text, key) for text, (key, _) in parsed]
     # A model path in the file is relative to the file; one given as an
     # override is relative to the working directory.
+    model_file = None  # the system model's file, which its own errors name
     try:
         if isinstance(tree.get("validation"), dict) and path is not None:
-            inline_model(tree["validation"], Path(path).parent)
+            model_file = inline_model(tree["validation"], Path(path).parent)
     except (SectionError, GslamError) as e:
         raise GslamError(f"{source}: {e}") from None
     for text, (key, value) in parsed:
@@ -564,7 +565,7 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
             raise GslamError(f"--set {text}: {e}") from None
     try:
         if isinstance(tree.get("validation"), dict):
-            inline_model(tree["validation"], Path.cwd())
+            model_file = inline_model(tree["validation"], Path.cwd()) or model_file
     except (SectionError, GslamError) as e:
         raise GslamError(f"{_blame(source, applied, 'validation.model')}: {e}") from None
     found = non_finite(tree)
@@ -584,7 +585,9 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
 
             check_model(vcfg.model)
     except SectionError as e:
-        raise GslamError(f"{_blame(source, applied, _section_error_key(str(e)))}: {e}") from None
+        key = _section_error_key(str(e))
+        in_model = model_file is not None and (key + ".").startswith("validation.model.")
+        raise GslamError(f"{model_file if in_model else _blame(source, applied, key)}: {e}") from None
     _check_sources(vcfg, config.input, lambda key: _blame(source, applied, key))
     # The checked sections, every default spelled out (validate_assignment
     # checks them as mappings).
@@ -626,8 +629,13 @@ def enabled_factors(config: PipelineConfig) -> list[str]:
 
 def _section_error_key(message: str) -> str:
     """The dotted key a validation-package error is about: its leading
-    ``section.key:``, plus the name of an unknown key."""
-    key = message.split(":", 1)[0].split(" ", 1)[0]
+    ``section.key:`` (``validation: model.priors:`` is
+    ``validation.model.priors``), plus the name of an unknown key."""
+    head, _, rest = message.partition(":")
+    key = head.split(" ", 1)[0]
+    inner = re.match(r" ([A-Za-z_][\w.]*):", rest)
+    if inner and " " not in head:
+        key = f"{key}.{inner.group(1)}"
     unknown = re.search(r"unknown key '([^']+)'", message)
     return f"{key}.{unknown.group(1)}" if unknown else key
 
