@@ -730,6 +730,16 @@ ERRORS: list[Case] = [
           ("submaps.refine.max_distance_m", "1e300", "1e+300 m is above 100 m"),
           ("loops.registration.kernel_m", "1e-300", "1e-300 m is below 0.001 m"),
       )),
+    # -- the gating section's multiples and spans --
+    *(Case(f"set-{key}-{value}", (*MAP, "--gating", "on", "--out", "{d}/o", "--set", f"{key}={value}"),
+           f"--set {key}={value}: gating: {key.split('.')[1]}: {says}")
+      for key, value, says in (
+          ("gating.inflation", "1e300", "1e+300 is above 1000"),
+          ("gating.holdoff_s", "1e300", "1e+300 s is above 86400 s"),
+          ("gating.lookback_s", "1e300", "1e+300 s is above 86400 s"),
+          ("gating.recheck_window_s", "1e300", "1e+300 s is above 86400 s"),
+          ("gating.keep_k_sigma", "1e-300", "1e-300 sigmas is below 0.5 sigmas"),
+      )),
     # -- a system model's errors name its file, not the config or a --set that did not touch it --
     *(Case(f"model-{name}", (*MAP[:2], "--config", "{d}/c.yaml", *extra, "--out", "{d}/o"), f"m.yaml: validation: {says}",
            both(text("m.yaml", change((CONFIGS / "validation" / "telemax_model.yaml").read_text())),
