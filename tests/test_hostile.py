@@ -740,6 +740,19 @@ ERRORS: list[Case] = [
           ("gating.recheck_window_s", "1e300", "1e+300 s is above 86400 s"),
           ("gating.keep_k_sigma", "1e-300", "1e-300 sigmas is below 0.5 sigmas"),
       )),
+    # -- the observers' fields, windows and geometry --
+    *(Case(f"set-{key}-{value}", (*MAP, "--gating", "on", "--out", "{d}/o", "--set", f"validation.observers.{key}={value}"),
+           f"validation.observers: {key}: {says}")
+      for key, value, says in (
+          ("magnetometer.strength_T", "1.0", "1 T is above 0.001 T"),
+          ("magnetometer.tolerance_T", "1e300", "1e+300 T is above 0.001 T"),
+          ("magnetometer.tolerance_dip_deg", "1e300", "1e+300 deg is above 180 deg"),
+          ("max_gap_s", "1e300", "1e+300 s is above 86400 s"),
+          ("gps_speed_window_s", "1e-300", "1e-300 s is below 0.001 s"),
+          ("scan.min_eigenvalue", "1e300", "1e+300 is above 1"),
+          ("scan_ceiling.max_ceiling_m", "1e300", "1e+300 m is above 1000 m"),
+          ("gps_course_min_speed_mps", "1e300", "1e+300 m/s is above 100 m/s"),
+      )),
     # -- a system model's errors name its file, not the config or a --set that did not touch it --
     *(Case(f"model-{name}", (*MAP[:2], "--config", "{d}/c.yaml", *extra, "--out", "{d}/o"), f"m.yaml: validation: {says}",
            both(text("m.yaml", change((CONFIGS / "validation" / "telemax_model.yaml").read_text())),

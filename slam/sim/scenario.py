@@ -241,10 +241,7 @@ class SensorsConfig(Strict):
 class EnvironmentConfig(Strict):
     """Undisturbed Earth field, GPS datum and absolute start time."""
 
-    # The Earth's field is 22-67 uT everywhere; a thousandth of a tesla is
-    # fifteen times the strongest, a microtesla twenty times the weakest.
-    field_strength_T: Annotated[float, within(1e-6, 1e-3, "T", "twenty times weaker than the Earth's field anywhere",
-                                              "fifteen times the Earth's strongest field")] = Field(48e-6, gt=0.0)
+    field_strength_T: Annotated[float, bounds.EARTH_FIELD_T] = Field(48e-6, gt=0.0)
     dip_deg: float = Field(64.0, ge=-90.0, le=90.0)
     declination_deg: Annotated[float, within(-180.0, 180.0, "deg", "a declination is at most half a turn west",
                                              "a declination is at most half a turn east")] = 3.0

@@ -81,6 +81,18 @@ HOLD_S = within(None, 86400.0, "s", high="a deviation held for a day before it c
 """How long a check's deviation must last before it counts (s)."""
 SPAN_S = within(None, 86400.0, "s", high="a verdict carried over a day reaches across any run")
 """How far a check carries its verdict: across a gap, after a cut (s)."""
+WINDOW_S = within(1e-3, 86400.0, "s", "shorter than any sensor's period: a window of no samples",
+                  "a window of over a day reaches across any run")
+"""A window or gap a check measures over (s)."""
+
+# --- the Earth's magnetic field --------------------------------------------------
+
+EARTH_FIELD_T = within(1e-6, 1e-3, "T", "twenty times weaker than the Earth's field anywhere (22-67 uT)",
+                       "fifteen times the Earth's strongest field")
+"""The strength of the Earth's field (T)."""
+FIELD_TOLERANCE_T = within(1e-9, 1e-3, "T", "below any magnetometer's noise (about 0.1 uT): every sample would "
+                           "deviate", "beyond fifteen times the Earth's strongest field: no deviation would count")
+"""How far a field may deviate before a check sees it (T)."""
 
 # --- sizes of maps and keyframes --------------------------------------------
 
@@ -165,6 +177,8 @@ DipoleMoment_A_m2 = Annotated[float, DIPOLE_MOMENT_A_M2]
 Multipath_m = Annotated[float, MULTIPATH_M]
 Azimuth_deg = Annotated[float, AZIMUTH_DEG]
 LaserRange_m = Annotated[float, LASER_RANGE_M]
+Window_s = Annotated[float, WINDOW_S]
+FieldTolerance_T = Annotated[float, FIELD_TOLERANCE_T]
 MatchDistance_m = Annotated[float, MATCH_DISTANCE_M]
 
 # --- counts handed to loops and to C++ (KISS-ICP, GTSAM) ----------------------
