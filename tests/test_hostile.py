@@ -826,6 +826,18 @@ ERRORS: list[Case] = [
          "keyframes.period_s: Input should be a valid number", text("c.yaml", "keyframes: {period_s: 2024-01-01}\n")),
     Case("scenario-wall-of-words", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
          "world.walls.0.0.0: Input should be a valid number", scenario(set_in("world", "walls", [[["a", "b"], [1, 2]]]))),
+    # -- a reader told the wrong format, and values each reader already refuses --
+    Case("map-run-folder-read-as-carmen", (*MAP, *QUICK, "--set", "input.format=carmen", "--out", "{d}/o"),
+         "bag: expected a CARMEN log file, got a directory"),
+    Case("map-carmen-log-read-as-a-bag", ("map", "{d}/c.log", "--config", str(CONFIGS / "datasets" / "carmen.yaml"), *QUICK,
+                                          "--set", "input.format=rosbag", "--out", "{d}/o"),
+         "c.log: not a readable ROS bag", carmen()),
+    Case("carmen-robotlaser-fov-nan", CARMEN, "c.log:1: expected finite numbers in ROBOTLASER1",
+         carmen(robotlaser=(-1.57, math.nan, 0.0174))),
+    Case("broad-positions-1e300", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"),
+         "groundtruth pose 0 (t = 0.000 s) is at (1e+300, 1e+300) m, beyond 1e+07 m", broad_mat(opt_pos=np.full((50, 3), 1e300))),
+    Case("broad-quaternion-1e-300", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"),
+         "opt_quat at sample 0 is not a rotation", broad_mat(opt_quat=np.tile([1e-300, 0, 0, 0], (50, 1)))),
     Case("scenario-door-1e300-wide", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "world.doors.0.width_m: 1e+300 m is above 100 m",
          scenario(lambda t: t["world"].update(doors=[{"center": [0, 0], "width_m": 1e300}]))),
     # -- physics of what the readers read --
