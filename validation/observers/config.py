@@ -206,7 +206,8 @@ class MagnetometerCheckConfig(StrictFrozen):
     strength_T: Annotated[float | None, bounds.EARTH_FIELD_T] = Field(None, gt=0.0)
     dip_deg: float | None = Field(None, ge=-90.0, le=90.0)
     tolerance_T: bounds.FieldTolerance_T = Field(5e-6, gt=0.0)
-    tolerance_dip_deg: Annotated[float, bounds.within(1e-2, 180.0, "deg", "below any magnetometer's noise: every "
+    # gslam calibrate writes at least 0.001 deg (a noise-free simulated field).
+    tolerance_dip_deg: Annotated[float, bounds.within(1e-3, 180.0, "deg", "below any magnetometer's noise: every "
                                                       "sample would deviate", "a dip is within +-90 deg: no "
                                                       "deviation would count")] = Field(5.0, gt=0.0)
     hold_s: Annotated[float, bounds.HOLD_S] = Field(1.0, ge=0.0)
