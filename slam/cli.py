@@ -191,8 +191,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
 def _cmd_compare(args: argparse.Namespace) -> int:
     from slam.commands.compare import run_compare
 
-    only = args.only.split(",") if args.only else None
-    res = run_compare(args.input, _config_path(args.config), args.out, _config_path(args.variants), only,
+    res = run_compare(args.input, _config_path(args.config), args.out, _config_path(args.variants), args.only,
                       args.set or [], progress=not args.quiet, force=args.force, command=args.command_line)
     print((res.out_dir / "comparison.md").read_text())
     print(f"wrote {res.out_dir}" + _report_hint(res.out_dir))
@@ -209,9 +208,8 @@ def _report_hint(folder: Path) -> str:
 def _cmd_demo(args: argparse.Namespace) -> int:
     from slam.commands.demo import run_demo
 
-    only = args.only.split(",") if args.only else None
     res = run_demo(args.out, _config_path(args.scenario), _config_path(args.config), _config_path(args.variants),
-                   only, args.seed, progress=not args.quiet, force=args.force, command=args.command_line)
+                   args.only, args.seed, progress=not args.quiet, force=args.force, command=args.command_line)
     if res.simulated:
         print(f"simulated {res.run_dir} ({res.duration_s:.1f} s of the mission)")
     else:
@@ -266,8 +264,9 @@ def _print_metrics(out_dir: Path, metrics: dict) -> None:
     print(json.dumps(shown, indent=2))
 
 
-def _whole(minimum: int):
-    """An argparse type: a whole number of at least ``minimum``."""
+def _whole(minimum: int, maximum: int | None = None, why: str = ""):
+    """An argparse type: a whole number of at least ``minimum`` (and at most
+    ``maximum``, ``why`` saying why)."""
 
     def parse(text: str) -> int:
         try:
@@ -276,12 +275,23 @@ def _whole(minimum: int):
             raise argparse.ArgumentTypeError(f"expected a whole number, got '{text}'") from None
         if value < minimum:
             raise argparse.ArgumentTypeError(f"expected {minimum} or more, got {value}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"expected at most {maximum}, got {value:.3g}: {why}")
         return value
 
     return parse
 
 
 _positive, _seed = _whole(1), _whole(0)
+_workers = _whole(1, 1024, "more processes than any machine runs at once")
+
+
+def _names(text: str) -> list[str]:
+    """An argparse type: comma-separated names, none of them empty."""
+    names = [n.strip() for n in text.split(",")]
+    if not all(names):
+        raise argparse.ArgumentTypeError(f"expected comma-separated variant names, got '{text}'")
+    return names
 
 
 def _out_path(text: str) -> str:
@@ -327,7 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--scenario", default=None, help="scenario YAML (default: the shipped configs/scenarios/telemax_lab.yaml)")
     d.add_argument("--config", default=None, help="pipeline config YAML (default: the shipped configs/telemax.yaml)")
     d.add_argument("--variants", default=None, help="variants YAML (default: the shipped configs/variants.yaml)")
-    d.add_argument("--only", default="ungated,gated,oracle", help="variants to run (default ungated,gated,oracle)")
+    d.add_argument("--only", type=_names, default="ungated,gated,oracle", help="variants to run (default ungated,gated,oracle)")
     d.add_argument("--seed", type=_seed, default=None, help="random seed (default: the scenario's)")
     d.set_defaults(func=_cmd_demo)
 
@@ -423,7 +433,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--config", required=True, help="pipeline config YAML")
     _add_out(c, "comparison folder: one result folder per variant, tables, figures", required=True)
     c.add_argument("--variants", default=None, help="variants YAML (default: the shipped configs/variants.yaml)")
-    c.add_argument("--only", default=None, help="comma-separated subset of the variants")
+    c.add_argument("--only", type=_names, default=None, help="comma-separated subset of the variants")
     c.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key for every variant")
     c.set_defaults(func=_cmd_compare)
 
@@ -434,7 +444,7 @@ def build_parser() -> argparse.ArgumentParser:
              + "\nRunning again into the same sweep folder skips the finished jobs.", common)
     a.add_argument("spec", help="ablation spec YAML (e.g. configs/ablations/gating_policy.yaml)")
     _add_out(a, "sweep folder; running again skips finished jobs", required=True)
-    a.add_argument("--workers", type=_positive, default=None, help="parallel jobs (default: CPU count)")
+    a.add_argument("--workers", type=_workers, default=None, help="parallel jobs (default: CPU count)")
     a.add_argument("--backend", choices=["local", "ray"], default="local",
                    help="local: process pool; ray: one Ray task per job (pip install \".[ray]\")")
     a.add_argument("--address", default=None, help="Ray cluster address (e.g. auto); default: a local Ray instance")

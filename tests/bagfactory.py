@@ -270,6 +270,60 @@ def with_foreign_channel(source: Path, dest: Path, topic: str, encoding: str = "
     return dest
 
 
+def split_mcap(source: Path, dest: Path, parts: int = 2, foreign: dict[int, tuple[str, str, str]] | None = None) -> Path:
+    """The one-file MCAP rosbag2 folder ``source`` split by log time into
+    ``parts`` files of a rosbag2 folder ``dest`` (as ``ros2 bag record
+    --max-bag-duration`` splits), its metadata listing them; ``foreign``:
+    part -> (topic, encoding, schema encoding) of a channel that another
+    tool added to that part, a message beside each message of its first
+    channel there (schema encoding "": no schema)."""
+    import json
+
+    import yaml
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    dest.mkdir(parents=True)
+    (mcap,) = source.glob("*.mcap")
+    with open(mcap, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        messages = list(reader.iter_messages(log_time_order=True))
+    size = -(-len(messages) // parts)
+    names = [f"{dest.name}_{k}.mcap" for k in range(parts)]
+    for k, name in enumerate(names):
+        with open(dest / name, "wb") as g:
+            writer = Writer(g)
+            writer.start(profile="ros2", library="tests.bagfactory")
+            schemas = {s.id: writer.register_schema(s.name, s.encoding, s.data) for s in summary.schemas.values()}
+            channels = {c.id: writer.register_channel(c.topic, c.message_encoding, schemas[c.schema_id], c.metadata)
+                        for c in summary.channels.values()}
+            added = None
+            if foreign is not None and k in foreign:
+                topic, encoding, schema_encoding = foreign[k]
+                schema = (writer.register_schema("Diagnostics", schema_encoding, b'{"type": "object"}')
+                          if schema_encoding else 0)
+                added = writer.register_channel(topic, encoding, schema)
+            chunk = messages[k * size:(k + 1) * size]
+            beside = chunk[0][1].id if chunk else None
+            for _, channel, message in chunk:
+                writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time,
+                                   message.sequence)
+                if added is not None and channel.id == beside:
+                    writer.add_message(added, message.log_time, json.dumps({"ok": True}).encode(),
+                                       message.publish_time)
+            writer.finish()
+    meta = yaml.safe_load((source / "metadata.yaml").read_text())
+    info = meta["rosbag2_bagfile_information"]
+    info["relative_file_paths"] = names
+    info["files"] = [{"path": name, "starting_time": {"nanoseconds_since_epoch": messages[k * size][2].log_time},
+                      "duration": {"nanoseconds": messages[min((k + 1) * size, len(messages)) - 1][2].log_time
+                                   - messages[k * size][2].log_time},
+                      "message_count": len(messages[k * size:(k + 1) * size])} for k, name in enumerate(names)]
+    (dest / "metadata.yaml").write_text(yaml.safe_dump(meta, sort_keys=False))
+    return dest
+
+
 def driving_bag(
     ros: int = 2,
     t0: float = 1_700_000_000.0,

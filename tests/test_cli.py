@@ -330,16 +330,37 @@ def test_a_reader_that_leaves_early_gets_no_error(short_run):
     ["scripts/datasets.py", "list"],
     ["-m", "slam.cli", "--help"],
     ["-m", "slam.cli", "map", "--help"],
-], ids=["datasets-list", "gslam-help", "gslam-map-help"])
-def test_a_script_whose_reader_leaves_early_ends_quietly(argv):
+    ["-m", "scripts.bench", "all", "--quick", "--only", "husky"],  # its first line is before any bench runs
+    ["-m", "scripts.bench.kiss_only", "{run}", "--threads", "1"],
+], ids=["datasets-list", "gslam-help", "gslam-map-help", "bench-all", "bench-kiss-only"])
+def test_a_script_whose_reader_leaves_early_ends_quietly(argv, short_run):
     """``python scripts/datasets.py list | head -1``: no BrokenPipeError
     traceback, and the code of a process a closed pipe ended (141) or 0."""
+    argv = [a.format(run=short_run.run_dir) for a in argv]
     proc = subprocess.Popen([sys.executable, *argv], cwd=REPO, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)
     proc.stdout.close()  # long before the interpreter has imported anything
     stderr = proc.stderr.read().decode()
     assert proc.wait(timeout=120) in (0, 141), stderr
     assert stderr == ""
+
+
+def test_a_bench_says_its_usage_as_its_docs_write_the_command():
+    """``python -m scripts.bench real_faults --help`` says that command, not
+    ``__main__.py``, whose usage line no one can run."""
+    proc = subprocess.run([sys.executable, "-m", "scripts.bench", "real_faults", "--help"], cwd=REPO,
+                          stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and proc.stdout.startswith("usage: python -m scripts.bench real_faults ["), proc.stdout[:200]
+
+
+@pytest.mark.parametrize("given, says", [("nowhere", "no such file or directory"),
+                                         ("notes.yaml", "not a readable ROS bag (")])
+def test_kiss_only_without_a_bag_says_so_in_one_line(tmp_path, given, says):
+    (tmp_path / "notes.yaml").write_text("a: 1\n")
+    proc = subprocess.run([sys.executable, "-m", "scripts.bench.kiss_only", str(tmp_path / given)], cwd=REPO,
+                          stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 1 and proc.stderr.startswith(f"kiss_only: {tmp_path / given}: {says}"), proc.stderr
+    assert proc.stderr.count("\n") == 1
 
 
 def test_a_full_or_closed_standard_output_is_named_or_harmless(short_run, tmp_path):

@@ -250,6 +250,52 @@ def scenario_waypoints(points) -> Callable[[Path, World], None]:
     return scenario(set_in("robot", "waypoints", points))
 
 
+def link_loop(name: str) -> Callable[[Path, World], None]:
+    """A link ``{d}/name`` to itself."""
+
+    def make(d: Path, world: World) -> None:
+        (d / name).symlink_to(d / name)
+
+    return make
+
+
+def finished_sweep(metrics: str) -> Callable[[Path, World], None]:
+    """The one-job sweep run into ``{d}/o``, its job's metrics.json then
+    replaced by ``metrics`` (as an edit, or a tool other than gslam, does)."""
+
+    def make(d: Path, world: World) -> None:
+        assert main(["-q", "ablate", str(world.spec), "--out", str(d / "o")]) == 0
+        (job,) = (d / "o" / "jobs").iterdir()
+        (job / "metrics.json").write_text(metrics)
+
+    return make
+
+
+def librsf_with(loops: str, groundtruth: str | None = None) -> Callable[[Path, World], None]:
+    """A libRSF log of 10 s (odom2 lines, a turn in the middle), ``loops``
+    lines after them, and ``groundtruth`` as its X_GT.txt if given."""
+
+    def make(d: Path, world: World) -> None:
+        rows = "".join(f"odom2 {0.1 * k:.1f} 0.5 0 {0.3 if 20 <= k < 30 else 0.0} 0.01 0.01 0.01\n" for k in range(100))
+        (d / "X_Input.txt").write_text(rows + loops + "\n")
+        if groundtruth is not None:
+            (d / "X_GT.txt").write_text(groundtruth)
+
+    return make
+
+
+def _covariance(variance: float) -> Callable[[float, object], None]:
+    def change(t: float, msg) -> None:
+        msg.position_covariance[0] = msg.position_covariance[4] = variance
+        msg.position_covariance_type = 2
+
+    return change
+
+
+LIBRSF = ("map", "{d}/X_Input.txt", "--config", str(CONFIGS / "datasets" / "librsf_corridor.yaml"), *QUICK, "--out", "{d}/o")
+MAG_BAG = ("map", "{d}/b", "--config", "{cfg}", "--set", "input.compass.source=magnetic_field", *QUICK, "--out", "{d}/o")
+
+
 # --- the error corpus -------------------------------------------------------------
 
 
@@ -467,6 +513,13 @@ ERRORS: list[Case] = [
     Case("config-datum-latitude-100", (*MAP, "--out", "{d}/o", "--set", "input.gps.datum_lat_deg=100",
                                        "--set", "input.gps.datum_lon_deg=11"), "input.gps.datum_lat_deg"),
     Case("bag-gyro-on-another-clock", BAG, "gyro stamps", bag(restamp("/imu/data", lambda k: -1e9))),
+    Case("bag-gyro-nanosec-3e9", BAG, "gyro topic '/imu/data': header stamp at message 0 has nanosec 3000000000, beyond "
+         "999999999: not a ROS time", bag(each("/imu/data", lambda t, m: setattr(m.header.stamp, "nanosec", 3_000_000_000)))),
+    Case("bag-scan-nanosec-1.5e9", BAG, "scan topic '/scan': header stamp at message 0 has nanosec 1500000000",
+         bag(each("/scan", lambda t, m: setattr(m.header.stamp, "nanosec", 1_500_000_000)))),
+    Case("run-truth-t0-of-another-recording", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"),
+         "s after t0 1e+300 lies outside the recording", copy_run(lambda r: (r / "truth.json").write_text(
+             json.dumps({**json.loads((r / "truth.json").read_text()), "t0": 1e300})))),
     Case("bag-odometry-jumps-a-day", BAG, "odometry stamps jump forward by 86400",
          bag(restamp("/odom", lambda k: 86400.0 if k >= 40 else 0.0))),
     # -- other formats --
@@ -527,6 +580,23 @@ ERRORS: list[Case] = [
           ("environment", "declination_deg", 1e6, "environment.declination_deg: 1e+06 deg is above 180 deg"),
           ("environment", "field_strength_T", 1.0, "environment.field_strength_T: 1 T is above 0.001 T"),
           ("environment", "field_strength_T", 1e-12, "environment.field_strength_T: 1e-12 T is below 1e-06 T"),
+          # noise, rates and reach of the simulated sensors, the thresholds of the true faults
+          ("sensors", "laser", "range_noise_m", 1e300, "sensors.laser.range_noise_m: 1e+300 m is above 1 m"),
+          ("sensors", "laser", "rate_hz", 1e-300, "sensors.laser.rate_hz: 1e-300 Hz is below 0.001 Hz"),
+          ("sensors", "laser", "max_range_m", 1e300, "sensors.laser.max_range_m: 1e+300 m is above 1000 m"),
+          ("sensors", "gyro", "bias_walk_rad_s_sqrt_s", 1e300, "sensors.gyro.bias_walk_rad_s_sqrt_s: 1e+300"),
+          ("sensors", "odometry", "distance_noise_m_sqrt_m", 1e300, "sensors.odometry.distance_noise_m_sqrt_m: 1e+300"),
+          ("sensors", "odometry", "yaw_noise_rad_sqrt_rad", 1e300, "sensors.odometry.yaw_noise_rad_sqrt_rad: 1e+300"),
+          ("sensors", "odometry", "turn_slip_per_rad_s", 1e300, "sensors.odometry.turn_slip_per_rad_s: 1e+300 s/rad"),
+          ("sensors", "gps", "sigma_m", 1e300, "sensors.gps.sigma_m: 1e+300 m is above 1e+06 m"),
+          ("sensors", "gps", "sigma_m", 1e-300, "sensors.gps.sigma_m: 1e-300 m is below 0.0001 m"),
+          ("sensors", "gps", "multipath_max_m", 1e300, "sensors.gps.multipath_max_m: 1e+300 m is above 1000 m"),
+          ("sensors", "gps", "altitude_m", 1e300, "sensors.gps.altitude_m: 1e+300 m is above 10000 m"),
+          ("sensors", "magnetometer", "mounting_height_m", 1e300, "sensors.magnetometer.mounting_height_m: 1e+300 m"),
+          ("robot", "max_turn_rate_deg_s", 1e300, "robot.max_turn_rate_deg_s: 1e+300 deg/s is above 2000 deg/s"),
+          ("robot", "max_accel_m_s2", 1e-300, "the mission would take about 1.25e+296 h"),
+          ("faults", "gps_sigmas", 1e300, "faults.gps_sigmas: 1e+300 sigmas is above 100 sigmas"),
+          ("faults", "compass_error_deg", 1e-300, "faults.compass_error_deg: 1e-300 deg is below 0.01 deg"),
       )),
     # -- physics bounds on what the readers read --
     Case("carmen-fov-1e-9", CARMEN, "no 2D laser resolves a thousandth of a degree",
@@ -584,6 +654,18 @@ ERRORS: list[Case] = [
           ("gyro_bias@2:1e300", "--fault gyro_bias@2:1e+300,bias_deg_s=2.0,label_deg_s=0.57: ends at 1e+300 s, after "
            "the recording ends (24.0 s)"),
           ("gyro_bias@1000:2000", "--fault gyro_bias@1000:2000,bias_deg_s=2.0,label_deg_s=0.57: starts after the recording ends"),
+          ("multipath@2:4,label_sigmas=1e300", "label_sigmas: 1e+300 sigmas is above 100 sigmas"),
+          ("multipath@2:4,label_sigmas=1e-300", "label_sigmas: 1e-300 sigmas is below 0.5 sigmas"),
+          ("multipath@2:4,bias_m=1e300", "bias_m: 1e+300 m is above 1000 m"),
+          ("multipath@2:4,azimuth_deg=1e300", "azimuth_deg: 1e+300 deg is above 360 deg"),
+          ("dipole@2:4,label_deg=1e-300", "label_deg: 1e-300 deg is below 0.01 deg"),
+          ("dipole@2:4,moment_A_m2=1e300", "moment_A_m2: 1e+300 A m^2 is above 1e+06 A m^2"),
+          ("dipole@2:4,distance_m=1e-300", "distance_m: 1e-300 m is below 0.01 m"),
+          ("dipole@2:4,height_m=1e300", "height_m: 1e+300 m is above 1000 m"),
+          ("dipole@2:4,earth_horizontal_uT=1e300", "earth_horizontal_uT: 1e+300 uT is above 100 uT"),
+          ("gyro_bias@2:4,label_deg_s=1e-300", "label_deg_s: 1e-300 deg/s is below 0.001 deg/s"),
+          ("slip@2:4,label_slip=1e300", "label_slip: 1e+300 is above 10"),
+          ("laser_cut@2:4,label_min_eigenvalue=1e300", "label_min_eigenvalue: 1e+300 is above 1"),
       )),
     # -- sigmas and observer parameters outside sense --
     *(Case(f"set-{key}-{value}", (*MAP, "--out", "{d}/o", "--set", f"{key}={value}"), f"--set {key}={value}: {says}")
@@ -633,6 +715,155 @@ ERRORS: list[Case] = [
           ("gyro-1e6-rad-s", {"imu_gyr": np.vstack([np.zeros((10, 3)), [[1e6, 0.0, 0.0]], np.zeros((39, 3))])},
            "imu_gyr at sample 10 is 1e+06 rad/s"),
       )),
+    # -- distances, reaches and tolerances a run cannot use (validation/base/bounds.py) --
+    *(Case(f"set-{key}-{value}", (*MAP, "--out", "{d}/o", "--set", f"{key}={value}"), f"--set {key}={value}: {key}: {says}")
+      for key, value, says in (
+          ("frontend.max_range_m", "1e300", "1e+300 m is above 1000 m"),
+          ("frontend.initial_threshold_m", "1e300", "1e+300 m is above 100 m"),
+          ("frontend.initial_threshold_m", "1e-300", "1e-300 m is below 0.001 m"),
+          ("backend.relative_error_tol", "1e300", "1e+300 is above 1"),
+          ("backend.relative_error_tol", "1e-300", "1e-300 is below 1e-15"),
+          ("evaluation.sm_fault_window_s", "1e-300", "1e-300 s is below 0.01 s"),
+          ("evaluation.sm_fault_trans_m", "1e300", "1e+300 m is above 100 m"),
+          ("output.grid_no_return_m", "1e300", "1e+300 m is above 1000 m"),
+          ("submaps.refine.kernel_m", "1e-300", "1e-300 m is below 0.001 m"),
+          ("submaps.refine.max_distance_m", "1e300", "1e+300 m is above 100 m"),
+          ("loops.registration.kernel_m", "1e-300", "1e-300 m is below 0.001 m"),
+      )),
+    # -- the gating section's multiples and spans --
+    *(Case(f"set-{key}-{value}", (*MAP, "--gating", "on", "--out", "{d}/o", "--set", f"{key}={value}"),
+           f"--set {key}={value}: gating: {key.split('.')[1]}: {says}")
+      for key, value, says in (
+          ("gating.inflation", "1e300", "1e+300 is above 1000"),
+          ("gating.holdoff_s", "1e300", "1e+300 s is above 86400 s"),
+          ("gating.lookback_s", "1e300", "1e+300 s is above 86400 s"),
+          ("gating.recheck_window_s", "1e300", "1e+300 s is above 86400 s"),
+          ("gating.keep_k_sigma", "1e-300", "1e-300 sigmas is below 0.5 sigmas"),
+      )),
+    # -- the observers' fields, windows and geometry --
+    *(Case(f"set-{key}-{value}", (*MAP, "--gating", "on", "--out", "{d}/o", "--set", f"validation.observers.{key}={value}"),
+           f"validation.observers: {key}: {says}")
+      for key, value, says in (
+          ("magnetometer.strength_T", "1.0", "1 T is above 0.001 T"),
+          ("magnetometer.tolerance_T", "1e300", "1e+300 T is above 0.001 T"),
+          ("magnetometer.tolerance_dip_deg", "1e300", "1e+300 deg is above 180 deg"),
+          ("max_gap_s", "1e300", "1e+300 s is above 86400 s"),
+          ("gps_speed_window_s", "1e-300", "1e-300 s is below 0.001 s"),
+          ("scan.min_eigenvalue", "1e300", "1e+300 is above 1"),
+          ("scan_ceiling.max_ceiling_m", "1e300", "1e+300 m is above 1000 m"),
+          ("gps_course_min_speed_mps", "1e300", "1e+300 m/s is above 100 m/s"),
+      )),
+    # -- a system model's errors name its file, not the config or a --set that did not touch it --
+    *(Case(f"model-{name}", (*MAP[:2], "--config", "{d}/c.yaml", *extra, "--out", "{d}/o"), f"m.yaml: validation: {says}",
+           both(text("m.yaml", change((CONFIGS / "validation" / "telemax_model.yaml").read_text())),
+                config(lambda t: t["validation"].update(model="m.yaml"))))
+      for name, extra, change, says in (
+          ("prior-1-with-gating-on", ("--gating", "on"), lambda m: m.replace("LOOP: 0.05", "LOOP: 1.0"),
+           "model.priors: prior of 'LOOP' must be in (0, 1), got 1.0"),
+          ("prior-negative", (), lambda m: m.replace("LOOP: 0.05", "LOOP: -0.5"), "model.priors: prior of 'LOOP'"),
+          ("relation-of-one-component", ("--gating", "on"),
+           lambda m: m.replace("yaw_compass_gyro: [IMU_YAW, IMU_GYRO]   #", "yaw_compass_gyro: [IMU_YAW, IMU_YAW]   #"),
+           "model: relations.yaw_compass_gyro: a relation needs two different components"),
+          ("masking-probability-2", ("--set", "validation.mode=on"), lambda m: m.replace(
+              "failure_masking: []", "failure_masking:\n  - {relation: yaw_compass_gyro, corr: true, masking_prob: 2.0}"),
+           "model.failure_masking.0.masking_prob: Input should be less than 1"),
+      )),
+    # -- result markers and a sweep's own files, read back as input --
+    Case("marker-json-nested-100000-deep", (*MAP, *QUICK, "--out", "{d}/m"),
+         "--out is a folder that is not a gslam map result (its .gslam-result.json is not one gslam wrote)",
+         text("m/.gslam-result.json", "[" * 100_000 + "]" * 100_000)),
+    Case("marker-files-hold-numbers", (*MAP, *QUICK, "--out", "{d}/m"), "lists 1, which is not a file inside the folder",
+         text("m/.gslam-result.json", json.dumps({"command": "map", "files": [1, 2]}))),
+    Case("marker-files-is-a-path", (*MAP, *QUICK, "--out", "{d}/m"), "lists '../x', which is not a file inside the folder",
+         text("m/.gslam-result.json", json.dumps({"command": "map", "files": "../x"}))),
+    *(Case(f"ablate-resumed-{name}", ("ablate", "{spec}", "--out", "{d}/o"),
+           f"metrics.json: expected the JSON object gslam writes, found {says}", finished_sweep(content))
+      for name, content, says in (
+          ("metrics-cut-short", '{"ate_rmse_m": ', "invalid JSON (Expecting value: line 1 column 16"),
+          ("metrics-a-list", "[1, 2]", "a JSON list"),
+          ("metrics-nested-100000-deep", "[" * 100_000, "JSON nested too deeply"),
+      )),
+    # -- a loop of links, above --out or as the input --
+    *(Case(f"{command}-out-under-a-link-loop", (*argv, "{d}/a/x"), "a/x: too many levels of symbolic links", link_loop("a"))
+      for command, argv in (
+          ("map", (*MAP, *QUICK, "--out")),
+          ("simulate", ("simulate", "{scen}", "--out")),
+          ("compare", ("compare", "{run}", "--config", "{cfg}", "--out")),
+          ("inject", ("inject", "{run}", "--fault", "gyro_bias@2:4", "--out")),
+          ("calibrate", (*CAL, "--out")),
+          ("inspect", ("inspect", "{run}", "--config-out")),
+          ("demo", ("demo", "--out")),
+          ("ablate", ("ablate", "{spec}", "--out")),
+      )),
+    Case("ablate-scenario-a-link-loop", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "a: too many levels of symbolic links",
+         both(link_loop("a"), lambda d, w: spec_in(d, w, inputs={"scenarios": [{"path": str(d / "a"), "seeds": [1]}]}))),
+    Case("map-input-a-link-loop", ("map", "{d}/a", "--config", "{cfg}", "--out", "{d}/o"),
+         "a: too many levels of symbolic links", link_loop("a")),
+    Case("inspect-input-a-link-loop", ("inspect", "{d}/a"), "a: too many levels of symbolic links", link_loop("a")),
+    Case("calibrate-input-a-dangling-link", ("calibrate", "{d}/a", "--config", "{cfg}", "--clean", "0:10", "--out", "{d}/c.yaml"),
+         "a: a symbolic link to ", lambda d, w: (d / "a").symlink_to(d / "nowhere")),
+    Case("config-model-a-link-loop", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "m.yaml: cannot read YAML file (Too many levels of symbolic links)",
+         both(link_loop("m.yaml"), text("c.yaml", "validation: {model: m.yaml}\n"))),
+    # -- command-line values no run can use --
+    Case("ablate-workers-1e11", ("ablate", "{spec}", "--out", "{d}/o", "--workers", "100000000000"),
+         "argument --workers: expected at most 1024, got 1e+11", code=2),
+    Case("compare-only-empty", ("compare", "{run}", "--config", "{cfg}", "--only", "", "--out", "{d}/o"),
+         "argument --only: expected comma-separated variant names, got ''", code=2),
+    Case("compare-only-an-empty-name", ("compare", "{run}", "--config", "{cfg}", "--only", "gated,,ungated", "--out", "{d}/o"),
+         "argument --only: expected comma-separated variant names, got 'gated,,ungated'", code=2),
+    Case("demo-only-blank", ("demo", "--only", " ", "--out", "{d}/o"), "argument --only: expected comma-separated", code=2),
+    # -- configs of the wrong YAML shape --
+    Case("config-merge-key-brings-its-anchor", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "unknown config key 'base'",
+         text("c.yaml", "base: &b {period_s: 0.5}\nkeyframes: {<<: *b}\n")),
+    Case("config-key-a-number", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "c.yaml: 1: Keys should be strings",
+         text("c.yaml", "1: 2\n")),
+    Case("config-two-documents", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "line 2: invalid YAML (but found another document)", text("c.yaml", "keyframes: {period_s: 0.5}\n---\nbackend: {}\n")),
+    Case("config-tab-indented", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "line 2: invalid YAML",
+         text("c.yaml", "keyframes:\n\tperiod_s: 0.5\n")),
+    Case("config-date-for-a-period", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "keyframes.period_s: Input should be a valid number", text("c.yaml", "keyframes: {period_s: 2024-01-01}\n")),
+    Case("scenario-wall-of-words", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "world.walls.0.0.0: Input should be a valid number", scenario(set_in("world", "walls", [[["a", "b"], [1, 2]]]))),
+    # -- a reader told the wrong format, and values each reader already refuses --
+    Case("map-run-folder-read-as-carmen", (*MAP, *QUICK, "--set", "input.format=carmen", "--out", "{d}/o"),
+         "bag: expected a CARMEN log file, got a directory"),
+    Case("map-carmen-log-read-as-a-bag", ("map", "{d}/c.log", "--config", str(CONFIGS / "datasets" / "carmen.yaml"), *QUICK,
+                                          "--set", "input.format=rosbag", "--out", "{d}/o"),
+         "c.log: not a readable ROS bag", carmen()),
+    Case("carmen-robotlaser-fov-nan", CARMEN, "c.log:1: expected finite numbers in ROBOTLASER1",
+         carmen(robotlaser=(-1.57, math.nan, 0.0174))),
+    Case("broad-positions-1e300", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"),
+         "groundtruth pose 0 (t = 0.000 s) is at (1e+300, 1e+300) m, beyond 1e+07 m", broad_mat(opt_pos=np.full((50, 3), 1e300))),
+    Case("broad-quaternion-1e-300", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"),
+         "opt_quat at sample 0 is not a rotation", broad_mat(opt_quat=np.tile([1e-300, 0, 0, 0], (50, 1)))),
+    Case("scenario-door-1e300-wide", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "world.doors.0.width_m: 1e+300 m is above 100 m",
+         scenario(lambda t: t["world"].update(doors=[{"center": [0, 0], "width_m": 1e300}]))),
+    # -- physics of what the readers read --
+    Case("bag-gps-covariance-1e300", BAG, "gps fix 0 has a sigma of 1e+150 m; one beyond 1e+06 m says nothing",
+         bag(each("/gps/fix", _covariance(1e300)))),
+    Case("bag-magnetic-field-of-1-tesla", MAG_BAG, "compass: median field 1e+06 uT, expected the Earth's",
+         bag(each("/imu/mag", lambda t, m: setattr(m.magnetic_field, "x", 1.0)))),
+    Case("bag-magnetic-field-zero", MAG_BAG, "compass: median field 0 uT, expected the Earth's",
+         bag(each("/imu/mag", lambda t, m: [setattr(m.magnetic_field, k, 0.0) for k in "xyz"]))),
+    Case("broad-sampling-rate-a-word", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"),
+         "sampling_rate: expected an IMU's rate in Hz (1 to 100000; BROAD's is 285.7), got 'fast'",
+         broad_mat(sampling_rate="fast")),
+    Case("broad-magnetometer-nan", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"),
+         "imu_gyr/imu_acc/imu_mag: expected finite samples", broad_mat(imu_mag=np.full((50, 3), np.nan))),
+    *(Case(f"librsf-{name}", LIBRSF, says, librsf_with(loop)) for name, loop, says in (
+        ("loop-weight-1e300", "loop 9.0 1.0 1e300", "loop line #1: weight 1e+300; expected 0 to 1e+06"),
+        ("loop-weight-negative", "loop 9.0 1.0 -1", "loop line #1: weight -1; expected 0 to 1e+06"),
+        ("loop-after-the-log", "loop 9.0 1e6 1", "loop line #1: t_other 1e+06 s is outside the odom2 lines' 0 to 9.9 s"),
+        ("loop-weight-nan", "loop 9.0 1.0 nan", "X_Input.txt:101: expected loop t t_other weight"),
+    )),
+    Case("librsf-ground-truth-goes-back", LIBRSF, "X_GT.txt: point2 line #51: expected increasing times",
+         librsf_with("loop 9.0 1.0 1", "".join(f"point2 {0.1 * (k % 50):.1f} {0.05 * k} 0 0.1 0 0 0.1\n" for k in range(100)))),
+    Case("carmen-a-billion-beams", CARMEN, "c.log:1: expected FLASER n r_1..r_n", text("c.log", "FLASER 1000000000 1 2 3 "
+                                                                                        "0 0 0 0 0 0 1.0 host 1.0\n")),
+    Case("carmen-negative-beam-count", CARMEN, "c.log:1: expected a positive beam count",
+         text("c.log", "FLASER -3 1 2 3 0 0 0 0 0 0 1.0 host 1.0\n")),
 ]
 
 
@@ -697,6 +928,10 @@ WARNINGS: list[Warned] = [
            scenario(lambda t: t["world"]["obstacles"].append([[4, 1.0], [4.4, 1.0], [4.4, 1.4], [4, 1.4]]))),
     Warned("scenario-leg-through-a-wall", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "crosses world.walls.",
            scenario(lambda t: t["world"]["walls"].append([[5, 0.5], [5, 2.0]]))),
+    Warned("carmen-range-limit-param-1e300", CARMEN, "the laser's range limit is 1e+300 m, beyond 10000 m",
+           carmen(head="PARAM robot_front_laser_max 1e300")),
+    Warned("librsf-without-ground-truth-anchored-once", LIBRSF, "no ground truth to anchor the first pose",
+           librsf_with("loop 9.0 1.0 1")),
 ]
 
 

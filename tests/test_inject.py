@@ -19,7 +19,7 @@ from slam.commands.inject.spec import DipoleFault, SlipFault
 from slam.readers.read import read_recording
 from slam.readers.rosbag import open_bag
 from slam.recording import Trajectory
-from tests.bagfactory import driving_bag, ned_driving_bag, with_foreign_channel
+from tests.bagfactory import driving_bag, ned_driving_bag, split_mcap, with_foreign_channel
 from tests.conftest import CONFIGS, real_data
 from tests.synthetic import wall_ranges
 
@@ -182,6 +182,18 @@ def test_an_mcap_file_with_a_json_channel_takes_faults_and_the_copy_leaves_the_c
     assert "/diagnostics" not in topics and {"/imu/data", "/odom", "/scan"} <= topics
     before, after = read_recording(drive, InputConfig()), read_recording(tmp_path / "run", InputConfig())
     assert np.array_equal(after.odometry.x, before.odometry.x)
+    assert not np.array_equal(after.gyro.rate, before.gyro.rate)
+
+
+def test_a_split_bag_with_a_json_channel_takes_faults_into_one_bag(tmp_path):
+    """Both MCAP files of a split bag are copied as one bag, a topic of both
+    files one connection (rosbags' writer refuses a connection added twice)."""
+    pytest.importorskip("mcap.writer", reason="the test extra installs mcap")
+    whole = driving_bag(ros=2, duration_s=1.0).write(tmp_path / "drive", storage="mcap")
+    split = split_mcap(whole, tmp_path / "split", foreign={1: ("/diagnostics", "json", "jsonschema")})
+    inject(split, ["gyro_bias@0.2:0.6"], tmp_path / "run", InputConfig())
+    before, after = read_recording(whole, InputConfig()), read_recording(tmp_path / "run", InputConfig())
+    assert np.array_equal(after.odometry.x, before.odometry.x) and np.array_equal(after.scans.t, before.scans.t)
     assert not np.array_equal(after.gyro.rate, before.gyro.rate)
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bagfactory import IMU, BagBuilder, driving_bag, with_foreign_channel
+from bagfactory import IMU, BagBuilder, driving_bag, split_mcap, with_foreign_channel
 from conftest import real_data
 from slam.config import InputConfig
 from slam.errors import GslamError
@@ -242,6 +242,42 @@ def test_a_needed_mcap_topic_of_another_encoding_is_one_error(drive_mcap, tmp_pa
     mixed = with_foreign_channel(drive_mcap, tmp_path / "mixed.mcap", "/odom", "json", schema)
     msg = error_of(read_recording, mixed, InputConfig())
     assert msg == (f"{mixed}: odometry topic '/odom': its messages are json, expected ROS 2's CDR "
+                   "(a nav_msgs/msg/Odometry)")
+
+
+@pytest.mark.parametrize("foreign", [
+    {1: ("/diagnostics", "json", "jsonschema")},
+    {0: ("/foxglove", "protobuf", "protobuf")},
+    {0: ("/diagnostics", "json", ""), 1: ("/diagnostics", "json", "jsonschema")},
+], ids=["json-in-the-second", "protobuf-in-the-first", "json-in-both"])
+def test_a_split_bag_with_foreign_channels_is_read_for_its_ros2_topics(tmp_path, caplog, foreign):
+    """A rosbag2 folder split into two MCAP files, another tool's channel
+    in one or both (rosbags refused the folder: 'not a readable ROS bag
+    ('jsonschema')'): the needed topics of both files are read as from the
+    folder unsplit, and each foreign topic named in one warning."""
+    pytest.importorskip("mcap.writer", reason="the test extra installs mcap")
+    whole = driving_bag(ros=2, duration_s=1.0).write(tmp_path / "drive", storage="mcap")
+    split = split_mcap(whole, tmp_path / "split", foreign=foreign)
+    assert len(list(split.glob("*.mcap"))) == 2
+    plain = read_recording(whole, InputConfig())
+    with caplog.at_level(logging.WARNING):
+        rec = read_recording(split, InputConfig())
+    said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    topics = sorted({topic: encoding for topic, encoding, _ in foreign.values()}.items())
+    assert said == [f"{split}: topic '{t}' skipped: its messages are {e}, not ROS 2's CDR" for t, e in topics]
+    assert rec.t0 == plain.t0 and len(rec.scans) == len(plain.scans)
+    for a, b in ((rec.gyro.t, plain.gyro.t), (rec.compass.yaw, plain.compass.yaw), (rec.odometry.x, plain.odometry.x),
+                 (rec.gps.x, plain.gps.x), (rec.groundtruth.y, plain.groundtruth.y), (rec.scans.t, plain.scans.t),
+                 (rec.scans.ranges, plain.scans.ranges)):
+        assert np.array_equal(a, b)
+
+
+def test_a_needed_topic_of_another_encoding_in_one_file_of_a_split_bag_is_one_error(tmp_path):
+    pytest.importorskip("mcap.writer", reason="the test extra installs mcap")
+    whole = driving_bag(ros=2, duration_s=1.0).write(tmp_path / "drive", storage="mcap")
+    split = split_mcap(whole, tmp_path / "split", foreign={1: ("/odom", "json", "jsonschema")})
+    msg = error_of(read_recording, split, InputConfig())
+    assert msg == (f"{split}: odometry topic '/odom': its messages are json, expected ROS 2's CDR "
                    "(a nav_msgs/msg/Odometry)")
 
 

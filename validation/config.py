@@ -74,14 +74,17 @@ class ValidationConfig(StrictFrozen):
         return "centred" if self.offline else "trailing"
 
 
-def inline_model(section: dict[str, Any], base_dir: Path) -> None:
-    """Replace a ``model: path`` entry by the YAML it names (in place)."""
+def inline_model(section: dict[str, Any], base_dir: Path) -> Path | None:
+    """Replace a ``model: path`` entry by the YAML it names (in place);
+    the file read, or None if the model was no path."""
     model = section.get("model")
-    if isinstance(model, str):
-        path = Path(model)
-        if not path.is_absolute():
-            path = base_dir / path
-        section["model"] = load_yaml(path)
+    if not isinstance(model, str):
+        return None
+    path = Path(model)
+    if not path.is_absolute():
+        path = base_dir / path
+    section["model"] = load_yaml(path)
+    return path
 
 
 def parse_sections(validation: Mapping[str, Any], gating: Mapping[str, Any]) -> tuple[ValidationConfig, GatingConfig]:

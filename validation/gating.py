@@ -30,11 +30,12 @@ import logging
 import math
 from collections.abc import Mapping, Sequence
 from enum import Enum
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 from pydantic import Field, field_validator
 
+from validation.base import bounds
 from validation.diagnosis.model import SystemModel
 from validation.base.errors import ValidationError
 from validation.base.yamlio import StrictFrozen, validate_mapping
@@ -125,12 +126,12 @@ class GatingConfig(StrictFrozen):
     single: SinglePolicy = SinglePolicy.EXCLUDE
     ambiguous: AmbiguousPolicy = AmbiguousPolicy.MOST_PROBABLE
     no_diagnosis: NoDiagnosisPolicy = NoDiagnosisPolicy.KEEP_PREVIOUS
-    inflation: float = Field(10.0, ge=1.0)
-    holdoff_s: float = Field(2.0, ge=0.0)
-    lookback_s: float = Field(0.0, ge=0.0)
-    keep_k_sigma: float | None = Field(3.0, gt=0.0)
+    inflation: Annotated[float, bounds.INFLATION] = Field(10.0, ge=1.0)
+    holdoff_s: Annotated[float, bounds.HOLD_S] = Field(2.0, ge=0.0)
+    lookback_s: Annotated[float, bounds.SPAN_S] = Field(0.0, ge=0.0)
+    keep_k_sigma: Annotated[float | None, bounds.K_SIGMA] = Field(3.0, gt=0.0)
     recheck_factors: tuple[str, ...] = ("compass", "gps")
-    recheck_window_s: float = Field(5.0, ge=0.0)
+    recheck_window_s: Annotated[float, bounds.SPAN_S] = Field(5.0, ge=0.0)
     baseline_factors: tuple[str, ...] = ("scan_matching",)
     baseline_m: float = Field(5.0, gt=0.0)
     factors: dict[str, dict[str, list[str]]] = Field(default_factory=_default_factors)

@@ -87,9 +87,10 @@ def main(argv: list[str] | None = None) -> int:
         opts = sub.parse_args(argv[1:])
         return run_all(opts.quick, opts.only)
     module = importlib.import_module(f"scripts.bench.{args.name}")
+    sys.argv[0] = f"python -m scripts.bench {args.name}"  # the bench's usage line, as its docs write the command
     run_script(f"bench {args.name}", lambda: module.main(argv[1:]))
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_script("bench", main)

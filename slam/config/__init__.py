@@ -206,10 +206,10 @@ class FrontendConfig(Strict):
     enabled: bool = True
     initial_guess: Literal["constant_velocity", "odometry"] = "constant_velocity"
     min_range_m: float = Field(0.1, ge=0.0)
-    max_range_m: float = Field(30.0, gt=0.0)
+    max_range_m: bounds.LaserRange_m = Field(30.0, gt=0.0)
     voxel_size_m: float = Field(0.1, gt=0.0)
     max_points_per_voxel: bounds.Count = Field(20, ge=1)
-    initial_threshold_m: float = Field(0.5, gt=0.0)
+    initial_threshold_m: bounds.MatchDistance_m = Field(0.5, gt=0.0)
     min_motion_m: float = Field(0.05, ge=0.0)
     max_iterations: bounds.Iterations = Field(500, ge=1)
     threads: bounds.Threads = Field(1, ge=0)
@@ -339,7 +339,7 @@ class BackendConfig(Strict):
     initial_sigma_xy_m: bounds.Sigma_m = Field(0.01, gt=0.0)
     initial_sigma_yaw_deg: bounds.Sigma_deg = Field(0.5, gt=0.0)
     max_iterations: bounds.Iterations = Field(100, ge=1)
-    relative_error_tol: float = Field(1e-6, gt=0.0)
+    relative_error_tol: Annotated[float, bounds.RELATIVE_TOLERANCE] = Field(1e-6, gt=0.0)
     robust_kernel: Kernel = "none"
     robust_param: bounds.RobustParam = Field(1.345, gt=0.0)
     gnc_inlier_probability: float | None = Field(None, gt=0.0, lt=1.0)
@@ -363,9 +363,10 @@ class EvaluationConfig(Strict):
     rpe_deltas_m: list[float] = Field(default_factory=lambda: [5.0])
     max_time_offset_s: Annotated[float, bounds.MATCH_OFFSET_S] = Field(0.05, gt=0.0)
     sm_output_faults: bool = True
-    sm_fault_window_s: float = Field(1.0, gt=0.0)
-    sm_fault_trans_m: float = Field(0.15, gt=0.0)
-    sm_fault_yaw_deg: float = Field(3.0, gt=0.0)
+    sm_fault_window_s: Annotated[float, bounds.within(1e-2, 3600.0, "s", "shorter than any scan period",
+                                                      "an hour of scan matching judged as one motion")] = Field(1.0, gt=0.0)
+    sm_fault_trans_m: bounds.MatchDistance_m = Field(0.15, gt=0.0)
+    sm_fault_yaw_deg: bounds.HeadingError_deg = Field(3.0, gt=0.0)
 
 
 class OutputConfig(Strict):
@@ -387,7 +388,7 @@ class OutputConfig(Strict):
     grid_resolution_m: Annotated[float, bounds.GRID_CELL_M] = Field(0.05, gt=0.0)
     grid_hit_probability: float = Field(0.7, gt=0.5, lt=1.0)
     grid_miss_probability: float = Field(0.4, gt=0.0, lt=0.5)
-    grid_no_return_m: float = Field(5.0, ge=0.0)
+    grid_no_return_m: bounds.LaserRange_m = Field(5.0, ge=0.0)
     mcap: bool = True
     report: bool = True
 
@@ -551,9 +552,10 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
     applied = [(text, key) for text, (key, _) in parsed]
     # A model path in the file is relative to the file; one given as an
     # override is relative to the working directory.
+    model_file = None  # the system model's file, which its own errors name
     try:
         if isinstance(tree.get("validation"), dict) and path is not None:
-            inline_model(tree["validation"], Path(path).parent)
+            model_file = inline_model(tree["validation"], Path(path).parent)
     except (SectionError, GslamError) as e:
         raise GslamError(f"{source}: {e}") from None
     for text, (key, value) in parsed:
@@ -563,7 +565,7 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
             raise GslamError(f"--set {text}: {e}") from None
     try:
         if isinstance(tree.get("validation"), dict):
-            inline_model(tree["validation"], Path.cwd())
+            model_file = inline_model(tree["validation"], Path.cwd()) or model_file
     except (SectionError, GslamError) as e:
         raise GslamError(f"{_blame(source, applied, 'validation.model')}: {e}") from None
     found = non_finite(tree)
@@ -583,7 +585,9 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
 
             check_model(vcfg.model)
     except SectionError as e:
-        raise GslamError(f"{_blame(source, applied, _section_error_key(str(e)))}: {e}") from None
+        key = _section_error_key(str(e))
+        in_model = model_file is not None and (key + ".").startswith("validation.model.")
+        raise GslamError(f"{model_file if in_model else _blame(source, applied, key)}: {e}") from None
     _check_sources(vcfg, config.input, lambda key: _blame(source, applied, key))
     # The checked sections, every default spelled out (validate_assignment
     # checks them as mappings).
@@ -625,8 +629,13 @@ def enabled_factors(config: PipelineConfig) -> list[str]:
 
 def _section_error_key(message: str) -> str:
     """The dotted key a validation-package error is about: its leading
-    ``section.key:``, plus the name of an unknown key."""
-    key = message.split(":", 1)[0].split(" ", 1)[0]
+    ``section.key:`` (``validation: model.priors:`` is
+    ``validation.model.priors``), plus the name of an unknown key."""
+    head, _, rest = message.partition(":")
+    key = head.split(" ", 1)[0]
+    inner = re.match(r" ([A-Za-z_][\w.]*):", rest)
+    if inner and " " not in head:
+        key = f"{key}.{inner.group(1)}"
     unknown = re.search(r"unknown key '([^']+)'", message)
     return f"{key}.{unknown.group(1)}" if unknown else key
 

@@ -48,9 +48,9 @@ class RegistrationConfig(Strict):
     matched against (corners, clutter).
     """
 
-    max_distance_m: float = Field(0.4, gt=0.0)
-    inlier_distance_m: float = Field(0.2, gt=0.0)
-    kernel_m: float = Field(0.1, gt=0.0)
+    max_distance_m: bounds.MatchDistance_m = Field(0.4, gt=0.0)
+    inlier_distance_m: bounds.MatchDistance_m = Field(0.2, gt=0.0)
+    kernel_m: bounds.MatchDistance_m = Field(0.1, gt=0.0)
     max_iterations: bounds.Iterations = Field(20, ge=1)
     normal_half_window: bounds.Count = Field(2, ge=1)
     normal_max_gap_m: float = Field(0.3, gt=0.0)

@@ -64,10 +64,10 @@ class RefineConfig(_Strict):
     constraint gets no information along it.
     """
 
-    max_distance_m: float = Field(0.15, gt=0.0)
-    inlier_distance_m: float = Field(0.1, gt=0.0)
+    max_distance_m: bounds.MatchDistance_m = Field(0.15, gt=0.0)
+    inlier_distance_m: bounds.MatchDistance_m = Field(0.1, gt=0.0)
     max_points: bounds.Count = Field(400, ge=10)
-    kernel_m: float = Field(0.05, gt=0.0)
+    kernel_m: bounds.MatchDistance_m = Field(0.05, gt=0.0)
     max_shift_m: float = Field(0.2, gt=0.0)
     max_turn_deg: float = Field(3.0, gt=0.0)
     min_inliers: float = Field(0.3, ge=0.0, le=1.0)

@@ -83,6 +83,7 @@ class Mapping:
         self.metrics: dict[str, Any] = {}
         self.extra_metrics: dict[str, Any] = {}
         self.extra_outputs: dict[str, str | Callable[[], str]] = {}
+        self._initial_pose: np.ndarray | None = None
 
     # -- the table of contents ------------------------------------------------
 
@@ -328,7 +329,14 @@ class Mapping:
 
     def initial_pose(self) -> np.ndarray:
         """The first keyframe's pose: ground truth's where the config asks
-        for it, else the origin facing the first compass heading."""
+        for it, else the origin facing the first compass heading. Found
+        once (recheck, loops and the optimiser each ask), so that its
+        warning is said once."""
+        if self._initial_pose is None:
+            self._initial_pose = self._find_initial_pose()
+        return self._initial_pose.copy()
+
+    def _find_initial_pose(self) -> np.ndarray:
         rec, cfg, t0 = self.recording, self.config.backend, self.measurements.t[:1]
         if cfg.initial_pose == "groundtruth":
             if rec.groundtruth is not None:

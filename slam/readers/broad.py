@@ -73,6 +73,7 @@ import numpy as np
 
 from slam.config import InputConfig
 from slam.errors import GslamError
+from slam.readers.data_checks import EARTH_FIELD_UT
 from validation.base.geometry import heading_from_magnetometer, wrap_angle
 from slam.recording import Compass, Gyro, Interval, MagneticReference, Recording, Trajectory
 
@@ -230,11 +231,8 @@ GRAVITY_M_S2 = (4.9, 19.6)
 """The median of ``|imu_acc|`` (m/s^2) over a trial: an IMU held on the
 Earth reads gravity, 9.81, whatever it does (BROAD's trials: 9.82-9.95);
 half or twice that is no accelerometer in m/s^2 (one in g reads 1)."""
-FIELD_UT = (2.0, 1000.0)
-"""The median of ``|imu_mag|`` (uT) over a trial: the Earth's field is 22-67
-uT everywhere (BROAD's trials, magnets beside them included: 42-46); a
-tenth of the weakest or fifteen times the strongest is no field in uT (one
-in tesla reads 5e-5, one in nT 5e4)."""
+FIELD_UT = EARTH_FIELD_UT
+"""The median of ``|imu_mag|`` (uT) over a trial, as every recording's field."""
 MAX_GYRO_RAD_S = 1000.0
 """rad/s on any axis (as :data:`slam.readers.data_checks.MAX_YAW_RATE`):
 gyroscopes saturate at a few thousand deg/s (BROAD's trials reach 24)."""
@@ -278,9 +276,14 @@ def read_broad(
     """
     path = Path(path)
     d = _load(path)
-    fs = float(np.asarray(d["sampling_rate"]).ravel()[0])
-    if not np.isfinite(fs) or not 1.0 <= fs <= 100_000.0:
-        raise GslamError(f"{path}: sampling_rate: expected an IMU's rate in Hz (1 to 100000; BROAD's is 285.7), got {fs:g}")
+    rate = np.asarray(d["sampling_rate"]).ravel()
+    try:
+        fs = float(rate[0])
+    except (TypeError, ValueError, IndexError):  # a string, a struct, an empty array
+        fs = None
+    if fs is None or not np.isfinite(fs) or not 1.0 <= fs <= 100_000.0:
+        got = f"{fs:g}" if fs is not None else (repr(rate[0].item()) if rate.size else "nothing")
+        raise GslamError(f"{path}: sampling_rate: expected an IMU's rate in Hz (1 to 100000; BROAD's is 285.7), got {got}")
     gyr, acc, mag, quat = d["imu_gyr"], d["imu_acc"], d["imu_mag"], d["opt_quat"]
     n = len(gyr)
     # 0: the magnetometer's sample stamped t + mag_lag_s was measured at t.

@@ -64,6 +64,7 @@ import numpy as np
 from slam.config import InputConfig
 from slam.errors import GslamError
 from validation.base.geometry import wrap_angle
+from slam.readers.data_checks import MAX_RANGE_M
 from slam.readers.files import SNIFF_BYTES, decode_log, sniff_log
 from validation.base.yamlio import check_regular_file
 from slam.recording import relative_poses
@@ -341,7 +342,10 @@ def _range_max(d: _Log, ranges: np.ndarray) -> float:
             return float(param)
         except ValueError:
             log.warning("PARAM robot_front_laser_max %r is not a number; ignored", param)
-    return 0.99 * float(np.max(ranges))
+    # Ranges no laser measures are no return (slam.readers.data_checks), not the laser's reach.
+    with np.errstate(invalid="ignore"):
+        measured = ranges[np.isfinite(ranges) & (ranges <= MAX_RANGE_M)]
+    return 0.99 * float(np.max(measured)) if measured.size else 0.0
 
 
 def read_carmen(path: str | Path, config: InputConfig | None = None) -> Recording:

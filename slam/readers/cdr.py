@@ -96,7 +96,7 @@ def agrees(msg: Any, cols: dict[str, np.ndarray], row: int = 0) -> bool:
     if int(cols["stamp_ns"][row]) != stamp:
         return False
     for name, values in cols.items():
-        if name == "stamp_ns":
+        if name in ("stamp_ns", "nanosec"):  # the stamp, compared above
             continue
         getter = _GETTERS.get(name)
         if getter is None:
@@ -173,4 +173,5 @@ def decode_columns(msgtype: str, raws: Sequence[bytes], fields: Sequence[str]) -
     rows = buf.reshape(-1).view(dtype)
     cols = {name: np.array(rows[name]) for name in fields}
     cols["stamp_ns"] = rows["sec"].astype(np.int64) * 1_000_000_000 + rows["nanosec"].astype(np.int64)
+    cols["nanosec"] = rows["nanosec"].astype(np.int64)
     return cols

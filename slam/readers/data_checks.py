@@ -21,6 +21,9 @@ says. The thresholds leave every shipped and real recording under
   nothing, or has fewer than :data:`MIN_BEAMS` beams: a warning, and the
   scans are left out (no scan-matching factor from an empty scan).
 * **Yaw rates** beyond :data:`MAX_YAW_RATE`: an error.
+* **Fields and fixes**: a magnetometer whose median field is not the
+  Earth's (:data:`EARTH_FIELD_UT`), a GPS fix whose sigma is beyond
+  :data:`MAX_GPS_SIGMA_M`: errors.
 """
 
 from __future__ import annotations
@@ -50,6 +53,15 @@ circumference is no local map frame."""
 MAX_POSE_STEP_M = 1000.0
 """m between two consecutive poses of one stream: no ground robot covers a
 kilometre between two samples of its odometry."""
+EARTH_FIELD_UT = (2.0, 1000.0)
+"""The median magnetic field strength (uT) of a recording: the Earth's field
+is 22-67 uT everywhere (BROAD's trials, magnets beside them included:
+42-46); a tenth of the weakest or fifteen times the strongest is no field
+in uT (one in tesla reads 5e-5, one in nT 5e4) or no magnetometer that
+works (a field of 0 has no heading)."""
+MAX_GPS_SIGMA_M = 1e6
+"""m: a fix known to no better than 1000 km says nothing (the bound of every
+configured position sigma, :data:`validation.base.bounds.SIGMA_M`)."""
 MIN_JUMP_S = 60.0
 """A forward jump shorter than this is a gap, never an error."""
 STREAMS = ("scans", "gyro", "compass", "odometry", "gps", "groundtruth")
@@ -106,6 +118,7 @@ def check_recording(rec: Recording, source: object, offsets: dict[str, float] | 
     check_scans(rec, source)
     check_rates(rec, source)
     check_poses(rec, source)
+    check_fields(rec, source)
     return rec
 
 
@@ -146,6 +159,25 @@ def check_rates(rec: Recording, source: object) -> None:
         i = int(np.argmax(rate))
         raise GslamError(f"{source}: gyro rate {i} is {rec.gyro.rate[i]:.6g} rad/s; no gyroscope measures more than "
                          f"{MAX_YAW_RATE:g} rad/s (the unit wrong?)")
+
+
+def check_fields(rec: Recording, source: object) -> None:
+    """A magnetometer reads the Earth's field (:data:`EARTH_FIELD_UT`); a
+    GPS fix's sigma is at most :data:`MAX_GPS_SIGMA_M` (NaN: unknown)."""
+    field = rec.compass.field if rec.compass is not None else None
+    if field is not None and len(field):
+        b = float(np.median(np.linalg.norm(np.asarray(field, dtype=np.float64), axis=1))) * 1e6
+        if not EARTH_FIELD_UT[0] <= b <= EARTH_FIELD_UT[1]:
+            raise GslamError(f"{source}: compass: median field {b:.3g} uT, expected the Earth's (22-67 uT, within "
+                             f"{EARTH_FIELD_UT[0]:g} to {EARTH_FIELD_UT[1]:g}; in tesla, as a MagneticField is?)")
+    if rec.gps is not None and len(rec.gps.t):
+        sigma = np.asarray(rec.gps.sigma, dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            far = sigma > MAX_GPS_SIGMA_M
+        if far.any():
+            i = int(np.argmax(far))
+            raise GslamError(f"{source}: gps fix {i} has a sigma of {sigma[i]:.3g} m; one beyond "
+                             f"{MAX_GPS_SIGMA_M:g} m says nothing (a covariance in other units?)")
 
 
 # --- stamps ------------------------------------------------------------------------
@@ -256,6 +288,10 @@ def _check_ranges(rec: Recording, where: str) -> None:
                         where, n, total, 100.0 * n / total, what, worst)
     if beyond.any():
         scans.ranges = np.where(beyond, np.float32(np.inf), r).astype(r.dtype, copy=False)
+    if math.isfinite(scans.range_max) and scans.range_max > MAX_RANGE_M:  # inf: no limit, as REP-117 allows
+        log.warning("%s: the laser's range limit is %.6g m, beyond %g m (no laser measures that far); taken as %g m",
+                    where, scans.range_max, MAX_RANGE_M, MAX_RANGE_M)
+        scans.range_max = MAX_RANGE_M
     lo, hi = float(scans.range_min), float(scans.range_max)
     with np.errstate(invalid="ignore"):
         usable = finite & ~beyond & (r >= max(lo, 0.0)) & (r < hi) & (r > 0)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import os
 from pathlib import Path
 
 from slam.errors import GslamError
@@ -11,6 +13,21 @@ SNIFF_BYTES = 1 << 20
 """How much of a text log is looked at before the whole is read: a binary
 file (a disk image, a sparse file of zeros) is refused on its first
 megabyte, not after gigabytes are in memory."""
+
+
+def check_exists(path: Path) -> None:
+    """A one-line :class:`GslamError` if there is nothing at ``path``: no
+    such file, a link to nothing, or a loop of links (which ``exists``
+    takes for nothing too)."""
+    try:
+        os.stat(path)
+        return
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            raise GslamError(f"{path}: too many levels of symbolic links (a link that leads back to itself)") from None
+    if path.is_symlink():
+        raise GslamError(f"{path}: a symbolic link to {os.readlink(path)}, which does not exist")
+    raise GslamError(f"{path}: no such file or directory")
 
 
 def sniff_log(head: bytes, source: str | Path, what: str) -> None:

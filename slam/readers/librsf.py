@@ -39,7 +39,7 @@ from slam.config import InputConfig
 from slam.errors import GslamError
 from validation.base.geometry import wrap_angle
 from slam.readers.carmen import chain_steps
-from slam.readers.files import SNIFF_BYTES, decode_log, sniff_log
+from slam.readers.files import SNIFF_BYTES, check_exists, decode_log, sniff_log
 from validation.base.yamlio import check_regular_file
 from slam.recording import Gyro, PlaceMatches, Recording, Trajectory
 
@@ -59,8 +59,7 @@ def dataset_files(path: str | Path) -> tuple[Path, Path | None]:
     """``(input, groundtruth or None)`` for a ``*_Input.txt``, a ``*_GT.txt``
     or a folder holding exactly one ``*_Input.txt``."""
     path = Path(path)
-    if not path.exists():
-        raise GslamError(f"{path}: no such file or directory")
+    check_exists(path)
     if path.is_dir():
         inputs = sorted(path.glob(f"*{INPUT_SUFFIX}"))
         if len(inputs) != 1:
@@ -141,6 +140,34 @@ def _physical_odometry(path: Path, rows: np.ndarray) -> None:
                              "a square (expected 0 or more)")
 
 
+MAX_LOOP_WEIGHT = 1e6
+"""A loop line's weight multiplies the information of its constraint (the
+Corridor's are 0.005-1): beyond a million, as any information scale
+(:data:`validation.base.bounds.INFORMATION_SCALE`), its sigma is a
+thousandth of ``loops.file.sigma_m`` and its square overflows."""
+LOOP_STAMP_SLACK_S = 10.0
+"""How far a loop line's stamps may lie outside the odom2 lines' span (s):
+the Corridor's last loop is 0.2 s after its last odom2 line."""
+
+
+def _physical_loops(path: Path, loops: np.ndarray, t: np.ndarray) -> None:
+    """One-line errors for loop lines that cannot be: a weight below 0 or
+    beyond :data:`MAX_LOOP_WEIGHT`, stamps outside the odometry's span by
+    more than :data:`LOOP_STAMP_SLACK_S` (another log's, or another unit)."""
+    weight = loops[:, 2]
+    bad = (weight < 0.0) | (weight > MAX_LOOP_WEIGHT)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise GslamError(f"{path}: loop line #{k + 1}: weight {weight[k]:g}; expected 0 to {MAX_LOOP_WEIGHT:g} (it "
+                         "scales the loop's information)")
+    lo, hi = t[0] - LOOP_STAMP_SLACK_S, t[-1] + LOOP_STAMP_SLACK_S
+    outside = (loops[:, :2] < lo) | (loops[:, :2] > hi)
+    if outside.any():
+        k, c = (int(v[0]) for v in np.nonzero(outside))
+        raise GslamError(f"{path}: loop line #{k + 1}: {('t', 't_other')[c]} {loops[k, c]:g} s is outside the "
+                         f"odom2 lines' {t[0]:g} to {t[-1]:g} s; expected a time of this log")
+
+
 def integrate_velocities(t: np.ndarray, vx: np.ndarray, vy: np.ndarray, wz: np.ndarray) -> np.ndarray:
     """Poses (n, 3) from body velocities (m/s, m/s, rad/s) at times ``t`` (s),
     starting at the origin; the velocities at ``t_k`` act over
@@ -187,6 +214,8 @@ def read_librsf(path: str | Path, config: InputConfig | None = None) -> Recordin
     t, vx, vy, wz = rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
     _increasing(inp, t, "odom2 line")
     _physical_odometry(inp, rows)
+    if len(loops):
+        _physical_loops(inp, loops, t)
     poses = integrate_velocities(t, vx, vy, wz)
     odometry = Trajectory(t=t.copy(), x=poses[:, 0], y=poses[:, 1], yaw=poses[:, 2])
 

@@ -35,6 +35,7 @@ from validation.base.yamlio import read_text
 from validation.base.yamlio import check_regular_file
 from slam.errors import GslamError
 from slam.readers import broad, carmen, librsf
+from slam.readers.files import check_exists
 from slam.readers.rosbag import BAG_SUFFIXES, RosbagReader, ScansHook, is_rosbag
 from slam.recording import COMPONENTS, SENSOR_MODALITIES, MagneticReference, Recording, expand_sensor_labels
 
@@ -98,8 +99,7 @@ def run_recording(path: Path) -> Path:
 def guess_format(path: str | Path) -> str:
     """The registry key of the reader for ``path`` (a run folder's recording)."""
     path = Path(path)
-    if not path.exists():
-        raise GslamError(f"{path}: no such file or directory")
+    check_exists(path)
     if not path.is_dir():
         check_regular_file(path, "recording")
     if is_run_folder(path):
@@ -193,14 +193,28 @@ def load_sidecar(path: str | Path) -> Sidecar:
     return sidecar
 
 
-def attach_sidecar(rec: Recording, sidecar: Sidecar) -> None:
+TRUTH_SLACK_S = 10.0
+"""How far a fault interval of ``truth.json`` may reach outside the recording
+(s): the simulator's and gslam inject's lie within it."""
+
+
+def attach_sidecar(rec: Recording, sidecar: Sidecar, source: str | Path = SIDECAR) -> None:
     """Fill ``rec.faults`` (shifted into the recording's time base) and
-    ``rec.magnetic_reference`` from the sidecar."""
+    ``rec.magnetic_reference`` from the sidecar; a one-line
+    :class:`GslamError` naming ``source`` if a fault lies outside the
+    recording by more than :data:`TRUTH_SLACK_S` (a ``t0`` or faults of
+    another recording would leave it without truth in silence)."""
     shift = sidecar.t0 - rec.t0
     rec.faults = {
         name: [(start + shift, end + shift) for start, end in intervals]
         for name, intervals in expand_sensor_labels(sidecar.faults).items()
     }
+    for name, intervals in sidecar.faults.items():
+        for start, end in intervals:
+            if start + shift > rec.duration + TRUTH_SLACK_S or end + shift < -TRUTH_SLACK_S:
+                raise GslamError(f"{source}: faults.{name} [{start:g}, {end:g}] s after t0 {sidecar.t0:.10g} lies "
+                                 f"outside the recording ({rec.t0:.10g} s plus {rec.duration:.1f} s); the truth of "
+                                 "another recording?")
     mag = sidecar.magnetic_reference
     if mag is not None:
         rec.magnetic_reference = MagneticReference(mag.strength_T, mag.dip_rad, mag.declination_rad)
@@ -244,7 +258,7 @@ def read_recording(path: str | Path, config: InputConfig, on_scans: ScansHook | 
         config = config.model_copy(update={"gps": datum})
     rec = _checked(_read(fmt, run_recording(path), config, on_scans), fmt, path, config, on_scans)
     rec.name = path.name
-    attach_sidecar(rec, sidecar)
+    attach_sidecar(rec, sidecar, path / SIDECAR)
     rec.fault_truth = _as_read(rec.faults)
     log.info("%s: run '%s' with faults in %s", path, sidecar.scenario, ", ".join(rec.faults) or "none")
     return rec

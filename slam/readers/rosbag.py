@@ -45,6 +45,7 @@ from typing import Any
 from slam.config import InputConfig
 from slam.errors import GslamError
 from slam.readers import cdr, rosbag2_sqlite, rosbag_mcap
+from slam.readers.files import check_exists
 from slam.readers.rosbag_imu import _CompassImuStream, _CompassMagStream, _GyroStream, world_yaw_rate
 from slam.readers.rosbag_poses import _GpsStream, _PoseStream
 from slam.readers.rosbag_scans import _ScanStream
@@ -89,8 +90,7 @@ def resolve_bag_path(path: Path) -> Path:
     """The path to hand to rosbags: ``path`` itself, or the single bag file in
     a directory that is not a rosbag2 directory (as a run folder's ``bag/``
     may be)."""
-    if not path.exists():
-        raise GslamError(f"{path}: no such file or directory")
+    check_exists(path)
     if not path.is_dir():
         check_regular_file(path, "ROS bag")
         return path
@@ -170,8 +170,8 @@ def _open_reader(path: Path) -> Any:
         reader = AnyReader([path], default_typestore=store)
         reader.open()
     except Exception as err:  # rosbags raises many types for foreign or broken files
-        mcap = rosbag_mcap.mcap_file(path)
-        mixed = rosbag_mcap.open_mixed_mcap(mcap, _first_line(err)) if mcap is not None else None
+        files = rosbag_mcap.mcap_files(path)
+        mixed = rosbag_mcap.open_mixed_mcap(path, files, _first_line(err)) if files else None
         if mixed is None:
             raise GslamError(f"{path}: not a readable ROS bag ({_first_line(err)})") from None
         return mixed

@@ -19,7 +19,7 @@ from slam.config import CompassInputConfig, GyroInputConfig, StreamFrameConfig
 from slam.errors import GslamError
 from validation.base.geometry import heading_from_magnetometer, wrap_angle, yaw_from_quaternion
 from slam.readers import frames
-from slam.readers.rosbag_streams import IMU, MAGNETIC_FIELD, _stamp, _Stream
+from slam.readers.rosbag_streams import IMU, MAGNETIC_FIELD, _Stream
 from slam.recording import Compass, Gyro
 
 
@@ -56,7 +56,7 @@ class _GyroStream(_Stream):
             self.rates.append((w.x, w.y, w.z, q.x, q.y, q.z, q.w))
         else:
             self.rates.append(((w.x, w.y, w.z)[self.axis],))
-        self.stamps.append(_stamp(msg))
+        self.add_stamp(msg)
 
     def bulk_fields(self) -> tuple[str, ...]:
         return ("angular_velocity", "orientation", "orientation_covariance") if self.world else ("angular_velocity",)
@@ -132,7 +132,7 @@ class _CompassMagStream(_Stream):
         self.fields: list[tuple[float, float, float]] = []
 
     def add(self, msg: Any) -> None:
-        self.stamps.append(_stamp(msg))
+        self.add_stamp(msg)
         m = msg.magnetic_field
         self.fields.append((m.x, m.y, m.z))
 
@@ -186,7 +186,7 @@ class _CompassImuStream(_Stream):
                 f"{self.where}: message {len(self.stamps)} has no orientation "
                 "(orientation_covariance[0] = -1); use compass source magnetic_field"
             )
-        self.stamps.append(_stamp(msg))
+        self.add_stamp(msg)
         q = msg.orientation
         self.quats.append((q.x, q.y, q.z, q.w))
 

@@ -7,11 +7,14 @@ and every channel's schema a ROS 2 definition (``ros2msg``, ``ros2idl``,
 logger's diagnostics) is refused as a whole, though the topics a run
 needs are ROS 2 messages like any other.
 
-:func:`open_mixed_mcap` reads such a file with the ``mcap`` package: each
-channel becomes rosbags' :class:`~rosbags.interfaces.Connection` (one of
-another encoding with no definition), the messages stay raw bytes, and
-the ROS 2 ones are deserialised by a type store of the file's own
-definitions, built as rosbags' ``AnyReader`` builds it.
+:func:`open_mixed_mcap` reads such a file, or the files of a rosbag2
+folder split into several (``ros2 bag record --max-bag-size``), with the
+``mcap`` package: each channel of each file becomes rosbags'
+:class:`~rosbags.interfaces.Connection` (one of another encoding with no
+definition), the messages stay raw bytes, merged across the files in the
+order of their log times, and the ROS 2 ones are deserialised by a type
+store of the files' own definitions, built as rosbags' ``AnyReader``
+builds it.
 :mod:`slam.readers.rosbag` reads the needed topics from it as from
 rosbags, and skips the channels it cannot decode, naming each
 (:func:`foreign_channels`).
@@ -19,6 +22,7 @@ rosbags, and skips the channels it cannot decode, naming each
 
 from __future__ import annotations
 
+import heapq
 import logging
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -44,82 +48,125 @@ def foreign_channels(connections: Sequence[Any]) -> dict[str, str]:
             if isinstance(c.ext, ConnectionExtRosbag2) and c.ext.serialization_format != ROS2_ENCODING}
 
 
+class _McapFile:
+    """One open MCAP file of a bag: its reader and the connection of each
+    of its channels (by the file's own channel ids)."""
+
+    def __init__(self, stream, reader, connections: dict[int, Any]):
+        self.stream, self.reader, self.connections = stream, reader, connections
+
+    def messages(self, wanted: dict[int, Any]) -> Iterator[tuple[int, Any, bytes]]:
+        """(log time in ns, connection, raw bytes) of the messages of the
+        ``wanted`` connections (by connection id), in log time order."""
+        mine = {channel: conn for channel, conn in self.connections.items() if conn.id in wanted}
+        if not mine:
+            return
+        topics = sorted({c.topic for c in mine.values()})
+        for _, channel, message in self.reader.iter_messages(topics=topics, log_time_order=True):
+            conn = mine.get(channel.id)
+            if conn is not None:
+                yield message.log_time, conn, message.data
+
+
 class MixedMcap:
-    """An MCAP file opened by :func:`open_mixed_mcap`, read as rosbags'
-    ``AnyReader`` is: ``connections``, ``messages``, ``deserialize`` and
-    the ``typestore`` of its ROS 2 definitions."""
+    """The MCAP files of a bag opened by :func:`open_mixed_mcap`, read as
+    rosbags' ``AnyReader`` is: ``connections`` (one per channel of each
+    file), ``messages``, ``deserialize`` and the ``typestore`` of their
+    ROS 2 definitions."""
 
     is2 = True
 
-    def __init__(self, path: Path, stream, reader, connections: list[Any], typestore):
+    def __init__(self, path: Path, files: list[_McapFile], connections: list[Any], typestore):
         self.path = path
         self.connections = connections
         self.typestore = typestore
-        self._stream, self._reader = stream, reader
+        self._files = files
 
     def messages(self, connections: Sequence[Any] | None = None) -> Iterator[tuple[Any, int, bytes]]:
         """(connection, log time in ns, raw bytes) of each message on
-        ``connections`` (None: all), in the order of their log times."""
-        by_id = {c.id: c for c in (self.connections if connections is None else connections)}
-        topics = sorted({c.topic for c in by_id.values()})
-        for _, channel, message in self._reader.iter_messages(topics=topics, log_time_order=True):
-            conn = by_id.get(channel.id)
-            if conn is not None:
-                yield conn, message.log_time, message.data
+        ``connections`` (None: all), in the order of their log times across
+        the files."""
+        wanted = {c.id: c for c in (self.connections if connections is None else connections)}
+        merged = heapq.merge(*(f.messages(wanted) for f in self._files), key=lambda m: m[0])
+        for log_time, conn, data in merged:
+            yield conn, log_time, data
 
     def deserialize(self, raw: bytes, msgtype: str) -> Any:
         return self.typestore.deserialize_cdr(raw, msgtype)
 
     def close(self) -> None:
-        self._stream.close()
+        for f in self._files:
+            f.stream.close()
 
 
-def mcap_file(path: Path) -> Path | None:
-    """The MCAP file of a bag path: the file itself, or the one ``.mcap``
-    file of a rosbag2 folder; None for anything else."""
+def mcap_files(path: Path) -> list[Path]:
+    """The MCAP files of a bag path: the file itself, or the ``.mcap``
+    files of a rosbag2 folder (one, or several when it was split); none
+    for anything else."""
     if path.is_file():
-        return path if path.suffix == ".mcap" else None
-    files = sorted(path.glob("*.mcap")) if path.is_dir() else []
-    return files[0] if len(files) == 1 else None
+        return [path] if path.suffix == ".mcap" else []
+    return sorted(path.glob("*.mcap")) if path.is_dir() else []
 
 
-def open_mixed_mcap(path: Path, refused: str) -> MixedMcap | None:
-    """``path`` (an MCAP file rosbags refused, saying ``refused``) opened
-    here, if what rosbags refused is channels besides ROS 2's or a profile
-    other than ``ros2``; None if the file is all ROS 2 or not a readable
-    MCAP file, so that rosbags' own reason stands. Raises
-    :class:`GslamError` when ``mcap`` is not installed or the file's ROS 2
-    definitions do not parse."""
+def open_mixed_mcap(path: Path, files: list[Path], refused: str) -> MixedMcap | None:
+    """The bag ``path`` (rosbags refused it, saying ``refused``) opened here
+    from its MCAP ``files``, if what rosbags refused is channels besides
+    ROS 2's or a profile other than ``ros2``; None if every file is all
+    ROS 2 or one is not a readable MCAP file, so that rosbags' own reason
+    stands. A topic's channels of one type in several files are one
+    connection, as in a split bag's metadata. Raises :class:`GslamError`
+    when ``mcap`` is not installed or the files' ROS 2 definitions do not
+    parse."""
     try:
         from mcap.reader import make_reader
     except ImportError:
         raise GslamError(f"{path}: not a readable ROS bag ({refused}); {MCAP_HINT}") from None
-    stream = open(path, "rb")
+    streams = []
     try:
-        reader = make_reader(stream)
-        summary = reader.get_summary()
-        header = reader.get_header()
-    except Exception:  # a broken file: rosbags has said why
-        stream.close()
-        return None
-    if summary is None:
-        stream.close()
-        return None
-    counts = summary.statistics.channel_message_counts if summary.statistics is not None else {}
-    connections = [_connection(ch, summary.schemas.get(ch.schema_id), counts.get(ch.id, 0))
-                   for ch in summary.channels.values()]
-    if header.profile == "ros2" and not foreign_channels(connections):
-        stream.close()
-        return None
-    try:
-        typestore = _typestore(path, connections)
+        summaries = []
+        for file in files:
+            streams.append(open(file, "rb"))
+            try:
+                reader = make_reader(streams[-1])
+                summaries.append((reader, reader.get_summary(), reader.get_header()))
+            except Exception:  # a broken file: rosbags has said why
+                return _closed(streams)
+            if summaries[-1][1] is None:
+                return _closed(streams)
+        # 1. Each channel's key (topic, encoding, schema) and message count, over every file.
+        counts: dict[tuple, int] = {}
+        first: dict[tuple, tuple] = {}  # key -> the first channel and schema of that key
+        keys: list[dict[int, tuple]] = []
+        for _, summary, _ in summaries:
+            stats = summary.statistics.channel_message_counts if summary.statistics is not None else {}
+            keys.append({})
+            for ch in summary.channels.values():
+                schema = summary.schemas.get(ch.schema_id)
+                key = (ch.topic, ch.message_encoding, *((schema.name, schema.encoding, schema.data) if schema else ()))
+                keys[-1][ch.id] = key
+                counts[key] = counts.get(key, 0) + stats.get(ch.id, 0)
+                first.setdefault(key, (ch, schema))
+        # 2. One connection per key, and each file's channels mapped to theirs.
+        shared = {key: _connection(k, *first[key], counts[key]) for k, key in enumerate(counts)}
+        connections = list(shared.values())
+        if all(header.profile == "ros2" for _, _, header in summaries) and not foreign_channels(connections):
+            return _closed(streams)
+        opened = [_McapFile(stream, reader, {ch_id: shared[key] for ch_id, key in file_keys.items()})
+                  for stream, (reader, _, _), file_keys in zip(streams, summaries, keys)]
+        return MixedMcap(path, opened, connections, _typestore(path, connections))
     except BaseException:
-        stream.close()
+        _closed(streams)
         raise
-    return MixedMcap(path, stream, reader, connections, typestore)
 
 
-def _connection(channel, schema, count: int) -> Any:
+def _closed(streams: list) -> None:
+    """Close ``streams``; None: the bag is not for this reader."""
+    for stream in streams:
+        stream.close()
+    return None
+
+
+def _connection(conn_id: int, channel, schema, count: int) -> Any:
     """rosbags' Connection of an MCAP channel; one of another encoding
     than CDR, or a schema that is not a ROS 2 definition, has none."""
     from rosbags.interfaces import Connection, ConnectionExtRosbag2, MessageDefinition
@@ -131,7 +178,7 @@ def _connection(channel, schema, count: int) -> Any:
     ros2 = channel.message_encoding == ROS2_ENCODING and form is not None
     msgdef = MessageDefinition(form, text) if ros2 else MessageDefinition(Format.NONE, "")
     msgtype = schema.name if schema is not None else ""
-    return Connection(channel.id, channel.topic, msgtype, msgdef, "", count,
+    return Connection(conn_id, channel.topic, msgtype, msgdef, "", count,
                       ConnectionExtRosbag2(channel.message_encoding, []), None)
 
 

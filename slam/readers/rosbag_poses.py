@@ -17,7 +17,7 @@ from slam.config import GpsInputConfig, StreamFrameConfig
 from slam.errors import GslamError
 from validation.base.geometry import enu_from_geodetic, yaw_from_quaternion
 from slam.readers import frames
-from slam.readers.rosbag_streams import NAV_SAT_FIX, ODOMETRY, _stamp, _Stream
+from slam.readers.rosbag_streams import NAV_SAT_FIX, ODOMETRY, _Stream
 from slam.recording import Gps, Trajectory
 
 # The streams are part of the reader: they log under its name, so that one
@@ -44,7 +44,7 @@ class _PoseStream(_Stream):
         self.poses: list[tuple[float, ...]] = []
 
     def add(self, msg: Any) -> None:
-        self.stamps.append(_stamp(msg))
+        self.add_stamp(msg)
         pose = msg.pose.pose if self.msgtype == ODOMETRY else msg.pose
         p, q = pose.position, pose.orientation
         self.poses.append((p.x, p.y, q.x, q.y, q.z, q.w))
@@ -97,7 +97,7 @@ class _GpsStream(_Stream):
         if status < 0 or lat != lat or lon != lon:  # x != x only for NaN
             self.dropped += 1
             return
-        self.stamps.append(_stamp(msg))
+        self.add_stamp(msg)
         cov = msg.position_covariance
         self.rows.append((lat, lon, cov[0], cov[4], msg.position_covariance_type, status))
 
@@ -112,7 +112,8 @@ class _GpsStream(_Stream):
         rows = np.column_stack([lat[keep], lon[keep], cov[:, 0], cov[:, 4], cols["position_covariance_type"][keep],
                                 cols["status"][keep]]).astype(np.float64)
         dropped = np.array([np.count_nonzero(~keep)])
-        super().add_columns({"stamp_ns": cols["stamp_ns"][keep], "rows": rows, "dropped": dropped})
+        super().add_columns({"stamp_ns": cols["stamp_ns"][keep], "nanosec": cols["nanosec"][keep], "rows": rows,
+                             "dropped": dropped})
 
     def finish(self) -> None:
         super().finish()

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from slam.errors import GslamError
-from slam.readers.rosbag_streams import LASER_SCAN, _stamp, _Stream
+from slam.readers.rosbag_streams import LASER_SCAN, _Stream
 from slam.recording import Scans
 
 
@@ -39,7 +39,7 @@ class _ScanStream(_Stream):
             )
         elif (msg.angle_min, msg.angle_increment) != (first.angle_min, first.angle_increment):
             raise GslamError(f"{self.where}: beam angles change at message {len(self.stamps)}")
-        self.stamps.append(_stamp(msg))
+        self.add_stamp(msg)
         self.ranges.append(msg.ranges)
 
     def bulk_fields(self) -> tuple[str, ...]:

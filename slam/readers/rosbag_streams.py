@@ -46,12 +46,18 @@ class _Stream:
         self.where = f"{bag}: {name} topic '{topic}'"
         self.msgtype = self.msgtypes[0]
         self.stamps: list[int] = []
+        self.nanosecs: list[int] = []  # of each stamp, to refuse one that is no ROS time
         self.blocks: list[dict[str, np.ndarray]] = []
         self.n_bulk = 0  # messages received through add_columns
         self.ns = np.zeros(0, dtype=np.int64)
 
     def add(self, msg: Any) -> None:
         raise NotImplementedError
+
+    def add_stamp(self, msg: Any) -> None:
+        """Keep the header stamp of ``msg`` (each ``add`` does)."""
+        self.stamps.append(_stamp(msg))
+        self.nanosecs.append(msg.header.stamp.nanosec)
 
     def bulk_fields(self) -> tuple[str, ...]:
         """Fields ``add_columns`` needs (names of :mod:`slam.readers.cdr`)."""
@@ -80,9 +86,15 @@ class _Stream:
         return self.blocks[0]
 
     def finish(self) -> None:
-        """Check the stamps are strictly increasing; subclasses check values."""
+        """Check the stamps are ROS times, strictly increasing; subclasses check values."""
         cols = self.columns()
         self.ns = cols["stamp_ns"] if cols is not None else np.asarray(self.stamps, dtype=np.int64)
+        nanosec = cols["nanosec"] if cols is not None else np.asarray(self.nanosecs, dtype=np.int64)
+        beyond = np.flatnonzero(nanosec >= _NS)
+        if beyond.size:  # sec + 3e9 ns would read as another, later second
+            i = int(beyond[0])
+            raise GslamError(f"{self.where}: header stamp at message {i} has nanosec {int(nanosec[i])}, beyond "
+                             f"{_NS - 1}: not a ROS time (a stamp in other units?)")
         steps = np.diff(self.ns)
         bad = np.flatnonzero(steps <= 0)
         if bad.size:

@@ -29,6 +29,17 @@ class Existing(Enum):
 # --- checks shared by every output -------------------------------------------------
 
 
+def resolve_path(path: str | Path) -> Path:
+    """``path`` made absolute with every link followed, as ``Path.resolve``
+    does, but a loop of links (``a -> a``, a folder linked into itself) is
+    a one-line :class:`GslamError` naming it instead of pathlib's
+    RuntimeError (Python 3.13 raises OSError, said as one line too)."""
+    try:
+        return Path(path).resolve()
+    except RuntimeError:
+        raise GslamError(f"{path}: too many levels of symbolic links (a link that leads back to itself)") from None
+
+
 def refuse(out: Path | str, why: str, flag: str = "--out") -> GslamError:
     return GslamError(f"{out}: {flag} {why}")
 
@@ -47,7 +58,7 @@ def check_out_path(out: str | Path, flag: str = "--out") -> Path:
         raise refuse(out, "is a symbolic link; give the place it points to, or a new name", flag)
     if mode is not None and special_file(mode):
         raise refuse(out, f"is {special_file(mode)}, not a regular file or folder; give a new name", flag)
-    if out.resolve().parent == out.resolve():
+    if resolve_path(out).parent == resolve_path(out):
         raise refuse(out, "is the file system root; give a new folder name", flag)
     return out
 
@@ -67,7 +78,7 @@ def check_inputs(out: Path, target: Path, inputs: Iterable[str | Path], flag: st
         path = Path(given)
         if not path.exists():
             continue
-        p = path.resolve()
+        p = resolve_path(path)
         if p == target or _same_file(p, target):
             raise refuse(out, f"is the input {given}; give a new name", flag)
         if target in p.parents:
@@ -82,7 +93,7 @@ def classify(out: str | Path, command: str, inputs: Iterable[str | Path] = (), f
     it is refused."""
     inputs = list(inputs)
     out = check_out_path(out)
-    target = out.resolve()
+    target = resolve_path(out)
     check_inputs(out, target, inputs)
     if not out.exists():
         return Existing.NEW
@@ -99,7 +110,12 @@ def classify(out: str | Path, command: str, inputs: Iterable[str | Path] = (), f
         return Existing.NEW
     if force:
         return Existing.FORCED
-    what = f"a gslam {found} result, not a {command} result" if found else f"not a gslam {command} result (no {RESULT_MARKER})"
+    if found:
+        what = f"a gslam {found} result, not a {command} result"
+    elif (out / RESULT_MARKER).exists():
+        what = f"not a gslam {command} result (its {RESULT_MARKER} is not one gslam wrote)"
+    else:
+        what = f"not a gslam {command} result (no {RESULT_MARKER})"
     raise refuse(
         out, f"is a folder that is {what}; give a new folder name, or --force to add the {command} files "
         "to it (nothing of yours there is replaced)"
@@ -112,7 +128,7 @@ def source_of(inputs: Iterable[str | Path]) -> str | None:
     for given in inputs:
         if given is None or str(given) == "":
             return None
-        return str(Path(given).resolve())
+        return str(resolve_path(given))
     return None
 
 

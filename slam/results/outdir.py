@@ -62,7 +62,7 @@ from pathlib import Path
 from slam.errors import GslamError
 from slam.results.out_checks import (
     Existing, check_free, check_inputs, check_names, check_out_path, classify, disk_full, make_parents, refuse,
-    remove_empty, source_of,
+    remove_empty, resolve_path, source_of,
 )
 from slam.results.records import (
     ADDED_MARKER, MARKERS, RESULT_MARKER, Record, inside, list_files, only_gslams, read_record, result_command,
@@ -107,10 +107,11 @@ class ResultFolder:
         inputs = list(inputs)
         existing = classify(out, command, inputs, force)
         out = Path(out)
-        target = out.resolve()
+        target = resolve_path(out)
         record = read_record(target, command) if existing is not Existing.NEW else None
         if existing is not Existing.NEW:
             check_names(out, target, command, names, record)
+        source = source_of(inputs)  # before any folder is made: an input can be a loop of links
         folder = None
         try:
             # From the first folder made to the object that removes it, a
@@ -123,7 +124,7 @@ class ResultFolder:
                 except OSError as e:
                     remove_empty(created)
                     raise refuse(out, f"cannot be written: {target.parent} ({e.strerror or e})") from None
-                folder = cls(out, target, command, existing, tmp, record, created, source_of(inputs))
+                folder = cls(out, target, command, existing, tmp, record, created, source)
             check_free(out, target.parent, need_bytes)
         except BaseException:
             if folder is not None:
@@ -261,13 +262,14 @@ def open_container(out: str | Path, command: str, inputs: Iterable[str | Path] =
     inputs = list(inputs)
     existing = classify(out, command, inputs, force)
     out = Path(out)
-    target = out.resolve()
+    target = resolve_path(out)
+    source = source_of(inputs)  # before any folder is made: an input can be a loop of links
     created = make_parents(out, target.parent)
     remove_stale_temps(target.parent)
     try:
         if existing is Existing.NEW:
             target.mkdir(exist_ok=True)
-            write_result_marker(target, command, None, source_of(inputs))
+            write_result_marker(target, command, None, source)
         elif not os.access(target, os.W_OK | os.X_OK):
             raise refuse(out, "cannot be written (permission denied)")
         elif existing is Existing.FORCED:
@@ -275,8 +277,8 @@ def open_container(out: str | Path, command: str, inputs: Iterable[str | Path] =
             names = list(names)
             check_names(out, target, command, names, record)
             write_added_record(target, command, {n.rstrip("/") for n in names})
-        elif force and (record := read_record(target, command)) is not None and record.input != source_of(inputs):
-            write_result_marker(target, command, None, source_of(inputs))  # forced onto another input's container
+        elif force and (record := read_record(target, command)) is not None and record.input != source:
+            write_result_marker(target, command, None, source)  # forced onto another input's container
     except OSError as e:
         remove_empty(created)
         raise refuse(out, f"cannot be written ({e.strerror})") from None
@@ -316,7 +318,7 @@ def check_new_file(path: str | Path, inputs: Iterable[str | Path] = (), force: b
     command; never an input or a file inside an input folder, a folder, a
     link, a device, a pipe or a file of the user's."""
     path = check_out_path(path, flag)
-    target = path.resolve()
+    target = resolve_path(path)
     check_inputs(path, target, inputs, flag)
     if path.is_dir():
         raise refuse(path, "is a folder; give a file name", flag)

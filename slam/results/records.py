@@ -65,7 +65,7 @@ def _read_json(path: Path) -> dict | None:
         if not stat.S_ISREG(st.st_mode) or st.st_size > 64 * 2**20:
             return None
         data = json.loads(path.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # RecursionError: JSON nested too deeply
         return None
     return data if isinstance(data, dict) else None
 
@@ -79,8 +79,12 @@ def plain_relative(name: object) -> bool:
 
 
 def _files(value, marker: Path) -> frozenset[str] | None:
-    if not isinstance(value, list) or not all(isinstance(f, str) for f in value):
+    """The marker's list of files; None where it has none (a marker of
+    gslam 0.1); :class:`BadMarker` for anything gslam never writes there."""
+    if value is None:
         return None
+    if not isinstance(value, list):
+        raise BadMarker(marker, value)
     for name in value:
         if not plain_relative(name):
             raise BadMarker(marker, name)

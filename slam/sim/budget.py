@@ -83,6 +83,13 @@ def _estimate(robot: RobotConfig, path: list) -> tuple[float, float]:
     return float(seconds), path_m
 
 
+def _hours(seconds: float) -> str:
+    """``seconds`` in hours to a tenth, or to three digits once beyond a
+    million hours (an acceleration of 1e-300 m/s^2 takes 1e300 s)."""
+    hours = seconds / 3600
+    return f"{hours:.1f}" if hours < 1e6 else f"{hours:.3g}"
+
+
 def _longest_part(robot: RobotConfig, duration: float, path_m: float) -> str:
     """What takes most of a mission's ``duration``: driving, a pause
     (naming its waypoint) or turning, in the words of the scenario's keys."""
@@ -111,7 +118,7 @@ def check_bounded(scenario: Scenario, source: str) -> MissionEstimate:
                          "can be simulated (robot.waypoints, robot.laps)")
     if duration > MAX_DURATION_S:
         raise GslamError(
-            f"{source}: the mission would take about {duration / 3600:.1f} h, most of it {_longest_part(scenario.robot, duration, path_m)}; "
+            f"{source}: the mission would take about {_hours(duration)} h, most of it {_longest_part(scenario.robot, duration, path_m)}; "
             f"at most {MAX_DURATION_S / 3600:.0f} h can be simulated"
         )
     rates = {

@@ -46,7 +46,8 @@ class Door(Strict):
     """An opening cut into every wall segment that passes through ``center``."""
 
     center: Point
-    width_m: float = Field(gt=0.0)
+    width_m: Annotated[float, within(None, 100.0, "m", high="a door that wide is no door: it cuts every wall it "
+                                     "passes through")] = Field(gt=0.0)
 
 
 class Region(Strict):
@@ -65,7 +66,7 @@ class Disturber(Strict):
 
     name: str
     position: tuple[float, float, float]
-    moment_A_m2: float = Field(gt=0.0)
+    moment_A_m2: bounds.DipoleMoment_A_m2 = Field(gt=0.0)
     direction: tuple[float, float, float] = (0.0, 0.0, 1.0)
 
     @field_validator("direction")
@@ -101,19 +102,26 @@ class RobotConfig(Strict):
     ``max_speed_m_s``). Corners sharper than ``spot_turn_above_deg`` are
     turned on the spot, the others on arcs of ``corner_radius_m``."""
 
-    start_yaw_deg: float = 0.0
+    start_yaw_deg: bounds.Azimuth_deg = 0.0
     waypoints: list[
         tuple[float, float] | tuple[float, float, float] | tuple[float, float, float, float]
     ] = Field(min_length=2)
-    max_speed_m_s: float = Field(0.5, gt=0.0)
-    max_accel_m_s2: float = Field(0.3, gt=0.0)
-    max_turn_rate_deg_s: float = Field(30.0, gt=0.0)
-    max_turn_accel_deg_s2: float = Field(60.0, gt=0.0)
-    corner_radius_m: float = Field(1.0, ge=0.0)
+    # What a ground robot can do: the fastest drive at tens of m/s and brake
+    # at about 1 g; none turns faster than a gyro measures.
+    max_speed_m_s: Annotated[float, within(None, 50.0, "m/s", high="no ground robot drives at 180 km/h")] = Field(
+        0.5, gt=0.0)
+    max_accel_m_s2: Annotated[float, within(None, 100.0, "m/s^2", high="ten times gravity: no ground robot's "
+                                            "wheels or tracks grip that")] = Field(0.3, gt=0.0)
+    max_turn_rate_deg_s: Annotated[float, within(None, 2000.0, "deg/s", high="beyond any gyro's measuring range "
+                                                 "(2000 deg/s)")] = Field(30.0, gt=0.0)
+    max_turn_accel_deg_s2: Annotated[float, within(None, 1e5, "deg/s^2", high="full turn rate in a fiftieth of a "
+                                                   "second: no robot's drive does that")] = Field(60.0, gt=0.0)
+    corner_radius_m: Annotated[float, within(None, 1000.0, "m", high="a corner a kilometre round is no corner of "
+                                             "a ground robot's route")] = Field(1.0, ge=0.0)
     spot_turn_above_deg: float = Field(100.0, ge=0.0, le=180.0)
     start_pause_s: float = Field(1.0, ge=0.0)
     end_pause_s: float = Field(1.0, ge=0.0)
-    truth_rate_hz: float = Field(100.0, ge=100.0)
+    truth_rate_hz: bounds.Rate_hz = Field(100.0, ge=100.0)
     laps: int = Field(1, ge=1)
 
     @field_validator("waypoints")
@@ -140,12 +148,13 @@ class RobotConfig(Strict):
 
 
 class LaserConfig(Strict):
-    rate_hz: float = Field(10.0, gt=0.0)
+    rate_hz: bounds.Rate_hz = Field(10.0, gt=0.0)
     beams: bounds.Count = Field(541, ge=2)
     fov_deg: float = Field(270.0, gt=0.0, le=360.0)
     min_range_m: float = Field(0.1, ge=0.0)
-    max_range_m: float = Field(10.0, gt=0.0)
-    range_noise_m: float = Field(0.01, ge=0.0)
+    max_range_m: bounds.LaserRange_m = Field(10.0, gt=0.0)
+    # A 2D laser ranges to 1-3 cm; a metre is no laser's noise.
+    range_noise_m: Annotated[float, within(None, 1.0, "m", high="no laser ranges that noisily")] = Field(0.01, ge=0.0)
 
     @model_validator(mode="after")
     def _range_window(self) -> "LaserConfig":
@@ -158,20 +167,23 @@ class LaserConfig(Strict):
 class GyroConfig(Strict):
     """z-rate with white noise (per sample) and a bias random walk."""
 
-    rate_hz: float = Field(100.0, gt=0.0)
+    rate_hz: bounds.Rate_hz = Field(100.0, gt=0.0)
     # The worst MEMS gyros are off by a few deg/s (0.05 rad/s) and noisy by
     # a tenth of that per sample: ten times more is no gyro that works.
     noise_rad_s: Annotated[float, within(None, 1.0, "rad/s", high="no gyroscope is that noisy")] = Field(0.002, ge=0.0)
     bias_initial_rad_s: Annotated[float, within(-0.5, 0.5, "rad/s", "no gyroscope's bias is 30 deg/s",
                                                 "no gyroscope's bias is 30 deg/s")] = 0.0
-    bias_walk_rad_s_sqrt_s: float = Field(2e-5, ge=0.0)
+    bias_walk_rad_s_sqrt_s: Annotated[float, within(None, 0.05, "rad/s/sqrt(s)", high="the bias would walk beyond "
+                                                    "0.5 rad/s in 100 s: no gyroscope's bias is 30 deg/s")] = Field(
+        2e-5, ge=0.0)
 
 
 class MagnetometerConfig(Strict):
-    rate_hz: float = Field(20.0, gt=0.0)
+    rate_hz: bounds.Rate_hz = Field(20.0, gt=0.0)
     noise_T: Annotated[float, within(None, 1e-4, "T", high="noise twice the Earth's field: no magnetometer that "
                                      "works")] = Field(2e-7, ge=0.0)
-    mounting_height_m: float = Field(0.3, ge=0.0)
+    mounting_height_m: Annotated[float, within(None, 10.0, "m", high="no ground robot carries its magnetometer "
+                                               "that high")] = Field(0.3, ge=0.0)
 
 
 class OdometryConfig(Strict):
@@ -180,7 +192,7 @@ class OdometryConfig(Strict):
     ``1 + rotation_overreport + slip``, where ``slip`` is the terrain's slip
     plus ``turn_slip_per_rad_s`` times the true turn rate."""
 
-    rate_hz: float = Field(20.0, gt=0.0)
+    rate_hz: bounds.Rate_hz = Field(20.0, gt=0.0)
     # A wheel's or track's radius is known to a few percent; tracks on a
     # spot turn report up to about twice the true turn. -1 and below would
     # report no motion, or motion backwards.
@@ -189,9 +201,13 @@ class OdometryConfig(Strict):
                                                   "the distance driven")] = 0.005
     rotation_overreport: Annotated[float, within(-0.5, 1.0, "", "the odometry would report less than half the turn",
                                                  "the odometry would report more than twice the turn")] = 0.0
-    turn_slip_per_rad_s: float = Field(0.05, ge=0.0)
-    distance_noise_m_sqrt_m: float = Field(0.005, ge=0.0)
-    yaw_noise_rad_sqrt_rad: float = Field(0.005, ge=0.0)
+    turn_slip_per_rad_s: Annotated[float, within(None, 1.0, "s/rad", high="a turn of 1 rad/s would slip by more "
+                                                 "than the whole motion")] = Field(0.05, ge=0.0)
+    # Noise of half the motion over each metre or radian is no odometry.
+    distance_noise_m_sqrt_m: Annotated[float, within(None, 0.5, "m/sqrt(m)", high="no odometry is that noisy")] = Field(
+        0.005, ge=0.0)
+    yaw_noise_rad_sqrt_rad: Annotated[float, within(None, 0.5, "rad/sqrt(rad)", high="no odometry is that noisy")] = Field(
+        0.005, ge=0.0)
 
 
 class GpsConfig(Strict):
@@ -199,12 +215,16 @@ class GpsConfig(Strict):
     indoor region. Multipath adds a bias away from the nearest wall of
     ``multipath_max_m * exp(-d / multipath_scale_m)`` at wall distance d."""
 
-    rate_hz: float = Field(5.0, gt=0.0)
-    sigma_m: float = Field(1.0, gt=0.0)
-    outage_distance_m: float = Field(2.0, ge=0.0)
-    multipath_max_m: float = Field(6.0, ge=0.0)
-    multipath_scale_m: float = Field(4.0, gt=0.0)
-    altitude_m: float = 115.0
+    rate_hz: bounds.Rate_hz = Field(5.0, gt=0.0)
+    sigma_m: bounds.Sigma_m = Field(1.0, gt=0.0)
+    outage_distance_m: Annotated[float, within(None, 1000.0, "m", high="a roof does not shade a fix a kilometre "
+                                               "away")] = Field(2.0, ge=0.0)
+    multipath_max_m: bounds.Multipath_m = Field(6.0, ge=0.0)
+    multipath_scale_m: Annotated[float, within(1e-2, 1000.0, "m", "a reflection felt only within a centimetre of "
+                                               "the wall", "a reflection felt a kilometre from the wall")] = Field(
+        4.0, gt=0.0)
+    altitude_m: Annotated[float, within(-1000.0, 10_000.0, "m", "below the lowest land (the Dead Sea, -430 m)",
+                                        "above the highest (Everest, 8849 m)")] = 115.0
 
 
 class SensorsConfig(Strict):
@@ -221,10 +241,7 @@ class SensorsConfig(Strict):
 class EnvironmentConfig(Strict):
     """Undisturbed Earth field, GPS datum and absolute start time."""
 
-    # The Earth's field is 22-67 uT everywhere; a thousandth of a tesla is
-    # fifteen times the strongest, a microtesla twenty times the weakest.
-    field_strength_T: Annotated[float, within(1e-6, 1e-3, "T", "twenty times weaker than the Earth's field anywhere",
-                                              "fifteen times the Earth's strongest field")] = Field(48e-6, gt=0.0)
+    field_strength_T: Annotated[float, bounds.EARTH_FIELD_T] = Field(48e-6, gt=0.0)
     dip_deg: float = Field(64.0, ge=-90.0, le=90.0)
     declination_deg: Annotated[float, within(-180.0, 180.0, "deg", "a declination is at most half a turn west",
                                              "a declination is at most half a turn east")] = 3.0
@@ -239,14 +256,16 @@ class FaultsConfig(Strict):
     """Thresholds that define the true fault intervals (see
     :mod:`slam.sim.faults`)."""
 
-    compass_error_deg: float = Field(5.0, gt=0.0)
+    compass_error_deg: bounds.HeadingError_deg = Field(5.0, gt=0.0)
     sm_min_returns: bounds.Count = Field(20, ge=3)
-    sm_min_eigenvalue: float = Field(0.03, ge=0.0)
-    odo_slip: float = Field(0.12, gt=0.0)
-    gyro_bias_rad_s: float = Field(0.01, gt=0.0)
-    gps_sigmas: float = Field(3.0, gt=0.0)
-    min_duration_s: float = Field(0.5, ge=0.0)
-    merge_gap_s: float = Field(0.5, ge=0.0)
+    sm_min_eigenvalue: bounds.ScanMinEigenvalue = Field(0.03, ge=0.0)
+    odo_slip: bounds.SlipFraction = Field(0.12, gt=0.0)
+    gyro_bias_rad_s: Annotated[float, within(1e-5, 35.0, "rad/s", "below any gyroscope's noise: every sample would "
+                                             "be a fault", "beyond any gyro's measuring range (2000 deg/s): nothing "
+                                             "would be a fault")] = Field(0.01, gt=0.0)
+    gps_sigmas: bounds.KSigma = Field(3.0, gt=0.0)
+    min_duration_s: Annotated[float, bounds.SPAN_S] = Field(0.5, ge=0.0)
+    merge_gap_s: Annotated[float, bounds.SPAN_S] = Field(0.5, ge=0.0)
 
 
 class Scenario(Strict):

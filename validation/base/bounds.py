@@ -81,6 +81,18 @@ HOLD_S = within(None, 86400.0, "s", high="a deviation held for a day before it c
 """How long a check's deviation must last before it counts (s)."""
 SPAN_S = within(None, 86400.0, "s", high="a verdict carried over a day reaches across any run")
 """How far a check carries its verdict: across a gap, after a cut (s)."""
+WINDOW_S = within(1e-3, 86400.0, "s", "shorter than any sensor's period: a window of no samples",
+                  "a window of over a day reaches across any run")
+"""A window or gap a check measures over (s)."""
+
+# --- the Earth's magnetic field --------------------------------------------------
+
+EARTH_FIELD_T = within(1e-6, 1e-3, "T", "twenty times weaker than the Earth's field anywhere (22-67 uT)",
+                       "fifteen times the Earth's strongest field")
+"""The strength of the Earth's field (T)."""
+FIELD_TOLERANCE_T = within(1e-9, 1e-3, "T", "below any magnetometer's noise (about 0.1 uT): every sample would "
+                           "deviate", "beyond fifteen times the Earth's strongest field: no deviation would count")
+"""How far a field may deviate before a check sees it (T)."""
 
 # --- sizes of maps and keyframes --------------------------------------------
 
@@ -98,6 +110,16 @@ KEYFRAME_DISTANCE_M = within(1e-3, 1000.0, "m", "each keyframe would be the last
 KEYFRAME_YAW_DEG = within(1e-3, 360.0, "deg", "each keyframe would be the last one's noise",
                           "a turn that is never reached")
 """The turn between keyframes (deg)."""
+
+LASER_RANGE_M = within(None, 1000.0, "m", high="beyond any 2D laser's reach")
+"""A range of a 2D laser (m): a limit of the scans used, a free-space trace."""
+MATCH_DISTANCE_M = within(1e-3, 100.0, "m", "finer than any laser's range noise: no point would find its match",
+                          "a point matched that far off is another wall's")
+"""A distance within which a scan's point matches the map (m): ICP's
+correspondence limits and kernels, KISS-ICP's first threshold."""
+RELATIVE_TOLERANCE = within(1e-15, 1.0, "", "below double precision: the optimiser would never stop early",
+                            "a relative decrease is at most 1: the optimiser would stop before its first step")
+"""An optimiser's relative error decrease that counts as converged."""
 
 SEARCH_WINDOW_M = within(None, 100.0, "m", high="a scan searched for that far from its guess is looked for in "
                          "the whole building, not corrected (and the search grid is padded by the window)")
@@ -117,11 +139,47 @@ ORACLE_K_SIGMA = within(0.5, 100.0, "sigmas", "it would exclude 62 % of good mea
 """The multiple of sigma beyond which the oracle excludes a measurement."""
 
 
+# --- simulated sensors and the faults added to a recording ---------------------
+
+RATE_HZ = within(1e-3, 1e4, "Hz", "a stream of one message in a quarter of an hour holds nothing a run can use",
+                 "faster than any laser, odometry, GPS or IMU publishes (IMUs reach a few kHz)")
+"""A sensor's publishing rate (Hz)."""
+HEADING_ERROR_DEG = within(1e-2, 180.0, "deg", "below any compass's noise: every sample would be a fault",
+                           "a heading is never more than half a turn off: nothing would be a fault")
+"""A heading error beyond which a compass is faulty (deg)."""
+SLIP_FRACTION = within(1e-3, 10.0, "", "below any odometry's noise: every step would be a fault",
+                       "a slipping wheel or track reports a few times its travel: nothing would be a fault")
+"""A slip beyond which odometry is faulty, as a fraction of the motion."""
+SCAN_MIN_EIGENVALUE = within(None, 1.0, "", high="the smallest of the three eigenvalues of a scan's point-to-line "
+                             "information per beam (unit normals, turns over the mean range) stays below 1: every "
+                             "scan would be degenerate")
+"""The smallest eigenvalue below which a scan's geometry is degenerate."""
+DIPOLE_MOMENT_A_M2 = within(None, 1e6, "A m^2", high="ten times a ship's steel hull (about 1e5 A m^2)")
+"""A magnetic disturber's moment (A m^2)."""
+MULTIPATH_M = within(None, 1000.0, "m", high="a reflected signal biases a fix by metres to a few hundred, "
+                     "not a kilometre")
+"""A GPS multipath bias (m)."""
+AZIMUTH_DEG = within(-360.0, 360.0, "deg", "an azimuth is within a turn", "an azimuth is within a turn")
+"""A direction in the plane (deg)."""
+
+
 Sigma_m = Annotated[float, SIGMA_M]
 RobustParam = Annotated[float, ROBUST_PARAM]
 InformationScale = Annotated[float, INFORMATION_SCALE]
 SearchWindow_m = Annotated[float, SEARCH_WINDOW_M]
 Sigma_deg = Annotated[float, SIGMA_DEG]
+Rate_hz = Annotated[float, RATE_HZ]
+KSigma = Annotated[float, K_SIGMA]
+HeadingError_deg = Annotated[float, HEADING_ERROR_DEG]
+SlipFraction = Annotated[float, SLIP_FRACTION]
+ScanMinEigenvalue = Annotated[float, SCAN_MIN_EIGENVALUE]
+DipoleMoment_A_m2 = Annotated[float, DIPOLE_MOMENT_A_M2]
+Multipath_m = Annotated[float, MULTIPATH_M]
+Azimuth_deg = Annotated[float, AZIMUTH_DEG]
+LaserRange_m = Annotated[float, LASER_RANGE_M]
+Window_s = Annotated[float, WINDOW_S]
+FieldTolerance_T = Annotated[float, FIELD_TOLERANCE_T]
+MatchDistance_m = Annotated[float, MATCH_DISTANCE_M]
 
 # --- counts handed to loops and to C++ (KISS-ICP, GTSAM) ----------------------
 

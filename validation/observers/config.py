@@ -203,10 +203,13 @@ class MagnetometerCheckConfig(StrictFrozen):
     enabled: bool = True
     name: str = "mag_plausible"
     component: Component = "IMU_YAW"
-    strength_T: float | None = Field(None, gt=0.0)
+    strength_T: Annotated[float | None, bounds.EARTH_FIELD_T] = Field(None, gt=0.0)
     dip_deg: float | None = Field(None, ge=-90.0, le=90.0)
-    tolerance_T: float = Field(5e-6, gt=0.0)
-    tolerance_dip_deg: float = Field(5.0, gt=0.0)
+    tolerance_T: bounds.FieldTolerance_T = Field(5e-6, gt=0.0)
+    # gslam calibrate writes at least 0.001 deg (a noise-free simulated field).
+    tolerance_dip_deg: Annotated[float, bounds.within(1e-3, 180.0, "deg", "below any magnetometer's noise: every "
+                                                      "sample would deviate", "a dip is within +-90 deg: no "
+                                                      "deviation would count")] = Field(5.0, gt=0.0)
     hold_s: Annotated[float, bounds.HOLD_S] = Field(1.0, ge=0.0)
 
 
@@ -219,9 +222,9 @@ class FieldGyroCheckConfig(StrictFrozen):
     enabled: bool = False
     name: str = "mag_field_gyro"
     component: Component = "IMU_YAW"
-    window_s: float = Field(1.0, gt=0.0)
-    smooth_s: float = Field(0.1, gt=0.0)
-    tolerance_T: float = Field(5e-6, gt=0.0)
+    window_s: bounds.Window_s = Field(1.0, gt=0.0)
+    smooth_s: bounds.Window_s = Field(0.1, gt=0.0)
+    tolerance_T: bounds.FieldTolerance_T = Field(5e-6, gt=0.0)
     hold_s: Annotated[float, bounds.HOLD_S] = Field(0.0, ge=0.0)
 
 
@@ -254,7 +257,7 @@ class ScanCheckConfig(StrictFrozen):
     name: str = "scan_degenerate"
     components: tuple[Component, Component, Component] = ("SM_DIST", "SM_LAT", "SM_YAW")
     min_returns: bounds.Count = Field(20, ge=1)
-    min_eigenvalue: float = Field(0.03, ge=0.0)
+    min_eigenvalue: Annotated[float, bounds.SCAN_MIN_EIGENVALUE] = Field(0.03, ge=0.0)
     min_share: float = Field(0.5, gt=0.0, lt=1.0)
     hold_s: Annotated[float, bounds.HOLD_S] = Field(0.0, ge=0.0)
 
@@ -287,7 +290,7 @@ class ScanCeilingConfig(StrictFrozen):
     min_no_return: float = Field(0.1, gt=0.0, le=1.0)
     min_edges: bounds.Count = Field(2, ge=1)
     min_edge_share: float = Field(0.5, gt=0.0, le=1.0)
-    max_ceiling_m: float = Field(10.0, gt=0.0)
+    max_ceiling_m: Annotated[float, bounds.LASER_RANGE_M] = Field(10.0, gt=0.0)
     fill_s: Annotated[float, bounds.SPAN_S] = Field(0.0, ge=0.0)
     settle_s: Annotated[float, bounds.SPAN_S] = Field(0.0, ge=0.0)
     settle_after_s: Annotated[float, bounds.SPAN_S] = Field(0.0, ge=0.0)
@@ -326,13 +329,15 @@ class ObserversConfig(StrictFrozen):
     gps: GpsCheckConfig = GpsCheckConfig()
     scan: ScanCheckConfig = ScanCheckConfig()
     scan_ceiling: ScanCeilingConfig = ScanCeilingConfig()
-    max_gap_s: float = Field(0.5, gt=0.0)
+    max_gap_s: bounds.Window_s = Field(0.5, gt=0.0)
     gap_periods: float | None = Field(3.0, gt=0.0)
     stream_max_gap_s: dict[str, float] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
     min_coverage: float = Field(0.25, ge=0.0, le=1.0)
-    gps_speed_window_s: float = Field(5.0, gt=0.0)
-    gps_course_min_speed_mps: float = Field(0.5, gt=0.0)
-    gps_course_max_turn_deg: float = Field(15.0, gt=0.0)
+    gps_speed_window_s: bounds.Window_s = Field(5.0, gt=0.0)
+    gps_course_min_speed_mps: Annotated[float, bounds.within(None, 100.0, "m/s", high="no ground robot drives "
+                                                             "faster: no course would be taken")] = Field(0.5, gt=0.0)
+    gps_course_max_turn_deg: Annotated[float, bounds.within(None, 360.0, "deg", high="a turn is at most a full "
+                                                            "one")] = Field(15.0, gt=0.0)
 
     @model_validator(mode="after")
     def _names(self) -> "ObserversConfig":

@@ -44,6 +44,7 @@ from slam.commands.ablate.spec import AblationSpec
 from slam.commands.ablate.worker import FileLock, JobOutcome, is_finished
 from slam.errors import GslamError
 from slam.results.atomic import write_text
+from slam.results.out_checks import resolve_path
 from slam.results.outdir import TEMP_TAG, open_container
 
 CONTAINER_NAMES = (
@@ -256,7 +257,7 @@ def run_ablation(
         check_reachable(address)
     inputs = [source, spec.config, *(s.path for s in spec.inputs.scenarios)]
     inputs += [j.input_path for j in jobs if j.input_path is not None]
-    out_dir = open_container(out_dir, "ablate", inputs, force, CONTAINER_NAMES).resolve()
+    out_dir = resolve_path(open_container(out_dir, "ablate", inputs, force, CONTAINER_NAMES))
     workers = max(1, workers or os.cpu_count() or 1)
     with FileLock(out_dir / ".lock"):
         _clean_leftovers(out_dir)

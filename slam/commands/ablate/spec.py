@@ -23,6 +23,8 @@ from pydantic import Discriminator, Field, Tag, ValidationError, model_validator
 from slam.config import describe_validation_error
 from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
+from slam.readers.files import check_exists
+from slam.results.out_checks import resolve_path
 from validation.base.yamlio import StrictFrozen
 
 SCENARIO_PREFIX = "scenario."
@@ -199,7 +201,7 @@ class AblationSpec(StrictFrozen):
         """A copy with every path made absolute against ``base_dir``."""
 
         def absolute(p: Path) -> Path:
-            return p if p.is_absolute() else (base_dir / p).resolve()
+            return p if p.is_absolute() else resolve_path(base_dir / p)
 
         inputs = InputsSpec(
             scenarios=[s.model_copy(update={"path": absolute(s.path)}) for s in self.inputs.scenarios],
@@ -215,7 +217,7 @@ def _expand_recorded(spec: AblationSpec, source: Path) -> AblationSpec:
     """Resolve ``{data}`` and expand globs in the recorded inputs' paths."""
     from slam.readers.datasets import data_root
 
-    base_dir = source.resolve().parent
+    base_dir = resolve_path(source).parent
     recorded: list[RecordedInput] = []
     for rec in spec.inputs.recorded:
         text = str(rec.path)
@@ -294,10 +296,12 @@ def load_spec(path: str | Path, max_seeds: int | None = None, max_jobs: int | No
     check_job_count(spec, path, max_jobs)
     spec = _expand_recorded(spec, path)
     check_job_count(spec, path, max_jobs)  # globs may have made more inputs
-    spec = spec.resolved(path.resolve().parent)
+    spec = spec.resolved(resolve_path(path).parent)
     for p in [spec.config] + [s.path for s in spec.inputs.scenarios] + [r.path for r in spec.inputs.recorded]:
-        if not p.exists():
-            raise GslamError(f"{path}: {p} not found")
+        try:
+            check_exists(p)
+        except GslamError as e:
+            raise GslamError(f"{path}: {e}") from None
     _check_base_config(spec.config, path)
     return spec
 

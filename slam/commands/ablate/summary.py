@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from slam.errors import GslamError
 from slam.outputs import report
 from slam.commands.ablate.jobs import Job
 from slam.commands.ablate.spec import AblationSpec
@@ -81,16 +82,35 @@ def job_row(out_dir: Path, job: Job) -> dict[str, Any]:
     metrics_path = out_dir / "jobs" / job.id / "metrics.json"
     failed_path = out_dir / "failed" / f"{job.id}.json"
     if metrics_path.exists():
-        metrics = flatten(json.loads(metrics_path.read_text()))
+        metrics = flatten(_job_json(metrics_path, out_dir / "jobs" / job.id))
         metrics["input_path"] = metrics.pop("input", None)
         delays = [v for k, v in metrics.items() if k.startswith("detection_delay_s.") and v is not None]
         metrics["detection_delay_mean_s"] = float(np.mean(delays)) if delays else None
         row.update(status="ok", error=None, **metrics)
     elif failed_path.exists():
-        row.update(status="failed", error=json.loads(failed_path.read_text()).get("error"))
+        row.update(status="failed", error=_job_json(failed_path, failed_path).get("error"))
     else:
         row.update(status="missing", error=None)
     return row
+
+
+def _job_json(path: Path, remove: Path) -> dict[str, Any]:
+    """A job's JSON file of an earlier run into the sweep's folder (its
+    metrics, its failure), read back as input: a one-line
+    :class:`GslamError` naming it if it is not the JSON object gslam
+    writes (edited, or not gslam's), and what to remove to run the job
+    again."""
+    try:
+        data = json.loads(path.read_text())
+        why = None if isinstance(data, dict) else f"a JSON {type(data).__name__}"
+    except ValueError as e:  # not UTF-8, not JSON
+        why = f"invalid JSON ({str(e).splitlines()[0]})"
+    except RecursionError:
+        why = "JSON nested too deeply"
+    if why is not None:
+        raise GslamError(f"{path}: expected the JSON object gslam writes, found {why}; remove {remove} to run the "
+                         "job again")
+    return data
 
 
 def write_summary(out_dir: Path, jobs: list[Job], spec: AblationSpec, report_html: bool = True) -> Summary:

@@ -37,6 +37,16 @@ _CUT_RANGE_M = within(0.01, 1000.0, "m", "shorter than any laser's minimum range
 _SLIP_SCALE = within(None, 10.0, "", high="a slipping wheel or track reports a few times its travel, not more")
 _GYRO_BIAS_DEG_S = within(-2000.0, 2000.0, "deg/s", "beyond any gyro's measuring range (2000 deg/s)",
                           "beyond any gyro's measuring range (2000 deg/s)")
+_GYRO_BIAS_LABEL_DEG_S = within(1e-3, 2000.0, "deg/s", "below any gyro's noise: every sample would be a fault",
+                                "beyond any gyro's measuring range (2000 deg/s): nothing would be a fault")
+# Where a dipole can be: beside the path (not inside the sensor), near enough to be felt.
+_DIPOLE_DISTANCE_M = within(1e-2, 1000.0, "m", "closer than a centimetre is inside the sensor",
+                            "a dipole a kilometre away is felt nowhere")
+_DIPOLE_HEIGHT_M = within(-1000.0, 1000.0, "m", "a dipole a kilometre below is felt nowhere",
+                          "a dipole a kilometre above is felt nowhere")
+# The Earth's horizontal field is 0 at the magnetic poles and at most about 40 uT.
+_EARTH_HORIZONTAL_UT = within(0.1, 100.0, "uT", "no compass finds north in a horizontal field that weak",
+                              "more than twice the Earth's strongest horizontal field")
 
 
 class Fault(StrictFrozen):
@@ -71,14 +81,14 @@ class DipoleFault(Fault):
     measured field)."""
 
     kind: Literal["dipole"] = "dipole"
-    moment_A_m2: float = Field(500.0, gt=0.0)
-    distance_m: float = Field(2.0, gt=0.0)
+    moment_A_m2: bounds.DipoleMoment_A_m2 = Field(500.0, gt=0.0)
+    distance_m: Annotated[float, _DIPOLE_DISTANCE_M] = Field(2.0, gt=0.0)
     side: Literal["left", "right"] = "left"
-    height_m: float = 0.0
-    azimuth_deg: float = 90.0
+    height_m: Annotated[float, _DIPOLE_HEIGHT_M] = 0.0
+    azimuth_deg: bounds.Azimuth_deg = 90.0
     target: Literal["auto", "magnetometer", "heading"] = "auto"
-    earth_horizontal_uT: float = Field(20.0, gt=0.0)
-    label_deg: float = Field(5.0, gt=0.0)
+    earth_horizontal_uT: Annotated[float, _EARTH_HORIZONTAL_UT] = Field(20.0, gt=0.0)
+    label_deg: bounds.HeadingError_deg = Field(5.0, gt=0.0)
 
 
 class LaserCutFault(Fault):
@@ -91,7 +101,7 @@ class LaserCutFault(Fault):
     kind: Literal["laser_cut"] = "laser_cut"
     range_m: Annotated[float, _CUT_RANGE_M] = Field(4.0, gt=0.0)
     label_min_returns: bounds.Count = Field(20, ge=3)
-    label_min_eigenvalue: float = Field(0.03, ge=0.0)
+    label_min_eigenvalue: bounds.ScanMinEigenvalue = Field(0.03, ge=0.0)
 
 
 class GyroBiasFault(Fault):
@@ -101,7 +111,7 @@ class GyroBiasFault(Fault):
 
     kind: Literal["gyro_bias"] = "gyro_bias"
     bias_deg_s: Annotated[float, _GYRO_BIAS_DEG_S] = 2.0
-    label_deg_s: float = Field(0.57, gt=0.0)
+    label_deg_s: Annotated[float, _GYRO_BIAS_LABEL_DEG_S] = Field(0.57, gt=0.0)
 
 
 class SlipFault(Fault):
@@ -112,7 +122,7 @@ class SlipFault(Fault):
     kind: Literal["slip"] = "slip"
     scale: Annotated[float, _SLIP_SCALE] = Field(1.5, ge=0.0)
     yaw_scale: Annotated[float, _SLIP_SCALE] = Field(1.0, ge=0.0)
-    label_slip: float = Field(0.12, gt=0.0)
+    label_slip: bounds.SlipFraction = Field(0.12, gt=0.0)
 
 
 class MultipathFault(Fault):
@@ -121,9 +131,9 @@ class MultipathFault(Fault):
     labelled where it exceeds ``label_sigmas`` times the fix's own sigma."""
 
     kind: Literal["multipath"] = "multipath"
-    bias_m: float = Field(8.0, ge=0.0)
-    azimuth_deg: float = 0.0
-    label_sigmas: float = Field(3.0, gt=0.0)
+    bias_m: bounds.Multipath_m = Field(8.0, ge=0.0)
+    azimuth_deg: bounds.Azimuth_deg = 0.0
+    label_sigmas: bounds.KSigma = Field(3.0, gt=0.0)
 
 
 KINDS: dict[str, type[Fault]] = {
