@@ -563,6 +563,18 @@ ERRORS: list[Case] = [
           ("backend.initial_sigma_yaw_deg", "1e-300", "backend.initial_sigma_yaw_deg: 1e-300 deg is below"),
           ("submaps.local.sigma_xy_m", "1e-300", "submaps.local.sigma_xy_m: 1e-300 m is below 0.0001 m"),
       )),
+    # -- a YAML truth value where a number belongs: a slip, never the number 1 or 0 --
+    *(Case(f"config-{key.replace('.', '-')}-{value}", (*MAP, "--out", "{d}/o", "--set", f"{key}={value}"), says)
+      for key, value, says in (
+          ("backend.max_iterations", "true", "max_iterations: expected a number, not true"),
+          ("submaps.search_depth", "false", "search_depth: expected a number, not false"),
+          ("backend.factors.odometry.sigma_xy_m", "true", "sigma_xy_m: expected a number, not true"),
+          ("validation.oracle_k_sigma", "false", "oracle_k_sigma: expected a number, not false"),
+      )),
+    Case("config-relation-threshold-true", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "threshold: expected a number, not true", config(relation(1, threshold=True))),
+    Case("scenario-laser-rate-true", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "rate_hz: expected a number, not true", scenario(set_in("sensors", "laser", "rate_hz", True))),
     Case("config-relation-sigma-floor-1e-300", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
          "sigma_floor: 1e-300 (m or rad) is below 1e-12 (m or rad)", config(relation(1, sigma_floor=1e-300))),
     # -- physics bounds on scenarios --

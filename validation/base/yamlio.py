@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import os
 import stat
+import types
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar, Union, get_args, get_origin
 
 import pydantic
 import yaml
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, model_validator
 
 from validation.base.errors import ValidationError
 
@@ -187,6 +188,29 @@ class Strict(BaseModel):
     value is."""
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_truth_value_for_a_number(cls, data: Any) -> Any:
+        """``max_iterations: true`` is a slip, not 1: pydantic would take a
+        YAML ``true`` or ``false`` for the number 1 or 0."""
+        if isinstance(data, dict):
+            for name, field in cls.model_fields.items():
+                value = data.get(field.alias or name)
+                if isinstance(value, bool) and _numeric(field.annotation):
+                    raise ValueError(f"{name}: expected a number, not {str(value).lower()}")
+        return data
+
+
+def _numeric(tp: Any) -> bool:
+    """``tp`` a number type (int or float, bounded, or None allowed), not bool."""
+    origin = get_origin(tp)
+    if origin is Annotated:
+        return _numeric(get_args(tp)[0])
+    if origin in (Union, types.UnionType):
+        args = [a for a in get_args(tp) if a is not type(None)]
+        return bool(args) and all(_numeric(a) for a in args)
+    return tp in (int, float)
 
 
 class StrictFrozen(Strict):
