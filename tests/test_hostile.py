@@ -771,8 +771,15 @@ ERRORS: list[Case] = [
                 config(lambda t: t["validation"].update(model="m.yaml"))))
       for name, extra, change, says in (
           ("prior-1-with-gating-on", ("--gating", "on"), lambda m: m.replace("LOOP: 0.05", "LOOP: 1.0"),
-           "model.priors: prior of 'LOOP' must be in (0, 1), got 1.0"),
+           "model.priors: prior of 'LOOP' must be in [1e-09, 1), got 1"),
           ("prior-negative", (), lambda m: m.replace("LOOP: 0.05", "LOOP: -0.5"), "model.priors: prior of 'LOOP'"),
+          ("prior-1e-300", ("--gating", "on"), lambda m: m.replace("LOOP: 0.05", "LOOP: 1.0e-300"),
+           "model.priors: prior of 'LOOP' must be in [1e-09, 1), got 1e-300"),
+          ("false-alarm-1e-300", ("--gating", "on"), lambda m: m.replace("priors:", "false_alarm: {yaw_compass_gyro: 1.0e-300}\npriors:"),
+           "model: false_alarm.yaw_compass_gyro must be in [1e-09, 1), got 1e-300"),
+          ("component-propagates-to-itself", ("--gating", "on"),
+           lambda m: m.replace("fault_propagation: []", "fault_propagation: [[IMU_YAW, IMU_YAW]]"),
+           "model: fault_propagation.0: a rule needs two different components, not 'IMU_YAW' twice"),
           ("relation-of-one-component", ("--gating", "on"),
            lambda m: m.replace("yaw_compass_gyro: [IMU_YAW, IMU_GYRO]   #", "yaw_compass_gyro: [IMU_YAW, IMU_YAW]   #"),
            "model: relations.yaw_compass_gyro: a relation needs two different components"),

@@ -56,6 +56,9 @@ from pydantic import Field, field_validator, model_validator
 from validation.base.yamlio import StrictFrozen, load_yaml, validate_mapping
 
 DEFAULT_PRIOR = 0.01
+MIN_PROBABILITY = 1e-9
+"""The least prior or false-alarm rate a model may give: once in a billion
+steps is never, and the products of smaller ones underflow."""
 """Fault probability of a component the model gives no prior for."""
 
 
@@ -110,8 +113,8 @@ class SystemModel(StrictFrozen):
     @classmethod
     def _probabilities(cls, value: dict[str, float]) -> dict[str, float]:
         for name, p in value.items():
-            if not 0.0 < p < 1.0:
-                raise ValueError(f"prior of {name!r} must be in (0, 1), got {p}")
+            if not MIN_PROBABILITY <= p < 1.0:
+                raise ValueError(f"prior of {name!r} must be in [{MIN_PROBABILITY:g}, 1), got {p:g}")
         return value
 
     @model_validator(mode="after")
@@ -133,6 +136,8 @@ class SystemModel(StrictFrozen):
                 raise ValueError(f"unary_checks.{name}: name already used by a relation")
         for i, pair in enumerate(self.fault_propagation):
             check(f"fault_propagation.{i}", pair)
+            if pair[0] == pair[1]:
+                raise ValueError(f"fault_propagation.{i}: a rule needs two different components, not {pair[0]!r} twice")
         owner: dict[str, str] = {}
         for sensor, parts in self.sensors.items():
             check("sensors", (sensor, *parts))
@@ -153,8 +158,8 @@ class SystemModel(StrictFrozen):
         for name, p in self.false_alarm.items():
             if name not in self.relations and name not in self.unary_checks:
                 raise ValueError(f"false_alarm: {name!r} is not a relation or unary check")
-            if not 0.0 < p < 1.0:
-                raise ValueError(f"false_alarm.{name} must be in (0, 1), got {p}")
+            if not MIN_PROBABILITY <= p < 1.0:
+                raise ValueError(f"false_alarm.{name} must be in [{MIN_PROBABILITY:g}, 1), got {p:g}")
         return self
 
     def prior(self, component: str) -> float:
