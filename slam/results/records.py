@@ -91,8 +91,14 @@ def _files(value, marker: Path) -> frozenset[str] | None:
     return frozenset(value)
 
 
-def _input(value) -> str | None:
-    return value if isinstance(value, str) and value else None
+def _input(value, marker: Path) -> str | None:
+    """The marker's input; None where it names none (a marker of gslam 0.1)."""
+    if value is None:
+        return None
+    if not isinstance(value, str) or not value:
+        raise GslamError(f"{marker}: its input {value!r} is not a path; gslam never writes such a marker, so nothing "
+                         "there is replaced or removed: move the marker away and run again")
+    return value
 
 
 def result_command(folder: Path) -> str | None:
@@ -104,8 +110,9 @@ def result_command(folder: Path) -> str | None:
 
 def result_input(folder: Path) -> str | None:
     """What the result in ``folder`` was made from, where its marker says."""
-    data = _read_json(Path(folder) / RESULT_MARKER)
-    return _input(data.get("input")) if data is not None else None
+    marker = Path(folder) / RESULT_MARKER
+    data = _read_json(marker)
+    return _input(data.get("input"), marker) if data is not None else None
 
 
 def read_record(folder: Path, command: str) -> Record | None:
@@ -115,7 +122,8 @@ def read_record(folder: Path, command: str) -> Record | None:
     folder = Path(folder)
     data = _read_json(folder / RESULT_MARKER)
     if data is not None and data.get("command") == command:
-        return Record(command, _files(data.get("files"), folder / RESULT_MARKER), input=_input(data.get("input")))
+        marker = folder / RESULT_MARKER
+        return Record(command, _files(data.get("files"), marker), input=_input(data.get("input"), marker))
     added = _read_json(folder / ADDED_MARKER) or {}
     entry = added.get(command)
     if isinstance(entry, dict):
