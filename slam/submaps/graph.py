@@ -96,6 +96,8 @@ class GlobalSlam:
         self.path = np.concatenate([[0.0], np.cumsum(steps)])
         self.constraints: list[Constraint] = []
         self._contexts: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._chain: list = []  # the prior and the chain's factors, by node
+        self._factors: dict[tuple[int, bool], tuple[Constraint, object]] = {}
 
     # -- the walk ---------------------------------------------------------------
 
@@ -344,29 +346,56 @@ class GlobalSlam:
         from slam.graph.factors import pose_key
 
         g = gtsam.NonlinearFactorGraph()
-        g.add(gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(*self.local.poses[0]), _noise([1e-3, 1e-3, 1e-4])))
-        for i in range(1, n):
-            cov = self.step_cov[i]
-            if cov[0, 0] >= UNKNOWN_VARIANCE:  # no measurement of this step: the local SLAM's
-                step, cov = between(self.local.poses[i - 1], self.local.poses[i]), np.diag(UNMATCHED_VARIANCE)
-            else:
-                step = self.steps[i]
-            noise = gtsam.noiseModel.Gaussian.Covariance(cov + 1e-12 * np.eye(3))
-            if self.local.matches[i] is not None and self.local.matches[i].refined:
-                # Where the scan was matched, dead reckoning is a second
-                # opinion: a robust one, as odometry and a scan matcher seeded
-                # by it can be wrong together (belgioioso: 15-18 deg at once).
-                noise = gtsam.noiseModel.Robust.Create(self.chain_robust, noise)
-            g.add(gtsam.BetweenFactorPose2(pose_key(i - 1), pose_key(i), gtsam.Pose2(*step), noise))
+        if not self._chain:
+            self._chain.append(gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(*self.local.poses[0]),
+                                                      _noise([1e-3, 1e-3, 1e-4])))
+        for i in range(len(self._chain), n):
+            self._chain.append(self._chain_factor(i))
+        for i in range(n):
+            g.add(self._chain[i])
         index = []  # (factor position, constraint index)
         for k, c in enumerate(self.constraints):
             if c.scan >= n:
                 continue
-            robust = self.robust if c.kind != "intra" and robust_inter and k not in plain else None
+            robust = c.kind != "intra" and robust_inter and k not in plain
             index.append((g.size(), k))
-            g.add(gtsam.BetweenFactorPose2(pose_key(c.anchor), pose_key(c.scan), gtsam.Pose2(*c.delta),
-                                           loop_noise(c.information, robust)))
+            g.add(self._constraint_factor(c, robust))
         return g, index
+
+    def _chain_factor(self, i: int):
+        """The dead-reckoning step into node ``i``."""
+        import gtsam
+
+        from slam.graph.factors import pose_key
+
+        cov = self.step_cov[i]
+        if cov[0, 0] >= UNKNOWN_VARIANCE:  # no measurement of this step: the local SLAM's
+            step, cov = between(self.local.poses[i - 1], self.local.poses[i]), np.diag(UNMATCHED_VARIANCE)
+        else:
+            step = self.steps[i]
+        noise = gtsam.noiseModel.Gaussian.Covariance(cov + 1e-12 * np.eye(3))
+        if self.local.matches[i] is not None and self.local.matches[i].refined:
+            # Where the scan was matched, dead reckoning is a second
+            # opinion: a robust one, as odometry and a scan matcher seeded
+            # by it can be wrong together (belgioioso: 15-18 deg at once).
+            noise = gtsam.noiseModel.Robust.Create(self.chain_robust, noise)
+        return gtsam.BetweenFactorPose2(pose_key(i - 1), pose_key(i), gtsam.Pose2(*step), noise)
+
+    def _constraint_factor(self, c: Constraint, robust: bool):
+        """The between factor of constraint ``c``, under the kernel when
+        ``robust``; made once per constraint and kind of noise, since the
+        graph is rebuilt around it at every optimisation (a factor is not
+        changed by optimising it)."""
+        import gtsam
+
+        from slam.graph.factors import pose_key
+
+        key = (id(c), robust)
+        if key not in self._factors:  # keeps c alive beside it, so its id is not reused
+            factor = gtsam.BetweenFactorPose2(pose_key(c.anchor), pose_key(c.scan), gtsam.Pose2(*c.delta),
+                                              loop_noise(c.information, self.robust if robust else None))
+            self._factors[key] = (c, factor)
+        return self._factors[key][1]
 
     def _optimise(self, est: np.ndarray, n: int, plain: set[int] = frozenset()) -> np.ndarray:
         import gtsam
