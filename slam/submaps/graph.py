@@ -34,6 +34,7 @@ from slam.matching.descriptor import context_distance, ring_key, scan_context
 from slam.graph.loop_factors import loop_noise
 from slam.config.submaps import SubmapsConfig
 from slam.submaps.local import LocalResult, Match, match_scan, refine_near
+from slam.submaps.near import NearSubmaps
 from slam.submaps.scans import ScanPoints
 
 log = logging.getLogger(__name__)
@@ -115,6 +116,19 @@ class GlobalSlam:
                 member.setdefault(k, set()).add(sid)
         last_scan = np.array([sm.scans[-1] for sm in local.submaps])
         centres = np.array([np.mean(sm.poses, axis=0)[:2] for sm in local.submaps])  # in the anchor's frame
+        anchor_of = np.array([sm.anchor for sm in local.submaps])
+        finishing = np.argsort(last_scan, kind="stable")  # submaps in the order they finish
+        near = NearSubmaps(cc.max_distance_m)
+        placed_at = 0  # estimate updates so far; the index is placed again after each
+
+        def world(sids: np.ndarray) -> np.ndarray:
+            """The centres of submaps ``sids`` in the world, as the estimate places their anchors."""
+            anchors = est[anchor_of[sids]]
+            c, s_ = np.cos(anchors[:, 2]), np.sin(anchors[:, 2])
+            cxy = centres[sids]
+            return anchors[:, :2] + np.column_stack([c * cxy[:, 0] - s_ * cxy[:, 1], s_ * cxy[:, 0] + c * cxy[:, 1]])
+
+        done_count, optimised = 0, 0
         searches = 0
         pending = 0
         last_opt = 0
@@ -130,22 +144,22 @@ class GlobalSlam:
             self._add_intra(i)
             if len(self.points.points[i]) < cfg.min_points:
                 continue
-            # Finished submaps the scan did not help build, nearest first.
-            done = np.nonzero(last_scan < i)[0]
-            done = [s for s in done if s not in member.get(i, ())]
-            if not done:
+            # Finished submaps (which the scan did not help build), nearest
+            # first; their places move only when the estimate is optimised.
+            finished = int(np.searchsorted(last_scan[finishing], i))
+            if optimised != placed_at:
+                near.place(finishing[:finished], world(finishing[:finished]))
+                placed_at = optimised
+            elif finished > done_count:
+                for sid, xy in zip(finishing[done_count:finished], world(finishing[done_count:finished])):
+                    near.add(sid, xy)
+            done_count = finished
+            if not finished:
                 continue
-            anchors = est[[local.submaps[s].anchor for s in done]]
-            c, s_ = np.cos(anchors[:, 2]), np.sin(anchors[:, 2])
-            cxy = centres[done]
-            world = anchors[:, :2] + np.column_stack([c * cxy[:, 0] - s_ * cxy[:, 1], s_ * cxy[:, 0] + c * cxy[:, 1]])
-            dist = np.hypot(*(world - est[i, :2]).T)
-            order = np.argsort(dist)
             tried = 0
-            for o in order:
-                if dist[o] > cc.max_distance_m or tried >= cc.max_per_scan:
+            for sid, _ in zip(*near.within(est[i, :2], cc.max_distance_m)):
+                if tried >= cc.max_per_scan:
                     break
-                sid = done[o]
                 if self.path[i] - last_tied[sid] < cc.spacing_m:
                     continue
                 sm = local.submaps[sid]
@@ -177,9 +191,11 @@ class GlobalSlam:
                     # then on they are loops like the others, under it.
                     est[: i + 1] = self._optimise(est[: i + 1], i + 1, plain=found)
                     last_opt, pending, last_loop = i, 0, self.path[i]
+                    optimised += 1
             if pending and i - last_opt >= cc.optimise_every:
                 est[: i + 1] = self._optimise(est[: i + 1], i + 1)
                 last_opt, pending = i, 0
+                optimised += 1
         est = self._optimise(est, n)
         if self.before_judging is not None:
             self.constraints.extend(self.before_judging(list(self.constraints)))
