@@ -98,6 +98,7 @@ class GlobalSlam:
         self.constraints: list[Constraint] = []
         self._contexts: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._chain: list = []  # the prior and the chain's factors, by node
+        self._keys: list[int] = []  # the GTSAM key of each node
         self._factors: dict[tuple[int, bool], tuple[Constraint, object]] = {}
 
     # -- the walk ---------------------------------------------------------------
@@ -334,15 +335,11 @@ class GlobalSlam:
         gives a weight below one half, every other factor a known inlier."""
         import gtsam
 
-        from slam.graph.factors import pose_key
-
         g, index = self._graph(n, robust_inter=False)
         inter = [pos for pos, k in index if self.constraints[k].kind != "intra"]
         if not inter:
             return set()
-        values = gtsam.Values()
-        for i in range(n):
-            values.insert(pose_key(i), gtsam.Pose2(*est[i]))
+        values = self._values(est, n)
         params = gtsam.GncLMParams()
         params.setLossType(gtsam.GncLossType.TLS)
         inter_set = set(inter)
@@ -416,20 +413,28 @@ class GlobalSlam:
     def _optimise(self, est: np.ndarray, n: int, plain: set[int] = frozenset()) -> np.ndarray:
         import gtsam
 
-        from slam.graph.factors import pose_key
-
         g, _ = self._graph(n, plain=plain)
-        values = gtsam.Values()
-        for i in range(n):
-            values.insert(pose_key(i), gtsam.Pose2(*est[i]))
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(50)
-        result = gtsam.LevenbergMarquardtOptimizer(g, values, params).optimize()
+        result = gtsam.LevenbergMarquardtOptimizer(g, self._values(est, n), params).optimize()
         out = est.copy()
-        for i in range(n):
-            p = result.atPose2(pose_key(i))
-            out[i] = (p.x(), p.y(), p.theta())
+        out[:n] = gtsam.utilities.extractPose2(result)  # x, y, theta of x0..x(n-1), in key order
         return out
+
+    def _values(self, est: np.ndarray, n: int):
+        """The first ``n`` poses of ``est`` as GTSAM values. Done at every
+        optimisation of the walk, over the whole graph so far: the keys are
+        made once, and the rows handed over as Python floats."""
+        import gtsam
+
+        from slam.graph.factors import pose_key
+
+        self._keys.extend(pose_key(i) for i in range(len(self._keys), n))
+        values = gtsam.Values()
+        insert, pose = values.insert, gtsam.Pose2
+        for key, (x, y, yaw) in zip(self._keys, est[:n].tolist()):
+            insert(key, pose(x, y, yaw))
+        return values
 
 
 def _agree(again: Match | None, delta: np.ndarray, max_m: float, max_rad: float) -> bool:
