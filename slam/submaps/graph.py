@@ -99,6 +99,10 @@ class GlobalSlam:
         self._contexts: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._chain: list = []  # the prior and the chain's factors, by node
         self._keys: list[int] = []  # the GTSAM key of each node
+        self._chain_graph = None  # the graph of the chain so far, and of the constraints (see _walk_graph)
+        self._constraint_graph = None
+        self._in_graph: list[Constraint] = []
+        self._last_scan = -1
         self._factors: dict[tuple[int, bool], tuple[Constraint, object]] = {}
 
     # -- the walk ---------------------------------------------------------------
@@ -358,12 +362,17 @@ class GlobalSlam:
 
         from slam.graph.factors import pose_key
 
-        g = gtsam.NonlinearFactorGraph()
         if not self._chain:
             self._chain.append(gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(*self.local.poses[0]),
                                                       _noise([1e-3, 1e-3, 1e-4])))
         for i in range(len(self._chain), n):
             self._chain.append(self._chain_factor(i))
+        if robust_inter and not plain:
+            g = self._walk_graph(n)
+            if g is not None:
+                m = len(self.constraints)
+                return g, list(zip(range(n, n + m), range(m)))
+        g = gtsam.NonlinearFactorGraph()
         for i in range(n):
             g.add(self._chain[i])
         index = []  # (factor position, constraint index)
@@ -374,6 +383,37 @@ class GlobalSlam:
             index.append((g.size(), k))
             g.add(self._constraint_factor(c, robust))
         return g, index
+
+    def _walk_graph(self, n: int):
+        """The graph :meth:`_graph` makes with every inter constraint under
+        the kernel, made of two graphs that only grow as the walk goes (the
+        chain's factors; the constraints' in their order), so the same
+        factors in the same order as factor by factor, without a pass over
+        all of them in Python; None where that is not the graph (it holds
+        more nodes than ``n``, or a constraint reaches past node ``n``)."""
+        import gtsam
+
+        if self._chain_graph is None:
+            self._chain_graph, self._constraint_graph = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph()
+        while self._chain_graph.size() < n:
+            self._chain_graph.add(self._chain[self._chain_graph.size()])
+        if self._chain_graph.size() != n:
+            return None
+        kept = self._in_graph
+        if len(kept) > len(self.constraints) or any(a is not b for a, b in zip(kept, self.constraints)):
+            # Constraints were taken back (a recognition unconfirmed, the
+            # outliers after GNC): start the constraints' graph again.
+            self._constraint_graph, self._in_graph, self._last_scan = gtsam.NonlinearFactorGraph(), [], -1
+        for c in self.constraints[len(self._in_graph):]:
+            self._constraint_graph.add(self._constraint_factor(c, c.kind != "intra"))
+            self._in_graph.append(c)
+            self._last_scan = max(self._last_scan, c.scan)
+        if self._last_scan >= n:
+            return None
+        g = gtsam.NonlinearFactorGraph()
+        g.push_back(self._chain_graph)
+        g.push_back(self._constraint_graph)
+        return g
 
     def _chain_factor(self, i: int):
         """The dead-reckoning step into node ``i``."""
