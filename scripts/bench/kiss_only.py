@@ -15,7 +15,10 @@ again, as gslam's front-end does: without it, round-off over a long blind
 stretch makes KISS-ICP's Sophus abort the process (telemax_loop does this).
 It prints the scans registered, the data span and the wall
 time of the process so far (imports included). ``BAG`` is a ``.bag``, a
-rosbag2 folder, or a simulated run folder (its ``bag/``).
+rosbag2 folder, or a simulated run folder (its ``bag/``), or a CARMEN log
+(``.log``, ``.log.gz``): its ``FLASER`` lines, 180 deg from the right
+(``laser_front_laser_fov`` when the log sets it), ``max_range`` 50 m (beyond
+it the logs hold saturation values: ``configs/datasets/carmen.yaml``).
 
 It imports nothing of gslam but the handler its exit shares with the other
 scripts (slam.errors, 2 ms), so its cost is KISS-ICP's and rosbags' alone.
@@ -97,14 +100,63 @@ def kiss_only(path: Path, topic: str, threads: int = 0) -> tuple[np.ndarray, np.
     return np.asarray(stamps), np.asarray(poses)
 
 
+CARMEN_MAX_RANGE_M = 50.0
+
+
+def is_carmen(path: Path) -> bool:
+    return path.name.endswith((".log", ".log.gz"))
+
+
+def carmen_scans(path: Path) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Stamps, beam angles and ranges of a CARMEN log's ``FLASER`` lines."""
+    import gzip
+
+    opener = gzip.open if path.name.endswith(".gz") else open
+    fov, stamps, ranges = np.pi, [], []
+    with opener(path, "rt") as f:
+        for line in f:
+            parts = line.split()
+            if parts[:2] == ["PARAM", "laser_front_laser_fov"]:
+                value = float(parts[2])
+                fov = value if value <= 2.0 * np.pi + 1e-6 else np.radians(value)  # degrees, or radians (csail)
+            elif parts and parts[0] == "FLASER":
+                n = int(parts[1])
+                ranges.append(np.array(parts[2 : 2 + n], dtype=np.float64))
+                stamps.append(float(parts[n + 8]))
+    n = len(ranges[0]) if ranges else 0
+    step = fov / (n - 1) if n % 2 == 1 and n > 1 else fov / max(n, 1)
+    return np.asarray(stamps), -fov / 2.0 + step * np.arange(n), ranges
+
+
+def kiss_only_carmen(path: Path, threads: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Stamps and KISS-ICP poses (n, 4, 4) of every scan of a CARMEN log."""
+    stamps, angles, scans = carmen_scans(path)
+    config = load_config(None)
+    config.data.max_range = CARMEN_MAX_RANGE_M
+    config.mapping.voxel_size = config.data.max_range / 100.0
+    config.registration.max_num_threads = threads
+    icp = KissICP(config)
+    cos, sin = np.cos(angles), np.sin(angles)
+    poses = []
+    for r in scans:
+        ok = np.isfinite(r) & (r < CARMEN_MAX_RANGE_M)
+        icp.register_frame(np.column_stack([r[ok] * cos[ok], r[ok] * sin[ok], np.zeros(int(ok.sum()))]), np.zeros(0))
+        icp.last_pose, icp.last_delta = planar(icp.last_pose), planar(icp.last_delta)
+        poses.append(icp.last_pose.copy())
+    return stamps, np.asarray(poses)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("bag", type=Path, help="a .bag file, a rosbag2 folder or a simulated run folder")
+    p.add_argument("bag", type=Path, help="a .bag file, a rosbag2 folder, a simulated run folder or a CARMEN log")
     p.add_argument("--topic", default="/scan", help="the LaserScan topic (default /scan)")
     p.add_argument("--poses", type=Path, default=None, help="write 't x y yaw' per scan to this file")
     p.add_argument("--threads", type=int, default=0, help="KISS-ICP's threads (default 0: all cores)")
     args = p.parse_args(argv)
-    stamps, poses = kiss_only(bag_path(args.bag), args.topic, args.threads)
+    if is_carmen(args.bag):
+        stamps, poses = kiss_only_carmen(args.bag, args.threads)
+    else:
+        stamps, poses = kiss_only(bag_path(args.bag), args.topic, args.threads)
     if args.poses is not None:
         yaw = np.arctan2(poses[:, 1, 0], poses[:, 0, 0])
         np.savetxt(args.poses, np.column_stack([stamps, poses[:, 0, 3], poses[:, 1, 3], yaw]), fmt="%.6f")

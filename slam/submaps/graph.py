@@ -34,6 +34,7 @@ from slam.matching.descriptor import context_distance, ring_key, scan_context
 from slam.graph.loop_factors import loop_noise
 from slam.config.submaps import SubmapsConfig
 from slam.submaps.local import LocalResult, Match, match_scan, refine_near
+from slam.submaps.near import NearSubmaps
 from slam.submaps.scans import ScanPoints
 
 log = logging.getLogger(__name__)
@@ -96,6 +97,13 @@ class GlobalSlam:
         self.path = np.concatenate([[0.0], np.cumsum(steps)])
         self.constraints: list[Constraint] = []
         self._contexts: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._chain: list = []  # the prior and the chain's factors, by node
+        self._keys: list[int] = []  # the GTSAM key of each node
+        self._chain_graph = None  # the graph of the chain so far, and of the constraints (see _walk_graph)
+        self._constraint_graph = None
+        self._in_graph: list[Constraint] = []
+        self._last_scan = -1
+        self._factors: dict[tuple[int, bool], tuple[Constraint, object]] = {}
 
     # -- the walk ---------------------------------------------------------------
 
@@ -113,6 +121,19 @@ class GlobalSlam:
                 member.setdefault(k, set()).add(sid)
         last_scan = np.array([sm.scans[-1] for sm in local.submaps])
         centres = np.array([np.mean(sm.poses, axis=0)[:2] for sm in local.submaps])  # in the anchor's frame
+        anchor_of = np.array([sm.anchor for sm in local.submaps])
+        finishing = np.argsort(last_scan, kind="stable")  # submaps in the order they finish
+        near = NearSubmaps(cc.max_distance_m)
+        placed_at = 0  # estimate updates so far; the index is placed again after each
+
+        def world(sids: np.ndarray) -> np.ndarray:
+            """The centres of submaps ``sids`` in the world, as the estimate places their anchors."""
+            anchors = est[anchor_of[sids]]
+            c, s_ = np.cos(anchors[:, 2]), np.sin(anchors[:, 2])
+            cxy = centres[sids]
+            return anchors[:, :2] + np.column_stack([c * cxy[:, 0] - s_ * cxy[:, 1], s_ * cxy[:, 0] + c * cxy[:, 1]])
+
+        done_count, optimised = 0, 0
         searches = 0
         pending = 0
         last_opt = 0
@@ -128,22 +149,22 @@ class GlobalSlam:
             self._add_intra(i)
             if len(self.points.points[i]) < cfg.min_points:
                 continue
-            # Finished submaps the scan did not help build, nearest first.
-            done = np.nonzero(last_scan < i)[0]
-            done = [s for s in done if s not in member.get(i, ())]
-            if not done:
+            # Finished submaps (which the scan did not help build), nearest
+            # first; their places move only when the estimate is optimised.
+            finished = int(np.searchsorted(last_scan[finishing], i))
+            if optimised != placed_at:
+                near.place(finishing[:finished], world(finishing[:finished]))
+                placed_at = optimised
+            elif finished > done_count:
+                for sid, xy in zip(finishing[done_count:finished], world(finishing[done_count:finished])):
+                    near.add(sid, xy)
+            done_count = finished
+            if not finished:
                 continue
-            anchors = est[[local.submaps[s].anchor for s in done]]
-            c, s_ = np.cos(anchors[:, 2]), np.sin(anchors[:, 2])
-            cxy = centres[done]
-            world = anchors[:, :2] + np.column_stack([c * cxy[:, 0] - s_ * cxy[:, 1], s_ * cxy[:, 0] + c * cxy[:, 1]])
-            dist = np.hypot(*(world - est[i, :2]).T)
-            order = np.argsort(dist)
             tried = 0
-            for o in order:
-                if dist[o] > cc.max_distance_m or tried >= cc.max_per_scan:
+            for sid, _ in zip(*near.within(est[i, :2], cc.max_distance_m)):
+                if tried >= cc.max_per_scan:
                     break
-                sid = done[o]
                 if self.path[i] - last_tied[sid] < cc.spacing_m:
                     continue
                 sm = local.submaps[sid]
@@ -175,9 +196,11 @@ class GlobalSlam:
                     # then on they are loops like the others, under it.
                     est[: i + 1] = self._optimise(est[: i + 1], i + 1, plain=found)
                     last_opt, pending, last_loop = i, 0, self.path[i]
+                    optimised += 1
             if pending and i - last_opt >= cc.optimise_every:
                 est[: i + 1] = self._optimise(est[: i + 1], i + 1)
                 last_opt, pending = i, 0
+                optimised += 1
         est = self._optimise(est, n)
         if self.before_judging is not None:
             self.constraints.extend(self.before_judging(list(self.constraints)))
@@ -316,15 +339,11 @@ class GlobalSlam:
         gives a weight below one half, every other factor a known inlier."""
         import gtsam
 
-        from slam.graph.factors import pose_key
-
         g, index = self._graph(n, robust_inter=False)
         inter = [pos for pos, k in index if self.constraints[k].kind != "intra"]
         if not inter:
             return set()
-        values = gtsam.Values()
-        for i in range(n):
-            values.insert(pose_key(i), gtsam.Pose2(*est[i]))
+        values = self._values(est, n)
         params = gtsam.GncLMParams()
         params.setLossType(gtsam.GncLossType.TLS)
         inter_set = set(inter)
@@ -343,48 +362,119 @@ class GlobalSlam:
 
         from slam.graph.factors import pose_key
 
+        if not self._chain:
+            self._chain.append(gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(*self.local.poses[0]),
+                                                      _noise([1e-3, 1e-3, 1e-4])))
+        for i in range(len(self._chain), n):
+            self._chain.append(self._chain_factor(i))
+        if robust_inter and not plain:
+            g = self._walk_graph(n)
+            if g is not None:
+                m = len(self.constraints)
+                return g, list(zip(range(n, n + m), range(m)))
         g = gtsam.NonlinearFactorGraph()
-        g.add(gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(*self.local.poses[0]), _noise([1e-3, 1e-3, 1e-4])))
-        for i in range(1, n):
-            cov = self.step_cov[i]
-            if cov[0, 0] >= UNKNOWN_VARIANCE:  # no measurement of this step: the local SLAM's
-                step, cov = between(self.local.poses[i - 1], self.local.poses[i]), np.diag(UNMATCHED_VARIANCE)
-            else:
-                step = self.steps[i]
-            noise = gtsam.noiseModel.Gaussian.Covariance(cov + 1e-12 * np.eye(3))
-            if self.local.matches[i] is not None and self.local.matches[i].refined:
-                # Where the scan was matched, dead reckoning is a second
-                # opinion: a robust one, as odometry and a scan matcher seeded
-                # by it can be wrong together (belgioioso: 15-18 deg at once).
-                noise = gtsam.noiseModel.Robust.Create(self.chain_robust, noise)
-            g.add(gtsam.BetweenFactorPose2(pose_key(i - 1), pose_key(i), gtsam.Pose2(*step), noise))
+        for i in range(n):
+            g.add(self._chain[i])
         index = []  # (factor position, constraint index)
         for k, c in enumerate(self.constraints):
             if c.scan >= n:
                 continue
-            robust = self.robust if c.kind != "intra" and robust_inter and k not in plain else None
+            robust = c.kind != "intra" and robust_inter and k not in plain
             index.append((g.size(), k))
-            g.add(gtsam.BetweenFactorPose2(pose_key(c.anchor), pose_key(c.scan), gtsam.Pose2(*c.delta),
-                                           loop_noise(c.information, robust)))
+            g.add(self._constraint_factor(c, robust))
         return g, index
 
-    def _optimise(self, est: np.ndarray, n: int, plain: set[int] = frozenset()) -> np.ndarray:
+    def _walk_graph(self, n: int):
+        """The graph :meth:`_graph` makes with every inter constraint under
+        the kernel, made of two graphs that only grow as the walk goes (the
+        chain's factors; the constraints' in their order), so the same
+        factors in the same order as factor by factor, without a pass over
+        all of them in Python; None where that is not the graph (it holds
+        more nodes than ``n``, or a constraint reaches past node ``n``)."""
+        import gtsam
+
+        if self._chain_graph is None:
+            self._chain_graph, self._constraint_graph = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph()
+        while self._chain_graph.size() < n:
+            self._chain_graph.add(self._chain[self._chain_graph.size()])
+        if self._chain_graph.size() != n:
+            return None
+        kept = self._in_graph
+        if len(kept) > len(self.constraints) or any(a is not b for a, b in zip(kept, self.constraints)):
+            # Constraints were taken back (a recognition unconfirmed, the
+            # outliers after GNC): start the constraints' graph again.
+            self._constraint_graph, self._in_graph, self._last_scan = gtsam.NonlinearFactorGraph(), [], -1
+        for c in self.constraints[len(self._in_graph):]:
+            self._constraint_graph.add(self._constraint_factor(c, c.kind != "intra"))
+            self._in_graph.append(c)
+            self._last_scan = max(self._last_scan, c.scan)
+        if self._last_scan >= n:
+            return None
+        g = gtsam.NonlinearFactorGraph()
+        g.push_back(self._chain_graph)
+        g.push_back(self._constraint_graph)
+        return g
+
+    def _chain_factor(self, i: int):
+        """The dead-reckoning step into node ``i``."""
         import gtsam
 
         from slam.graph.factors import pose_key
 
+        cov = self.step_cov[i]
+        if cov[0, 0] >= UNKNOWN_VARIANCE:  # no measurement of this step: the local SLAM's
+            step, cov = between(self.local.poses[i - 1], self.local.poses[i]), np.diag(UNMATCHED_VARIANCE)
+        else:
+            step = self.steps[i]
+        noise = gtsam.noiseModel.Gaussian.Covariance(cov + 1e-12 * np.eye(3))
+        if self.local.matches[i] is not None and self.local.matches[i].refined:
+            # Where the scan was matched, dead reckoning is a second
+            # opinion: a robust one, as odometry and a scan matcher seeded
+            # by it can be wrong together (belgioioso: 15-18 deg at once).
+            noise = gtsam.noiseModel.Robust.Create(self.chain_robust, noise)
+        return gtsam.BetweenFactorPose2(pose_key(i - 1), pose_key(i), gtsam.Pose2(*step), noise)
+
+    def _constraint_factor(self, c: Constraint, robust: bool):
+        """The between factor of constraint ``c``, under the kernel when
+        ``robust``; made once per constraint and kind of noise, since the
+        graph is rebuilt around it at every optimisation (a factor is not
+        changed by optimising it)."""
+        import gtsam
+
+        from slam.graph.factors import pose_key
+
+        key = (id(c), robust)
+        if key not in self._factors:  # keeps c alive beside it, so its id is not reused
+            factor = gtsam.BetweenFactorPose2(pose_key(c.anchor), pose_key(c.scan), gtsam.Pose2(*c.delta),
+                                              loop_noise(c.information, self.robust if robust else None))
+            self._factors[key] = (c, factor)
+        return self._factors[key][1]
+
+    def _optimise(self, est: np.ndarray, n: int, plain: set[int] = frozenset()) -> np.ndarray:
+        import gtsam
+
         g, _ = self._graph(n, plain=plain)
-        values = gtsam.Values()
-        for i in range(n):
-            values.insert(pose_key(i), gtsam.Pose2(*est[i]))
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(50)
-        result = gtsam.LevenbergMarquardtOptimizer(g, values, params).optimize()
+        result = gtsam.LevenbergMarquardtOptimizer(g, self._values(est, n), params).optimize()
         out = est.copy()
-        for i in range(n):
-            p = result.atPose2(pose_key(i))
-            out[i] = (p.x(), p.y(), p.theta())
+        out[:n] = gtsam.utilities.extractPose2(result)  # x, y, theta of x0..x(n-1), in key order
         return out
+
+    def _values(self, est: np.ndarray, n: int):
+        """The first ``n`` poses of ``est`` as GTSAM values. Done at every
+        optimisation of the walk, over the whole graph so far: the keys are
+        made once, and the rows handed over as Python floats."""
+        import gtsam
+
+        from slam.graph.factors import pose_key
+
+        self._keys.extend(pose_key(i) for i in range(len(self._keys), n))
+        values = gtsam.Values()
+        insert, pose = values.insert, gtsam.Pose2
+        for key, (x, y, yaw) in zip(self._keys, est[:n].tolist()):
+            insert(key, pose(x, y, yaw))
+        return values
 
 
 def _agree(again: Match | None, delta: np.ndarray, max_m: float, max_rad: float) -> bool:

@@ -8,7 +8,9 @@ Sections:
 * ``speed`` (:mod:`.speed`): ``gslam map --gating on`` as a process against
   KISS-ICP alone as a process, like with like: one thread against one
   thread (the default, bit-identical) and all cores against KISS-ICP's
-  default (``frontend.threads: 0``); paired ratios, medians.
+  default (``frontend.threads: 0``); and against kiss-slam (``--kiss-slam``);
+  on telemax_lab, the looping run and every CARMEN log with real stamps;
+  paired ratios, medians.
 * ``ratio``, ``growth``, ``isam2``, ``diagnosis`` (:mod:`.stages`): in one
   process, the pipeline against KISS-ICP alone and its split into stages;
   growth of time and memory with the run's length; iSAM2's latency per
@@ -52,12 +54,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="simulated runs, made once (the 2 h run is ~1.5 GB)")
     ap.add_argument("--repeats", type=int, default=None, help="rounds of speed and ratio (default 5; quick 3)")
     ap.add_argument("--cli-repeats", type=int, default=None)
-    ap.add_argument("--inputs", nargs="+", choices=["lab", "loop"], default=None,
-                    help="speed's inputs (default lab loop; quick lab)")
+    ap.add_argument("--inputs", nargs="+", choices=["lab", "loop", "carmen"], default=None,
+                    help="speed's inputs (default lab loop carmen; quick lab); carmen: every CARMEN log with real stamps")
+    ap.add_argument("--kiss-slam", default="kiss_slam_pipeline",
+                    help="kiss-slam's executable (its own environment: scripts/bench/peers.py); 'none' leaves it out")
     ap.add_argument("--laps", type=int, default=7, help="laps of speed's looping run (default 7: 29.5 min)")
     ap.add_argument("--config", type=Path, default=REPO / "configs" / "telemax.yaml")
     ap.add_argument("--before", type=Path, default=None, help="another checkout's code to time as 'before' in speed")
-    ap.add_argument("--growth-laps", type=int, nargs="+", default=None, help="default 1 7 29; quick 1 3")
+    ap.add_argument("--growth-laps", type=int, nargs="+", default=None, help="default 1 3 10 29; quick 1 3 10")
     ap.add_argument("--growth-repeats", type=int, default=None)
     ap.add_argument("--isam2-laps", type=int, default=None, help="default 29; quick 3")
     ap.add_argument("--isam2-repeats", type=int, default=None)
@@ -82,11 +86,11 @@ def main(argv: list[str] | None = None) -> int:
     sections = {
         "speed": lambda: report.markdown.extend([
             "## gslam map against KISS-ICP alone, as processes", "",
-            speed_section(args.out / "speed", repeats, args.inputs or (["lab"] if quick else ["lab", "loop"]),
-                          args.laps, args.config, args.before)]),
+            speed_section(args.out / "speed", repeats, args.inputs or (["lab"] if quick else ["lab", "loop", "carmen"]),
+                          args.laps, args.config, args.before, None if args.kiss_slam == "none" else args.kiss_slam)]),
         "ratio": lambda: (bench_ratio(report, args.cache, work, repeats),
                           bench_cli(report, args.cache, work, args.cli_repeats or (1 if quick else 3))),
-        "growth": lambda: bench_growth(report, args.cache, work, args.growth_laps or ([1, 3] if quick else [1, 7, 29]),
+        "growth": lambda: bench_growth(report, args.cache, work, args.growth_laps or ([1, 3, 10] if quick else [1, 3, 10, 29]),
                                        args.growth_repeats or (1 if quick else 3)),
         "isam2": lambda: bench_isam2(report, args.cache, work, args.isam2_laps or (3 if quick else 29),
                                      args.isam2_repeats or (1 if quick else 3)),

@@ -2,9 +2,12 @@
 as cold processes on the same bag: the ``speed`` section of the ``perf``
 bench.
 
-Inputs (simulated once, seed 5): ``lab`` is telemax_lab (220.6 s, 2,207
-scans); ``loop`` is telemax_loop with ``--laps`` laps. Programs, each a
-fresh interpreter, compared like with like:
+Inputs: ``lab`` is telemax_lab (simulated once, seed 5; 220.6 s, 2,207
+scans); ``loop`` is telemax_loop with ``--laps`` laps; ``carmen`` is every
+CARMEN log in ``../shared/data/carmen`` whose stamps are real (not
+synthesised by the reader), mapped with ``configs/datasets/carmen.yaml``
+as the ``carmen`` bench maps them. Programs, each a fresh interpreter,
+compared like with like:
 
 * ``gslam`` (``frontend.threads: 1``, the default: the same poses on every
   run) against ``kiss 1 thread`` (``python -m scripts.bench.kiss_only RUN
@@ -19,6 +22,10 @@ fresh interpreter, compared like with like:
 * ``gslam`` against ``gslam no outputs`` (``--set output.grid=false --set
   output.mcap=false``, the map's figure kept): what the occupancy grid and
   ``run.mcap`` cost as a user pays for them, target at most 1.10;
+* ``kiss-slam`` (``--kiss-slam``, its own environment:
+  :mod:`scripts.bench.peers`): the laser SLAM a KISS-ICP user tries first,
+  in its default setting, on the same scans written once as PLY files
+  (the writing not timed), against which ``gslam`` is compared;
 * with ``--before DIR``, ``before``: the default command with the code of
   another checkout (``git archive COMMIT | tar -x -C DIR``), against
   ``kiss 1 thread``, and whether both wrote the same bytes.
@@ -30,7 +37,9 @@ program: the median and worst wall time, the CPU time (user + sys of the
 process and its children), the real-time factor, the pipeline's own split
 from ``metrics.json`` (``start-up`` is the wall time outside
 ``runtime_s``) and the load average around the runs. Targets: a ratio of
-at most 1.15 with one thread, 1.3 with all cores, 1.10 for the outputs.
+at most 1.5 with one thread, 1.3 with all cores, 1.15 without submaps and
+loops, 1.10 for the outputs; below 1 against kiss-slam; a real-time factor
+of at least 80 on the simulated runs and 60 on the logs (issue 37).
 """
 
 from __future__ import annotations
@@ -48,15 +57,22 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from scripts.bench.common import simulated, table
 from slam.errors import GslamError
 from slam.results.atomic import write_text
 
 ROOT = Path(__file__).resolve().parents[3]
 SEED = 5
+CARMEN = ROOT.parent / "shared" / "data" / "carmen"
+CARMEN_CONFIG = ROOT / "configs" / "datasets" / "carmen.yaml"
 PEERS = {"gslam": "kiss 1 thread", "gslam all cores": "kiss", "gslam no loops": "kiss 1 thread", "before": "kiss 1 thread"}
 """The program each gslam program is compared with."""
-TARGETS = {"gslam": 1.15, "gslam all cores": 1.3, "gslam no loops": 1.15}
+TARGETS = {"gslam": 1.5, "gslam all cores": 1.3, "gslam no loops": 1.15}
+AGAINST_KISS_SLAM = ("gslam", "kiss-slam", 1.0)
+"""Program, peer and the target of their ratio (below it)."""
+RTF_TARGETS = {"simulated": 80.0, "carmen": 60.0}
 OUTPUTS = ("gslam", "gslam no outputs", 1.10)
 """Program, the same without the grid and run.mcap, and the target of their ratio."""
 STEPS = ("read", "prepare", "frontend", "frontend_wait", "validation", "submaps", "loops", "graph_build", "optimise",
@@ -101,17 +117,78 @@ def _timed(cmd: list[str], env: dict[str, str] | None = None, cwd: Path = ROOT) 
     return wall, cpu
 
 
-def run_kiss(name: str, program: str, run: Path, rnd: int, threads: int) -> Sample:
+@dataclass
+class Input:
+    """One input of the section: the run or log, the config it is mapped
+    with and the ``gslam map`` arguments beside it, its data span (s), and
+    the programs timed on it; ``scans``: the PLY folder kiss-slam reads."""
+
+    name: str
+    path: Path
+    config: Path
+    args: tuple[str, ...]
+    duration_s: float
+    programs: list[str]
+    kind: str = "simulated"
+    scans: Path | None = None
+
+
+def carmen_inputs() -> list[tuple[str, Path]]:
+    """The CARMEN logs whose stamps are real (the reader synthesised none)."""
+    from slam.config import load_config
+    from slam.readers.read import read_recording
+
+    cfg = load_config(CARMEN_CONFIG)
+    out = []
+    for path in sorted(CARMEN.glob("*.log.gz")):
+        if not read_recording(path, cfg.input).stamps_synthesised:
+            out.append((path.name.split("-corrected")[0], path))
+    return out
+
+
+def export_for_kiss_slam(path: Path, config: Path, folder: Path) -> Path:
+    """The scans of ``path`` as PLY files in ``folder`` (once), as the
+    ``carmen`` bench hands them to kiss-slam."""
+    from scripts.bench.peers import export_scans
+    from slam.config import load_config
+    from slam.readers.read import read_recording
+
+    if not (folder / "done").exists():
+        cfg = load_config(config)
+        rec = read_recording(path, cfg.input)
+        shutil.rmtree(folder, ignore_errors=True)
+        export_scans(rec.scans, folder, cfg.frontend.min_range_m, cfg.frontend.max_range_m)
+        np.save(folder / "t.npy", rec.scans.t)
+        (folder / "done").write_text("")
+    return folder
+
+
+def run_kiss(name: str, program: str, run: Path, rnd: int, threads: int, duration_s: float) -> Sample:
     load = os.getloadavg()[0]
     wall, cpu = _timed([sys.executable, "-m", "scripts.bench.kiss_only", str(run), "--threads", str(threads)])
-    return Sample(name, program, rnd, wall, cpu, load, duration_s=data_span(run))
+    return Sample(name, program, rnd, wall, cpu, load, duration_s=duration_s)
+
+
+def run_kiss_slam(name: str, executable: str, scans: Path, work: Path, rnd: int, duration_s: float) -> Sample:
+    """kiss-slam (its default setting) on the PLY scans, as a process."""
+    from scripts.bench.peers import kiss_slam
+
+    load = os.getloadavg()[0]
+    shutil.rmtree(work, ignore_errors=True)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    run = kiss_slam(executable, scans.resolve(), np.load(scans / "t.npy"), work.resolve(), "default")  # it runs in work
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if run.error:
+        raise GslamError(f"kiss-slam on {scans}: {run.error}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return Sample(name, "kiss-slam", rnd, run.wall_s, cpu, load, duration_s=duration_s)
 
 
 def run_gslam(name: str, program: str, code: Path, run: Path, config: Path, out: Path, rnd: int, keep: Path | None,
-              sets: tuple[str, ...] = ()) -> Sample:
+              sets: tuple[str, ...] = (), args: tuple[str, ...] = ("--gating", "on")) -> Sample:
     env = {**os.environ, "PYTHONPATH": str(code)}
     cmd = [sys.executable, "-m", "slam.cli", "-q", "map", str(run), "--config", str(config), "--out", str(out),
-           "--gating", "on", *(a for s in sets for a in ("--set", s))]
+           *args, *(a for s in sets for a in ("--set", s))]
     load = os.getloadavg()[0]
     wall, cpu = _timed(cmd, env, cwd=code)  # python -m puts the working folder first on the path
     metrics = json.loads((out / "metrics.json").read_text())
@@ -167,7 +244,9 @@ def samples_csv(samples: list[Sample]) -> str:
 
 
 
-def report(samples: list[Sample], programs: list[str], identity: dict[str, list[str]], note: str) -> str:
+def report(samples: list[Sample], programs: list[str], identity: dict[str, list[str]], note: str,
+           kinds: dict[str, str] | None = None) -> str:
+    kinds = kinds or {}
     head = ["input", "program", "n", "wall median [s]", "wall worst [s]", "CPU median [s]", "RTF median",
             "peer", "ratio to peer (median of rounds)", "worst round ratio", "load avg (min-max)"]
     rows, verdicts = [], []
@@ -184,10 +263,24 @@ def report(samples: list[Sample], programs: list[str], identity: dict[str, list[
                          f"{_med([s.cpu_s for s in group]):.2f}", f"{_med([s.rtf for s in group]):.0f}x",
                          PEERS.get(prog), f"{_med(ratios):.2f}" if ratios else None,
                          f"{max(ratios):.2f}" if ratios else None, f"{min(loads):.1f}-{max(loads):.1f}"])
-            if prog in TARGETS and ratios:
+            if prog in TARGETS and ratios and kinds.get(inp, "simulated") == "simulated":  # the targets of the robot's runs
                 r = _med(ratios)
                 verdicts.append(f"- {inp}, {prog} against {PEERS[prog]}: {r:.2f} "
                                 f"({'within' if r <= TARGETS[prog] else 'above'} the target {TARGETS[prog]})")
+        prog, peer_name, target = AGAINST_KISS_SLAM
+        peer = {s.round: s for s in samples if s.input == inp and s.program == peer_name}
+        ratios = [s.wall_s / peer[s.round].wall_s for s in samples
+                  if s.input == inp and s.program == prog and s.round in peer]
+        if ratios:
+            r = _med(ratios)
+            verdicts.append(f"- {inp}, {prog} against {peer_name}: {r:.2f} (worst round {max(ratios):.2f}; "
+                            f"{'below' if r < target else 'not below'} the target {target:g})")
+        rtf = [s.rtf for s in samples if s.input == inp and s.program == "gslam"]
+        if rtf:
+            kind = kinds.get(inp, "simulated")
+            verdicts.append(f"- {inp}, gslam real-time factor {_med(rtf):.0f}x "
+                            f"({'at least' if _med(rtf) >= RTF_TARGETS[kind] else 'below'} the target "
+                            f"{RTF_TARGETS[kind]:.0f}x)")
         with_out, without, target = OUTPUTS
         bare = {s.round: s for s in samples if s.input == inp and s.program == without}
         costs = [s.wall_s / bare[s.round].wall_s for s in samples
@@ -217,9 +310,10 @@ def report(samples: list[Sample], programs: list[str], identity: dict[str, list[
 
 
 def speed_section(out: Path, repeats: int, inputs: list[str], laps: int, config: Path,
-                  before: Path | None = None) -> str:
+                  before: Path | None = None, kiss_slam: str | None = None) -> str:
     """Time every program on every input, ``repeats`` rounds; the section's
-    Markdown (``out`` keeps the inputs, the last results and samples.csv)."""
+    Markdown (``out`` keeps the inputs, the last results and samples.csv).
+    ``kiss_slam``: its executable (None: not timed)."""
     if repeats < 1:
         raise GslamError("--repeats: expected at least 1")
     out.mkdir(parents=True, exist_ok=True)
@@ -227,33 +321,55 @@ def speed_section(out: Path, repeats: int, inputs: list[str], laps: int, config:
     gslam_sets = {"gslam": (), "gslam all cores": ("frontend.threads=0",), "before": (),
                   "gslam no outputs": ("output.grid=false", "output.mcap=false"),
                   "gslam no loops": ("submaps.enabled=false", "loops.enabled=false")}
-    programs = ["kiss 1 thread", "gslam", "kiss", "gslam all cores", "gslam no outputs", "gslam no loops"] + (
-        ["before"] if before else [])
+    if kiss_slam is not None and shutil.which(kiss_slam) is None:
+        raise GslamError(f"--kiss-slam {kiss_slam}: not found (see scripts/bench/peers.py; 'none' leaves it out)")
+    peer = ["kiss-slam"] if kiss_slam else []
+    simulated_programs = ["kiss 1 thread", "gslam", "kiss", "gslam all cores", "gslam no outputs",
+                          "gslam no loops"] + peer + (["before"] if before else [])
+    carmen_programs = ["kiss 1 thread", "gslam"] + peer + (["before"] if before else [])
     code = {"gslam": ROOT, "gslam all cores": ROOT, "gslam no outputs": ROOT, "gslam no loops": ROOT,
             "before": before.resolve() if before else None}
+    todo: list[Input] = []
+    for inp in inputs:
+        if inp == "carmen":
+            for name, path in carmen_inputs():
+                from slam.config import load_config
+                from slam.readers.read import read_recording
+
+                duration = read_recording(path, load_config(CARMEN_CONFIG).input).duration
+                todo.append(Input(name, path, CARMEN_CONFIG, (), duration, carmen_programs, "carmen"))
+        else:
+            run = simulated(out / "inputs", "telemax_lab" if inp == "lab" else "telemax_loop", SEED,
+                            None if inp == "lab" else laps)
+            todo.append(Input(inp, run, config.resolve(), ("--gating", "on"), data_span(run), simulated_programs))
+    if kiss_slam:
+        for item in todo:
+            item.scans = export_for_kiss_slam(item.path, item.config, out / "inputs" / f"ply_{item.name}")
     samples: list[Sample] = []
     identity: dict[str, list[str]] = {}
+    programs_seen: list[str] = []
     loads_start = os.getloadavg()
-    for inp in inputs:
-        run = simulated(out / "inputs", "telemax_lab" if inp == "lab" else "telemax_loop", SEED,
-                        None if inp == "lab" else laps)
-        keep = {prog: out / f"result_{inp}_{prog.replace(' ', '_')}" for prog in programs if prog in code}
+    for item in todo:
+        keep = {prog: out / f"result_{item.name}_{prog.replace(' ', '_')}" for prog in item.programs if prog in code}
         for k in keep.values():
             shutil.rmtree(k, ignore_errors=True)
         for rnd in range(1, repeats + 1):
-            for prog in programs:
+            for prog in item.programs:
                 if prog in kiss_threads:
-                    s = run_kiss(inp, prog, run, rnd, kiss_threads[prog])
+                    s = run_kiss(item.name, prog, item.path, rnd, kiss_threads[prog], item.duration_s)
+                elif prog == "kiss-slam":
+                    s = run_kiss_slam(item.name, kiss_slam, item.scans, out / "kiss_slam", rnd, item.duration_s)
                 else:
-                    s = run_gslam(inp, prog, code[prog], run, config.resolve(), out / "tmp_map", rnd, keep[prog],
-                                  gslam_sets[prog])
+                    s = run_gslam(item.name, prog, code[prog], item.path, item.config, out / "tmp_map", rnd,
+                                  keep[prog], gslam_sets[prog], item.args)
                 samples.append(s)
-                print(f"{inp} round {rnd} {prog}: {s.wall_s:.2f} s (load {s.load_before:.1f})", flush=True)
+                print(f"{item.name} round {rnd} {prog}: {s.wall_s:.2f} s (load {s.load_before:.1f})", flush=True)
+        programs_seen += [p for p in item.programs if p not in programs_seen]
         if "before" in keep:
-            identity[inp] = same_outputs(keep["gslam"], keep["before"])
+            identity[item.name] = same_outputs(keep["gslam"], keep["before"])
     loads_end = os.getloadavg()
     note = (f"Load average (1, 5, 15 min) {loads_start[0]:.1f}, {loads_start[1]:.1f}, {loads_start[2]:.1f} at the "
             f"start and {loads_end[0]:.1f}, {loads_end[1]:.1f}, {loads_end[2]:.1f} at the end; "
-            f"{repeats} rounds, programs in turn: {', '.join(programs)}.")
+            f"{repeats} rounds, programs in turn on each input: {', '.join(programs_seen)}.")
     write_text(out / "samples.csv", samples_csv(samples))
-    return report(samples, programs, identity, note)
+    return report(samples, programs_seen, identity, note, {item.name: item.kind for item in todo})
