@@ -101,6 +101,18 @@ def _input(value, marker: Path) -> str | None:
     return value
 
 
+def _read_added(folder: Path) -> dict:
+    """The ``--force`` record of ``folder`` ({} where there is none); a
+    record that is there but not one gslam wrote is refused, never
+    overwritten: it may be all that tells gslam's files from the user's."""
+    path = Path(folder) / ADDED_MARKER
+    data = _read_json(path)
+    if data is None and (path.exists() or path.is_symlink()):
+        raise GslamError(f"{path}: not a record gslam wrote (not a JSON object), so nothing there is replaced or "
+                         "removed: move it away and run again")
+    return data or {}
+
+
 def result_command(folder: Path) -> str | None:
     """The command whose result ``folder`` is, or None if it is none."""
     data = _read_json(Path(folder) / RESULT_MARKER)
@@ -124,7 +136,7 @@ def read_record(folder: Path, command: str) -> Record | None:
     if data is not None and data.get("command") == command:
         marker = folder / RESULT_MARKER
         return Record(command, _files(data.get("files"), marker), input=_input(data.get("input"), marker))
-    added = _read_json(folder / ADDED_MARKER) or {}
+    added = _read_added(folder)
     entry = added.get(command)
     if isinstance(entry, dict):
         return Record(command, _files(entry.get("files"), folder / ADDED_MARKER) or frozenset(), added=True)
@@ -173,7 +185,7 @@ def write_result_marker(folder: Path, command: str, files: set[str] | frozenset[
 
 def write_added_record(folder: Path, command: str, files: set[str] | frozenset[str]) -> None:
     """Record that ``command`` added ``files`` to ``folder`` with --force."""
-    data = _read_json(folder / ADDED_MARKER) or {}
+    data = _read_added(folder)
     data[command] = {**_stamp(), "files": sorted(files)}
     _write_json(folder / ADDED_MARKER, data)
 
