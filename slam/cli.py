@@ -66,7 +66,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from slam.sim import simulate
 
     res = simulate(_config_path(args.scenario), args.out, seed=args.seed, progress=not args.quiet, force=args.force)
-    print(f"wrote {res.run_dir} ({res.duration_s:.1f} s simulated)")
+    _say(f"wrote {res.run_dir} ({res.duration_s:.1f} s simulated)")
     for comp, intervals in res.faults.items():
         if intervals:
             spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals)
@@ -84,7 +84,7 @@ def _cmd_inject(args: argparse.Namespace) -> int:
     config = load_config(config_path)
     res = inject(args.input, args.fault or [], args.out, config.input, inputs=config_files(config_path),
                  force=args.force)
-    print(f"wrote {res.run_dir} ({res.duration_s:.1f} s, the input with the faults added; truth.json beside it)")
+    _say(f"wrote {res.run_dir} ({res.duration_s:.1f} s, the input with the faults added; truth.json beside it)")
     for comp, intervals in sorted(res.injected.items()):
         spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in intervals) or "none beyond the nominal noise"
         print(f"  injected faults {comp}: {spans}")
@@ -139,7 +139,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         n = res.compass_noise
         print(f"  compass factor: sd {math.degrees(n.sd_rad):.3g} deg against the gyro, correlated over "
               f"{n.correlation_s:.3g} s: written to backend.factors.compass")
-    print(f"wrote {res.out} (target {100 * res.target_per_observer:.3f} % of steps per observer): "
+    _say(f"wrote {res.out} (target {100 * res.target_per_observer:.3f} % of steps per observer): "
           f"gslam map RUN --config {res.out} --out DIR --gating on")
     return 0
 
@@ -164,11 +164,11 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 
     write_text(args.config_out, found.starter)
     if found.proposal is not None and found.proposal.nothing_to_validate() is None:
-        print(f"wrote {args.config_out}: learn its observers with gslam calibrate {args.input} --config "
+        _say(f"wrote {args.config_out}: learn its observers with gslam calibrate {args.input} --config "
               f"{args.config_out} --out learnt.yaml, then gslam map {args.input} --config learnt.yaml --out DIR "
               "--gating on")
     else:
-        print(f"wrote {args.config_out}: gslam map {args.input} --config {args.config_out} --out runs/first_map "
+        _say(f"wrote {args.config_out}: gslam map {args.input} --config {args.config_out} --out runs/first_map "
               "(ungated)")
     return 0
 
@@ -194,7 +194,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     res = run_compare(args.input, _config_path(args.config), args.out, _config_path(args.variants), args.only,
                       args.set or [], progress=not args.quiet, force=args.force, command=args.command_line)
     print((res.out_dir / "comparison.md").read_text())
-    print(f"wrote {res.out_dir}" + _report_hint(res.out_dir))
+    _say(f"wrote {res.out_dir}" + _report_hint(res.out_dir))
     _warn_self_checks(res.results)
     return 0
 
@@ -253,7 +253,7 @@ def _print_metrics(out_dir: Path, metrics: dict) -> None:
     )
     shown = {k: metrics[k] for k in keys if k in metrics}
     check = metrics.get("self_check")
-    print(f"wrote {out_dir}")
+    _say(f"wrote {out_dir}")
     if check is not None:
         from slam.outputs.self_check import summary_line, warning_line
 
@@ -551,6 +551,11 @@ class _WatchedStdout:
 
 def _one_line(text: str) -> str:
     return " ".join(text.split("\n"))
+
+
+def _say(text: str) -> None:
+    """A result line on stdout, one line whatever the paths in it hold."""
+    print(_one_line(text))
 
 
 INTERRUPTED = tuple(128 + s for s in STOPS)

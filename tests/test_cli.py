@@ -429,3 +429,10 @@ def test_a_latin1_terminal_gets_what_it_cannot_show_escaped(tmp_path, short_run)
     said = (run.stdout + run.stderr).decode("latin-1")
     assert run.returncode == 0 and "Traceback" not in said and out.is_file()
     assert "\\u03c7\\u03ac\\u03c1" in said  # the name, escaped
+
+
+def test_a_result_line_stays_one_line_whatever_its_path_holds(capsys):
+    from slam.cli import _say
+
+    _say("wrote runs/a\nb (2.0 s simulated)")
+    assert capsys.readouterr().out == "wrote runs/a b (2.0 s simulated)\n"
