@@ -137,9 +137,10 @@ TARGETS = {"gated / best kernel, worst": 1.0, "gated / best kernel, geometric me
            "uninjected gated / ungated, worst": 1.05, "uninjected alarm fraction, worst": 0.02}
 
 
-def fault_specs(kind: str, duration: float, placements: list[float], length: float) -> list[str]:
-    """The ``--fault`` specs of ``kind`` at each placement (share of ``duration``)."""
-    return [FAULTS[kind].format(a=p * duration, b=(p + length) * duration) for p in placements]
+def fault_specs(kind: str, duration: float, placements: list[float], length: float,
+                faults: dict[str, str] = FAULTS) -> list[str]:
+    """The ``--fault`` specs of ``kind`` (in ``faults``) at each placement (share of ``duration``)."""
+    return [faults[kind].format(a=p * duration, b=(p + length) * duration) for p in placements]
 
 
 def stretch_faults(specs: list[str]) -> dict[str, list[tuple[float, float]]]:
@@ -193,8 +194,7 @@ def error(row: dict) -> float:
 def injected_specs(name: str, kind: str, duration: float, args: argparse.Namespace) -> list[str]:
     if name == HUSKY:
         return [HUSKY_FAULTS[kind].format(a=a, b=b) for a, b in HUSKY_STRETCHES_S]
-    spec = log_faults(name)[kind]
-    return [spec.format(a=p * duration, b=(p + args.length) * duration) for p in args.placements]
+    return fault_specs(kind, duration, args.placements, args.length, log_faults(name))
 
 
 def run_method(path: Path, config: Path, overrides: list[str], out: Path, recording=None, frontend=None):

@@ -242,6 +242,11 @@ def samples_csv(samples: list[Sample]) -> str:
     return buf.getvalue()
 
 
+def _paired(samples: list[Sample], inp: str, prog: str, peer_name: str | None) -> list[float]:
+    """Per round of ``inp``: ``prog``'s wall time over ``peer_name``'s in that round."""
+    peer = {s.round: s for s in samples if s.input == inp and s.program == peer_name}
+    return [s.wall_s / peer[s.round].wall_s for s in samples
+            if s.input == inp and s.program == prog and s.round in peer]
 
 
 def report(samples: list[Sample], programs: list[str], identity: dict[str, list[str]], note: str,
@@ -255,9 +260,8 @@ def report(samples: list[Sample], programs: list[str], identity: dict[str, list[
             group = [s for s in samples if s.input == inp and s.program == prog]
             if not group:
                 continue
-            peer = {s.round: s for s in samples if s.input == inp and s.program == PEERS.get(prog)}
             walls = [s.wall_s for s in group]
-            ratios = [s.wall_s / peer[s.round].wall_s for s in group if s.round in peer]
+            ratios = _paired(samples, inp, prog, PEERS.get(prog))
             loads = [s.load_before for s in group]
             rows.append([inp, prog, len(group), f"{_med(walls):.2f}", f"{max(walls):.2f}",
                          f"{_med([s.cpu_s for s in group]):.2f}", f"{_med([s.rtf for s in group]):.0f}x",
@@ -268,9 +272,7 @@ def report(samples: list[Sample], programs: list[str], identity: dict[str, list[
                 verdicts.append(f"- {inp}, {prog} against {PEERS[prog]}: {r:.2f} "
                                 f"({'within' if r <= TARGETS[prog] else 'above'} the target {TARGETS[prog]})")
         prog, peer_name, target = AGAINST_KISS_SLAM
-        peer = {s.round: s for s in samples if s.input == inp and s.program == peer_name}
-        ratios = [s.wall_s / peer[s.round].wall_s for s in samples
-                  if s.input == inp and s.program == prog and s.round in peer]
+        ratios = _paired(samples, inp, prog, peer_name)
         if ratios:
             r = _med(ratios)
             verdicts.append(f"- {inp}, {prog} against {peer_name}: {r:.2f} (worst round {max(ratios):.2f}; "
@@ -282,9 +284,7 @@ def report(samples: list[Sample], programs: list[str], identity: dict[str, list[
                             f"({'at least' if _med(rtf) >= RTF_TARGETS[kind] else 'below'} the target "
                             f"{RTF_TARGETS[kind]:.0f}x)")
         with_out, without, target = OUTPUTS
-        bare = {s.round: s for s in samples if s.input == inp and s.program == without}
-        costs = [s.wall_s / bare[s.round].wall_s for s in samples
-                 if s.input == inp and s.program == with_out and s.round in bare]
+        costs = _paired(samples, inp, with_out, without)
         if costs:
             r = _med(costs)
             verdicts.append(f"- {inp}, the grid and run.mcap ({with_out} against {without}): {r:.2f} "
