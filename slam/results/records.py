@@ -51,12 +51,12 @@ class Record:
 
 
 class BadMarker(GslamError):
-    """A marker that names a path outside its folder: not one gslam wrote."""
+    """A marker gslam never writes (one that names a path outside its
+    folder, an input that is no path): ``why`` says what is wrong."""
 
-    def __init__(self, marker: Path, name: object):
-        super().__init__(
-            f"{marker}: lists {name!r}, which is not a file inside the folder; gslam never writes such a marker, "
-            "so nothing there is replaced or removed: move the marker away and run again")
+    def __init__(self, marker: Path, why: str):
+        super().__init__(f"{marker}: {why}; gslam never writes such a marker, so nothing there is replaced or "
+                         "removed: move the marker away and run again")
 
 
 def _read_json(path: Path) -> dict | None:
@@ -84,10 +84,10 @@ def _files(value, marker: Path) -> frozenset[str] | None:
     if value is None:
         return None
     if not isinstance(value, list):
-        raise BadMarker(marker, value)
+        raise BadMarker(marker, f"lists {value!r}, which is not a file inside the folder")
     for name in value:
         if not plain_relative(name):
-            raise BadMarker(marker, name)
+            raise BadMarker(marker, f"lists {name!r}, which is not a file inside the folder")
     return frozenset(value)
 
 
@@ -96,8 +96,7 @@ def _input(value, marker: Path) -> str | None:
     if value is None:
         return None
     if not isinstance(value, str) or not value:
-        raise GslamError(f"{marker}: its input {value!r} is not a path; gslam never writes such a marker, so nothing "
-                         "there is replaced or removed: move the marker away and run again")
+        raise BadMarker(marker, f"its input {value!r} is not a path")
     return value
 
 
@@ -108,8 +107,7 @@ def _read_added(folder: Path) -> dict:
     path = Path(folder) / ADDED_MARKER
     data = _read_json(path)
     if data is None and (path.exists() or path.is_symlink()):
-        raise GslamError(f"{path}: not a record gslam wrote (not a JSON object), so nothing there is replaced or "
-                         "removed: move it away and run again")
+        raise BadMarker(path, "not a record gslam wrote (not a JSON object)")
     return data or {}
 
 
