@@ -280,3 +280,27 @@ def test_a_blamed_scan_leaves_no_trace_in_the_submaps_when_left_out(short_run):
     assert traces == 0 and blamed > 0
     kept, _ = _traces_of_blamed_scans(short_run, "keep")
     assert kept > 0
+
+
+def test_the_path_on_dead_reckoning_alone_may_drift_as_the_odometry_does():
+    from types import SimpleNamespace
+
+    from slam.config.submaps import RecognitionConfig
+    from slam.submaps.graph import GlobalSlam, drift_allowance
+
+    laser = RecognitionConfig()
+    assert drift_allowance(laser, 50.0, 20.0) == (laser.max_drift_per_m * 50.0, laser.max_turn_per_m_deg * 50.0)
+    blind = RecognitionConfig(blind_drift_per_m=0.6, blind_turn_per_m_deg=4.0)
+    assert drift_allowance(blind, 50.0, 0.0) == drift_allowance(laser, 50.0, 0.0)
+    drift_m, turn_deg = drift_allowance(blind, 50.0, 20.0)  # 30 m on the laser, 20 m on odometry alone
+    assert drift_m == pytest.approx(0.1 * 30.0 + 0.6 * 20.0) and turn_deg == pytest.approx(1.0 * 30.0 + 4.0 * 20.0)
+
+    # A node's scan with too few points to match (left out, or the laser
+    # blind) was reached on dead reckoning: the steps into it count.
+    poses = np.column_stack([np.arange(6.0), np.zeros(6), np.zeros(6)])
+    sizes = [100, 100, 0, 3, 100, 0]
+    points = SimpleNamespace(points=[np.zeros((k, 2)) for k in sizes])
+    walk = GlobalSlam(points, SimpleNamespace(poses=poses), SubmapsConfig(enabled=True), np.zeros((6, 3)),
+                      np.zeros((6, 3, 3)))
+    assert walk.path.tolist() == [0, 1, 2, 3, 4, 5]
+    assert walk.blind_path.tolist() == [0, 0, 1, 2, 2, 3]

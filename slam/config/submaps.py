@@ -162,7 +162,11 @@ class RecognitionConfig(_Strict):
     inside the window. The pose found must lie within the drift the run can
     have gathered since its last loop: the windows plus ``max_drift_per_m``
     and ``max_turn_per_m_deg`` per metre of path; a place further off is a
-    look-alike (a symmetric building's other wing). A recognition is a loop
+    look-alike (a symmetric building's other wing). Over the path walked on
+    dead reckoning alone (nodes whose scans are too sparse to match, or left
+    out by the gating) the run drifts as its odometry does:
+    ``blind_drift_per_m`` and ``blind_turn_per_m_deg`` there (None: the
+    rates above). A recognition is a loop
     only when a second one, at most ``confirm_within_m`` of path later,
     places the run within ``agree_m`` and ``agree_deg`` of the first; both
     then join the graph without a robust kernel, so the graph closes the
@@ -181,6 +185,8 @@ class RecognitionConfig(_Strict):
     min_score: float = Field(0.6, ge=0.0, le=1.0)
     max_drift_per_m: float = Field(0.1, ge=0.0)
     max_turn_per_m_deg: float = Field(1.0, ge=0.0)
+    blind_drift_per_m: float | None = Field(None, ge=0.0)
+    blind_turn_per_m_deg: float | None = Field(None, ge=0.0)
     confirm_within_m: float = Field(5.0, gt=0.0)
     agree_m: float = Field(0.3, gt=0.0)
     agree_deg: float = Field(3.0, gt=0.0)

@@ -32,7 +32,7 @@ import numpy as np
 from validation.base.geometry import between, compose, wrap_angle
 from slam.matching.descriptor import context_distance, ring_key, scan_context
 from slam.graph.loop_factors import loop_noise
-from slam.config.submaps import SubmapsConfig
+from slam.config.submaps import RecognitionConfig, SubmapsConfig
 from slam.submaps.local import LocalResult, Match, match_scan, refine_near
 from slam.submaps.near import NearSubmaps
 from slam.submaps.scans import ScanPoints
@@ -80,6 +80,19 @@ def _noise(sigmas, robust=None):
     return gtsam.noiseModel.Robust.Create(robust, noise) if robust is not None else noise
 
 
+def drift_allowance(rc: RecognitionConfig, path_m: float, blind_m: float) -> tuple[float, float]:
+    """How far (m) and how much (deg) a run can have drifted over ``path_m``
+    of path since its last loop, ``blind_m`` of it on dead reckoning alone,
+    beyond the recognition's windows (:class:`RecognitionConfig`)."""
+    drift_m, turn_deg = rc.max_drift_per_m * path_m, rc.max_turn_per_m_deg * path_m
+    if blind_m > 0.0:
+        if rc.blind_drift_per_m is not None:
+            drift_m += (rc.blind_drift_per_m - rc.max_drift_per_m) * blind_m
+        if rc.blind_turn_per_m_deg is not None:
+            turn_deg += (rc.blind_turn_per_m_deg - rc.max_turn_per_m_deg) * blind_m
+    return drift_m, turn_deg
+
+
 class GlobalSlam:
     """See the module docstring. ``steps`` (n, 3) and ``step_cov`` (n, 3, 3):
     the dead-reckoning chain between the scans, which the graph keeps
@@ -95,6 +108,10 @@ class GlobalSlam:
         self.steps, self.step_cov = steps, step_cov
         steps = np.hypot(*np.diff(local.poses[:, :2], axis=0).T)
         self.path = np.concatenate([[0.0], np.cumsum(steps)])
+        # The path walked on dead reckoning alone: into a node whose scan has
+        # too few points to match (the laser blind, or left out by the gating).
+        blind = np.array([len(points.points[i]) < cfg.min_points for i in range(1, len(local.poses))], dtype=bool)
+        self.blind_path = np.concatenate([[0.0], np.cumsum(np.where(blind, steps, 0.0))])
         self.constraints: list[Constraint] = []
         self._contexts: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._chain: list = []  # the prior and the chain's factors, by node
@@ -142,6 +159,7 @@ class GlobalSlam:
         self.chain_robust = gtsam.noiseModel.mEstimator.Cauchy.Create(cc.robust_scale)
         rc = cfg.recognition
         last_loop, last_try = 0.0, -np.inf  # path at the last loop and at the last recognition tried
+        blind_at_loop = 0.0  # dead-reckoned path at the last loop
         recognitions: list[tuple[int, Match, int, np.ndarray]] = []  # (node, match, submap, its global pose)
         for i in range(n):
             if i > 0:
@@ -185,17 +203,18 @@ class GlobalSlam:
                 last_tied[sid] = self.path[i]
                 pending += 1
                 if loop:
-                    last_loop = self.path[i]
+                    last_loop, blind_at_loop = self.path[i], self.blind_path[i]
             if rc.enabled and self.path[i] - last_loop >= rc.min_path_m and self.path[i] - last_try >= rc.spacing_m:
                 # Drift may have carried the estimate beyond the windows: recognise the place.
                 last_try = self.path[i]
-                found, tried = self._recognise(i, est, member, last_scan, recognitions, self.path[i] - last_loop)
+                found, tried = self._recognise(i, est, member, last_scan, recognitions, self.path[i] - last_loop,
+                                               self.blind_path[i] - blind_at_loop)
                 searches += tried
                 if found:
                     # Without the kernel, so the graph closes the loop; from
                     # then on they are loops like the others, under it.
                     est[: i + 1] = self._optimise(est[: i + 1], i + 1, plain=found)
-                    last_opt, pending, last_loop = i, 0, self.path[i]
+                    last_opt, pending, last_loop, blind_at_loop = i, 0, self.path[i], self.blind_path[i]
                     optimised += 1
             if pending and i - last_opt >= cc.optimise_every:
                 est[: i + 1] = self._optimise(est[: i + 1], i + 1)
@@ -225,12 +244,14 @@ class GlobalSlam:
     # -- place recognition -----------------------------------------------------------
 
     def _recognise(self, i: int, est: np.ndarray, member: dict[int, set[int]], last_scan: np.ndarray,
-                   recognitions: list, unpinned_m: float) -> tuple[set[int], int]:
+                   recognitions: list, unpinned_m: float, blind_m: float) -> tuple[set[int], int]:
         """Look for node ``i``'s surroundings among the finished submaps far
         back along the path (see :class:`RecognitionConfig`), ``unpinned_m``
-        of path after the last loop: the indices of the constraints a
-        confirmed recognition added (none if none), and how many searches ran."""
+        of path after the last loop, ``blind_m`` of it on dead reckoning
+        alone: the indices of the constraints a confirmed recognition added
+        (none if none), and how many searches ran."""
         cfg, rc = self.cfg, self.cfg.recognition
+        drift_m, turn_deg = drift_allowance(rc, unpinned_m, blind_m)
         query = self._context_of_node(i, member)
         far = [sid for sid in np.nonzero(last_scan < i)[0]
                if self.path[i] - self.path[last_scan[sid]] >= cfg.constraints.loop_separation_m]
@@ -256,8 +277,8 @@ class GlobalSlam:
                 continue
             pose = compose(est[sm.anchor], m.pose)
             moved = between(est[i], pose)
-            if (np.hypot(moved[0], moved[1]) > rc.linear_window_m + rc.max_drift_per_m * unpinned_m
-                    or abs(moved[2]) > np.radians(rc.angular_window_deg + rc.max_turn_per_m_deg * unpinned_m)):
+            if (np.hypot(moved[0], moved[1]) > rc.linear_window_m + drift_m
+                    or abs(moved[2]) > np.radians(rc.angular_window_deg + turn_deg)):
                 continue  # further than the run can have drifted: a look-alike
             for j, mj, sj, pj in recognitions:
                 if not 0 < self.path[i] - self.path[j] <= rc.confirm_within_m:
