@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 
 from scripts.bench.real_faults import (
-    BROAD_REPORT, BROAD_TUNING, HUSKY, KERNELS, METHODS, fault_specs, injected_specs, log_faults, log_source,
-    stretch_faults, summarise,
+    BROAD_REPORT, BROAD_TUNING, HUSKY, KERNELS, METHODS, fault_specs, injected_specs, injected_stretches, log_faults,
+    log_source, stretch_faults, summarise,
 )
 
 
@@ -23,16 +23,20 @@ def _rows(log: str, fault: str, ates: dict[str, float], **gated) -> list[dict]:
 
 def test_the_summary_holds_gated_against_the_best_kernel_and_the_interval_oracle():
     rows = _rows("a", "cut3", {"gated": 0.5, "cauchy": 0.8, "interval_oracle": 0.25},
-                 alarm_fraction=0.1, precision=0.9, recall=0.5, detected=3, missed=1, delay_s=1.0)
+                 alarm_fraction=0.1, precision=0.9, recall=0.5, detected=3, missed=1, delay_s=1.0,
+                 stretches_found=3, stretches=3)
     rows += _rows("b", "cut3", {"gated": 2.0, "huber": 1.0, "interval_oracle": 2.0},
-                  alarm_fraction=0.1, precision=0.5, recall=0.5, detected=1, missed=1, delay_s=None)
+                  alarm_fraction=0.1, precision=0.5, recall=0.5, detected=1, missed=1, delay_s=None,
+                  stretches_found=0, stretches=3)
     rows += [{"log": "a", "fault": "none", "method": "ungated", "ate_m": 0.10},
              {"log": "a", "fault": "none", "method": "gated", "ate_m": 0.11, "alarm_fraction": 0.03}]
     text, f = summarise(rows)
     assert f["gated / best kernel, worst"] == pytest.approx(2.0)
     assert f["gated / best kernel, geometric mean"] == pytest.approx((0.5 / 0.8 * 2.0) ** 0.5)
     assert f["gated / interval oracle, geometric mean"] == pytest.approx((2.0 * 1.0) ** 0.5)
-    assert f["stretches detected"] == pytest.approx(4 / 6)
+    assert f["labelled intervals detected"] == pytest.approx(4 / 6)
+    assert f["injected stretches found"] == pytest.approx(3 / 6)
+    assert "| 3/3 | 3/4 | 1.0 |" in text and "| 0/3 | 1/2 |" in text
     assert f["uninjected gated / ungated, worst"] == pytest.approx(1.1)
     assert f["uninjected alarm fraction, worst"] == pytest.approx(0.03)
     assert "| a | cut3 |" in text and "cauchy 0.800" in text and "missed" in text and "met" in text
@@ -59,7 +63,8 @@ def test_a_log_without_ground_truth_has_no_tight_oracle_and_its_own_summary_colu
     rows += [r for r in husky if r["method"] != "oracle"]
     text, f = summarise(rows)
     assert f["gated / best kernel, geometric mean"] == pytest.approx((0.5 * 0.5) ** 0.5)
-    assert f["stretches detected"] == pytest.approx(0.5)
+    assert f["labelled intervals detected"] == pytest.approx(0.5)
+    assert f["injected stretches found"] is None  # no row counted them
     assert "| husky | slip | 1.000 | 2.000 | 1.000 | gnc_gm 4.000 | – |" in text
     assert "| figure | measured, every log | CARMEN | Husky | target |  |" in text
 
@@ -100,3 +105,26 @@ def test_the_stretch_oracle_gates_each_injected_sensor_over_its_whole_stretch():
     text, f = summarise(rows)
     assert f["gated / stretch oracle, geometric mean"] == pytest.approx(0.25)
     assert "| a | cut3 | 1.000 | 1.000 | 1.000 | cauchy 2.000 | 1.000 | 0.500 | 4.000 | 0.50 | 2.00 | 0.25 |" in text
+
+
+def test_an_injected_stretch_is_found_where_one_of_its_components_is_blamed():
+    from types import SimpleNamespace
+
+    from validation.metrics import stretches_found
+
+    specs = ["laser_cut@10.0:20.0,range_m=3", "slip@30.0:40.0,scale=1.5", "slip@50.0:60.0,scale=1.5"]
+    stretches = injected_stretches(specs)
+    assert stretches == [(["SM_DIST", "SM_LAT", "SM_YAW"], 10.0, 20.0), (["ODO_DIST"], 30.0, 40.0),
+                         (["ODO_DIST"], 50.0, 60.0)]
+    t = [15.0, 35.0, 45.0, 55.0]
+
+    def result(*diagnoses):
+        return SimpleNamespace(consistent=True, diagnoses=tuple(frozenset(d) for d in diagnoses))
+
+    # The whole matcher blamed in the cut (a sensor stands for its modalities);
+    # the odometry blamed between the slips, and only suspected (second in
+    # the ranking) within the second.
+    results = [result({"SM"}), result({"ODO_DIST"}), result({"ODO_DIST"}), result({"LOOP"}, {"ODO_DIST"})]
+    expand = {"SM": ["SM_DIST", "SM_LAT", "SM_YAW"]}
+    assert stretches_found(t, results, [], stretches, expand) == 2
+    assert stretches_found(t, results, [], stretches) == 1

@@ -35,6 +35,11 @@ Definitions (validation steps at ``validation.rate_hz``):
   it; negative when the blame ends before the fault. Blame carried across a
   gap between two faults counts in full as false alarm.
 * ``truth_components``: the components whose truth is known.
+
+:func:`stretches_found` asks a coarser question of whole stretches (an
+injected fault's span, whatever its labels): was any of its components
+blamed (in the most probable diagnosis, the one the gating acts on) at any
+step within it.
 """
 
 from __future__ import annotations
@@ -160,3 +165,23 @@ def validation_metrics(
         "blamed_steps": dict(sorted(blamed_counts.items())),
         "no_diagnosis_steps": int(sum(1 for r in results if not r.consistent)) if results is not None else 0,
     }
+
+
+def stretches_found(
+    step_t: np.ndarray,
+    results: list[DiagnosisResult] | None,
+    actions: list[Actions],
+    stretches: Sequence[tuple[Sequence[str], float, float]],
+    expand: Mapping[str, Sequence[str]] | None = None,
+) -> int:
+    """How many of ``stretches`` (components, start s, end s) had one of
+    their components blamed (the most probable diagnosis; oracle: gated) at
+    some step within them; a blamed sensor counts as all its modalities
+    (``expand``)."""
+    top, _, _ = _blamed(results, actions, expand or {})
+    t = np.asarray(step_t, dtype=float)
+    found = 0
+    for comps, a, b in stretches:
+        steps = np.flatnonzero((t >= a) & (t <= b))
+        found += any(set(comps) & top[k] for k in steps)
+    return found
