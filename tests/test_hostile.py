@@ -250,6 +250,11 @@ def scenario_waypoints(points) -> Callable[[Path, World], None]:
     return scenario(set_in("robot", "waypoints", points))
 
 
+def _an_hour_long(tree: dict) -> None:
+    """The short scenario made about 50 minutes long: a pause of 3000 s at its second waypoint."""
+    tree["robot"]["waypoints"][1] = [*tree["robot"]["waypoints"][1][:2], 3000.0]
+
+
 def link_loop(name: str) -> Callable[[Path, World], None]:
     """A link ``{d}/name`` to itself."""
 
@@ -893,6 +898,22 @@ ERRORS: list[Case] = [
                                                                                         "0 0 0 0 0 0 1.0 host 1.0\n")),
     Case("carmen-negative-beam-count", CARMEN, "c.log:1: expected a positive beam count",
          text("c.log", "FLASER -3 1 2 3 0 0 0 0 0 0 1.0 host 1.0\n")),
+    # -- a world whose size makes the simulation compute for hours (slam/sim/budget.py's check_work) --
+    *(Case(f"scenario-{name}", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), f"simulating would compute for about {says}",
+           scenario(lambda t, change=change: _an_hour_long(t) or change(t)))
+      for name, change, says in (
+          ("20000-walls-in-the-lasers-range", lambda t: t["world"]["walls"].append(
+              [[float(x), 5.0 + 0.1 * (k % 2)] for k, x in enumerate(np.linspace(0.0, 8.0, 20_001))]),
+           "1.9 h, most of it ray casting 30,290 scans (sensors.laser.rate_hz 10 over about 3029 s) of 541 beams"),
+          ("15000-steel-structures-at-1-khz", lambda t: t["world"].update(disturbers=[
+              {"name": f"d{k}", "position": [100.0, 100.0, 0.5], "moment_A_m2": 10.0} for k in range(15_000)])
+           or t["robot"].update(truth_rate_hz=1000.0) or t["sensors"]["magnetometer"].update(rate_hz=1000.0),
+           "1.6 h, most of it the field of 15,000 steel structures (world.disturbers)"),
+          ("25000-doors-in-25000-walls", lambda t: t["world"].update(
+              doors=[{"center": [1000.0 + k, 1000.0], "width_m": 0.5} for k in range(25_000)])
+           or t["world"]["walls"].append([[float(x), 500.0] for x in np.linspace(0.0, 100.0, 25_001)]),
+           "1.6 h, most of it cutting 25,000 doors (world.doors) into 25,0"),
+      )),
 ]
 
 
