@@ -38,7 +38,7 @@ from slam.commands.calibrate.heading import HeadingOffset, learn_heading_offset
 from slam.commands.calibrate.lags import LagEstimate, learn_lags
 from slam.commands.calibrate.noise import CompassNoise, learn_compass_noise
 from slam.commands.calibrate.propose import Proposal, propose
-from slam.commands.calibrate.runs import CalibrationRun, load_run, parse_clean
+from slam.commands.calibrate.runs import CalibrationRun, distinct_runs, load_run, parse_clean
 from slam.commands.calibrate.select import (CheckChoice, Choice, FieldGyroChoice, calibrate_field_gyro, calibrate_magnetometer,
                                    calibrate_relation)
 from slam.commands.calibrate.support import Support, judge, uses_fitted_gain
@@ -106,6 +106,7 @@ def calibrate(
     if not 0.0 < false_alarm < 1.0:
         raise GslamError(f"--false-alarm {false_alarm:g}: expected a share of steps between 0 and 1, e.g. 0.005")
     out = check_new_file(out, [*runs, *config_files(config_path)], force, command="calibrate")
+    runs = distinct_runs(runs)
     stretch = parse_clean(clean)
     config = load_config(config_path, list(overrides))
     vcfg, _ = validation_sections(config)
