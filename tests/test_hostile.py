@@ -250,6 +250,17 @@ def scenario_waypoints(points) -> Callable[[Path, World], None]:
     return scenario(set_in("robot", "waypoints", points))
 
 
+def _truth_with(section: str, key: str, value: float) -> Callable[[Path], None]:
+    """A run folder change: truth.json's ``section.key`` set to ``value``."""
+
+    def change(run: Path) -> None:
+        truth = json.loads((run / "truth.json").read_text())
+        truth[section][key] = value
+        (run / "truth.json").write_text(json.dumps(truth))
+
+    return change
+
+
 def _an_hour_long(tree: dict) -> None:
     """The short scenario made about 50 minutes long: a pause of 3000 s at its second waypoint."""
     tree["robot"]["waypoints"][1] = [*tree["robot"]["waypoints"][1][:2], 3000.0]
@@ -914,6 +925,19 @@ ERRORS: list[Case] = [
            or t["world"]["walls"].append([[float(x), 500.0] for x in np.linspace(0.0, 100.0, 25_001)]),
            "1.6 h, most of it cutting 25,000 doors (world.doors) into 25,0"),
       )),
+    # -- a run folder's truth.json read as input: the physics of its reference and datum --
+    *(Case(f"truth-{name}", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"), f"truth.json: {says}",
+           copy_run(_truth_with(section, key, value)))
+      for name, section, key, value, says in (
+          ("field-negative", "magnetic_reference", "strength_T", -48e-6,
+           "magnetic_reference.strength_T: -4.8e-05 T is below 1e-06 T"),
+          ("field-of-1-tesla", "magnetic_reference", "strength_T", 1.0, "magnetic_reference.strength_T: 1 T is above 0.001 T"),
+          ("dip-10-rad", "magnetic_reference", "dip_rad", 10.0, "magnetic_reference.dip_rad: 10 rad is above 1.5708 rad"),
+          ("declination-1e6-rad", "magnetic_reference", "declination_rad", 1e6,
+           "magnetic_reference.declination_rad: 1e+06 rad is above 3.14159 rad"),
+          ("datum-latitude-100", "gps_datum", "lat_deg", 100.0, "gps_datum.lat_deg: 100 deg is above 90 deg"),
+      )),
+
 ]
 
 
