@@ -937,6 +937,24 @@ ERRORS: list[Case] = [
            "magnetic_reference.declination_rad: 1e+06 rad is above 3.14159 rad"),
           ("datum-latitude-100", "gps_datum", "lat_deg", 100.0, "gps_datum.lat_deg: 100 deg is above 90 deg"),
       )),
+    # -- a scenario's coordinates and its legs' speeds: a site, driven by a ground robot --
+    *(Case(f"scenario-{name}", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), says, scenario(change))
+      for name, change, says in (
+          ("steel-at-1e300-m", lambda t: t["world"]["disturbers"].append(
+              {"name": "far", "position": [1e300, 1.0, 0.0], "moment_A_m2": 10.0}),
+           "world.disturbers.2.position.0: 1e+300 m is above 1e+06 m: a scenario's world is a site within 1000 km"),
+          ("wall-to-1e300-m", lambda t: t["world"]["walls"].append([[1e300, 0.0], [-1e300, 0.0]]),
+           "world.walls.7.0.0: 1e+300 m is above 1e+06 m"),
+          ("region-corner-at-minus-1e300-m", lambda t: t["world"]["regions"][0]["polygon"].__setitem__(0, [-1e300, 0.0]),
+           "world.regions.0.polygon.0.0: -1e+300 m is below -1e+06 m"),
+          ("waypoint-at-1e300-m", lambda t: t["robot"]["waypoints"].__setitem__(1, [1e300, 1.2]),
+           "robot.waypoints: waypoint 1 at (1e+300, 1.2) m lies beyond 1e+06 m of the origin"),
+          ("leg-speed-1e300", lambda t: t["robot"]["waypoints"].__setitem__(1, [1.0, 1.2, 0.0, 1e300]),
+           "robot.waypoints: waypoint 1's leg speed (fourth value) 1e+300 m/s is above 50 m/s"),
+          ("leg-speed-1e-300", lambda t: t["robot"]["waypoints"].__setitem__(1, [1.0, 1.2, 0.0, 1e-300]),
+           "s.yaml: the mission would take about 3.89e+296 h, most of it the 1.4 m leg to robot.waypoints.1 at its "
+           "speed 1e-300 m/s (its fourth value)"),
+      )),
 
 ]
 

@@ -87,7 +87,8 @@ def _estimate(robot: RobotConfig, path: list) -> tuple[float, float]:
     w_max = np.radians(robot.max_turn_rate_deg_s)
     spot_limit = np.radians(robot.spot_turn_above_deg)
     alpha = np.radians(robot.max_turn_accel_deg_s2)
-    seconds = path_m / v + robot.start_pause_s + robot.end_pause_s + sum(pauses)
+    driving = float(np.sum(lengths / _leg_speeds(robot, path)))
+    seconds = driving + robot.start_pause_s + robot.end_pause_s + sum(pauses)
     yaw = np.radians(robot.start_yaw_deg)
     for i, (leg, length) in enumerate(zip(legs, lengths)):
         if length == 0.0:
@@ -106,6 +107,12 @@ def _estimate(robot: RobotConfig, path: list) -> tuple[float, float]:
     return float(seconds), path_m
 
 
+def _leg_speeds(robot: RobotConfig, path: list) -> np.ndarray:
+    """The speed limit (m/s) of each leg of ``path``: the fourth value of
+    the waypoint it ends at, else ``max_speed_m_s``."""
+    return np.array([w[3] if len(w) > 3 else robot.max_speed_m_s for w in path[1:]], dtype=float)
+
+
 def _hours(seconds: float) -> str:
     """``seconds`` in hours to a tenth, or to three digits once beyond a
     million hours (an acceleration of 1e-300 m/s^2 takes 1e300 s)."""
@@ -117,7 +124,15 @@ def _longest_part(robot: RobotConfig, duration: float, path_m: float) -> str:
     """What takes most of a mission's ``duration``: driving, a pause
     (naming its waypoint) or turning, in the words of the scenario's keys."""
     laps = robot.laps
-    parts = {f"{path_m:.1f} m of path at robot.max_speed_m_s {robot.max_speed_m_s:g}": path_m / robot.max_speed_m_s}
+    pts = np.array([w[:2] for w in robot.waypoints], dtype=float)
+    lengths = np.hypot(*np.diff(pts, axis=0).T)
+    own = [i for i, w in enumerate(robot.waypoints) if len(w) > 3 and i > 0]
+    rest_m = path_m - laps * sum(lengths[i - 1] for i in own)
+    parts = {f"{rest_m:.1f} m of path at robot.max_speed_m_s {robot.max_speed_m_s:g}": rest_m / robot.max_speed_m_s}
+    for i in own:
+        speed = robot.waypoints[i][3]
+        parts[f"the {lengths[i - 1]:.1f} m leg to robot.waypoints.{i} at its speed {speed:g} m/s (its fourth value)"
+              + (f" (x {laps} laps)" if laps > 1 else "")] = laps * lengths[i - 1] / speed
     for i, w in enumerate(robot.waypoints):
         if len(w) > 2 and w[2] > 0:
             times = laps if i > 0 else 1
