@@ -955,6 +955,15 @@ ERRORS: list[Case] = [
            "s.yaml: the mission would take about 3.89e+296 h, most of it the 1.4 m leg to robot.waypoints.1 at its "
            "speed 1e-300 m/s (its fourth value)"),
       )),
+    # -- command-line values that say nothing, or say one thing twice --
+    *(Case(f"inject-{name}", ("inject", "{run}", "--fault", fault, "--out", "{d}/o"), f"--fault {fault}: {says}")
+      for name, fault, says in (
+          ("param-given-twice", "gyro_bias@2:4,bias_deg_s=1,bias_deg_s=50", "'bias_deg_s' given twice"),
+          ("start-given-as-a-param", "gyro_bias@2:4,start_s=10", "'start_s' given twice (KIND@T0:T1 gives it)"),
+      )),
+    *(Case(f"calibrate-false-alarm-{value}", ("calibrate", "{run}", "--config", "{cfg}", "--false-alarm", value, "--out",
+                                              "{d}/c.yaml"), f"--false-alarm {says}: expected a share of steps from 1e-06")
+      for value, says in (("1e-300", "1e-300"), ("0.9", "0.9"))),
 
 ]
 

@@ -54,6 +54,8 @@ log = logging.getLogger(__name__)
 
 DEFAULT_FALSE_ALARM = 0.005
 """Share of a run's validation steps with a false alarm that calibration aims at."""
+MIN_FALSE_ALARM, MAX_FALSE_ALARM = 1e-6, 0.5
+"""The shares ``--false-alarm`` may ask for."""
 
 
 @dataclass
@@ -103,8 +105,10 @@ def calibrate(
     out the relations the data do not support (:mod:`slam.commands.calibrate.support`)."""
     if not runs:
         raise GslamError("gslam calibrate: no run given")
-    if not 0.0 < false_alarm < 1.0:
-        raise GslamError(f"--false-alarm {false_alarm:g}: expected a share of steps between 0 and 1, e.g. 0.005")
+    if not MIN_FALSE_ALARM <= false_alarm <= MAX_FALSE_ALARM:
+        raise GslamError(f"--false-alarm {false_alarm:g}: expected a share of steps from {MIN_FALSE_ALARM:g} (one "
+                         f"false alarm in a million steps; no run tells a smaller share from none) to "
+                         f"{MAX_FALSE_ALARM:g} (half the steps alarmed validates nothing), e.g. 0.005")
     out = check_new_file(out, [*runs, *config_files(config_path)], force, command="calibrate")
     runs = distinct_runs(runs)
     stretch = parse_clean(clean)
