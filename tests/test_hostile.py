@@ -964,7 +964,13 @@ ERRORS: list[Case] = [
     *(Case(f"calibrate-false-alarm-{value}", ("calibrate", "{run}", "--config", "{cfg}", "--false-alarm", value, "--out",
                                               "{d}/c.yaml"), f"--false-alarm {says}: expected a share of steps from 1e-06")
       for value, says in (("1e-300", "1e-300"), ("0.9", "0.9"))),
-
+    # -- ablation specs that sweep nothing --
+    Case("ablate-grid-axis-empty", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "spec.yaml: sweep.grid.gating.inflation: List should have at least 1 item", spec(sweep={"grid": {"gating.inflation": []}})),
+    Case("ablate-input-grid-axis-empty", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "sweep.grid.1.gating.inflation: List",
+         spec(sweep={"grid": [{"gating.inflation": [2.0]}, {"gating.inflation": []}]})),
+    Case("ablate-name-empty", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "spec.yaml: name: String should have at least 1",
+         spec(name="")),
 ]
 
 
