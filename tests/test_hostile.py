@@ -959,7 +959,7 @@ ERRORS: list[Case] = [
     *(Case(f"inject-{name}", ("inject", "{run}", "--fault", fault, "--out", "{d}/o"), f"--fault {fault}: {says}")
       for name, fault, says in (
           ("param-given-twice", "gyro_bias@2:4,bias_deg_s=1,bias_deg_s=50", "'bias_deg_s' given twice"),
-          ("start-given-as-a-param", "gyro_bias@2:4,start_s=10", "'start_s' given twice (KIND@T0:T1 gives it)"),
+          ("start-given-as-a-param", "gyro_bias@2:4,start_s=3", "'start_s' given twice (KIND@T0:T1 gives it)"),
       )),
     *(Case(f"calibrate-false-alarm-{value}", ("calibrate", "{run}", "--config", "{cfg}", "--false-alarm", value, "--out",
                                               "{d}/c.yaml"), f"--false-alarm {says}: expected a share of steps from 1e-06")
@@ -971,6 +971,15 @@ ERRORS: list[Case] = [
          spec(sweep={"grid": [{"gating.inflation": [2.0]}, {"gating.inflation": []}]})),
     Case("ablate-name-empty", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "spec.yaml: name: String should have at least 1",
          spec(name="")),
+    # -- BROAD fields MATLAB stored as something other than one real array of the trial's length --
+    *(Case(f"broad-{name}", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"), f"t.mat: {says}", broad_mat(**fields))
+      for name, fields, says in (
+          ("gyro-complex", {"imu_gyr": np.zeros((50, 3)) + 1j}, "imu_gyr: expected real numbers, got complex numbers"),
+          ("acceleration-text", {"imu_acc": "abc"}, "imu_acc: expected real numbers, got text"),
+          ("sampling-rate-two-values", {"sampling_rate": np.array([[100.0, 200.0]])},
+           "sampling_rate: expected one IMU rate in Hz (BROAD's is 285.7), got 2 values"),
+          ("positions-of-two-columns", {"opt_pos": np.zeros((50, 2))}, "opt_pos: expected shape (50, 3), got (50, 2)"),
+      )),
 ]
 
 
