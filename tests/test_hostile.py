@@ -980,6 +980,15 @@ ERRORS: list[Case] = [
            "sampling_rate: expected one IMU rate in Hz (BROAD's is 285.7), got 2 values"),
           ("positions-of-two-columns", {"opt_pos": np.zeros((50, 2))}, "opt_pos: expected shape (50, 3), got (50, 2)"),
       )),
+    # -- text in a wide encoding, named as such (UTF-8 is expected) --
+    Case("config-utf32", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "c.yaml: UTF-32 text; expected a YAML config",
+         raw("c.yaml", "keyframes: {period_s: 0.5}\n".encode("utf-32"))),
+    Case("config-utf16-without-a-bom", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "c.yaml: UTF-16 text; expected",
+         raw("c.yaml", "keyframes: {period_s: 0.5}\n".encode("utf-16-le"))),
+    Case("carmen-utf16", CARMEN, "c.log: cannot read: UTF-16 text; expected a CARMEN text log in ASCII or UTF-8",
+         carmen(encoding=lambda s: s.encode("utf-16"))),
+    Case("librsf-utf16-without-a-bom", LIBRSF, "X_Input.txt: cannot read: UTF-16 text; expected a libRSF text file",
+         raw("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} 0.5 0 0 1 1 1\n" for k in range(50)).encode("utf-16-be"))),
 ]
 
 
