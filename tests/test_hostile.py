@@ -980,6 +980,13 @@ ERRORS: list[Case] = [
            "sampling_rate: expected one IMU rate in Hz (BROAD's is 285.7), got 2 values"),
           ("positions-of-two-columns", {"opt_pos": np.zeros((50, 2))}, "opt_pos: expected shape (50, 3), got (50, 2)"),
       )),
+    *(Case(f"broad-{name}", ("map", "{d}/t.mat", "--config", "{cfg}", "--set", "keyframes.period_s=0.05", "--out", "{d}/o"),
+           f"t.mat: opt_quat/opt_pos: no sample has a tracked pose (finite opt_quat and opt_pos) with the pitch within 60 deg",
+           broad_mat(**fields))
+      for name, fields in (
+          ("positions-all-nan", {"opt_pos": np.full((50, 3), np.nan)}),
+          ("truth-pitched-beyond-60-deg", {"opt_quat": np.tile([np.cos(0.7), 0.0, np.sin(0.7), 0.0], (50, 1))}),
+      )),
     # -- text in a wide encoding, named as such (UTF-8 is expected) --
     Case("config-utf32", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "c.yaml: UTF-32 text; expected a YAML config",
          raw("c.yaml", "keyframes: {period_s: 0.5}\n".encode("utf-32"))),

@@ -346,6 +346,9 @@ def read_broad(
     good = tracked & (np.abs(true_pitch) <= max_pitch)
     pos = d["opt_pos"] if "opt_pos" in d else np.zeros((n, 3))
     good &= np.isfinite(pos).all(axis=1)
+    if not good.any():  # a trial must have its truth: the headings are scored against it
+        raise GslamError(f"{path}: opt_quat/opt_pos: no sample has a tracked pose (finite opt_quat and opt_pos) with "
+                         f"the pitch within {max_pitch_deg:g} deg; expected a BROAD trial with its optical truth")
     groundtruth = Trajectory(t=t[good], x=pos[good, 0], y=pos[good, 1], yaw=true_yaw[good])
 
     # 5: the undisturbed field at the start.
