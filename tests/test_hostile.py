@@ -1271,20 +1271,23 @@ def test_a_huge_sparse_file_is_refused_on_its_first_bytes(tmp_path, capsys, name
 
 
 def test_a_run_given_twice_is_learnt_from_once_with_one_warning(world: World, tmp_path: Path, capsys, caplog):
-    """gslam calibrate given one recording four ways (its path, the path with
-    a slash, a link to it, its bag) learns from it once, says so in one
-    warning line, and writes what it writes for the run given once: counted
-    four times, each step's false alarm would weigh a quarter."""
+    """gslam calibrate given one recording five ways (its path, the path with
+    a slash, a link to it, its bag, a copy of the run folder) learns from it
+    once, says so in one warning line, and writes what it writes for the run
+    given once: counted five times, each step's false alarm would weigh a
+    fifth."""
     (tmp_path / "link").symlink_to(world.run)
+    shutil.copytree(world.run, tmp_path / "copy")
     once, four = tmp_path / "once.yaml", tmp_path / "four.yaml"
     cal = ("calibrate", "--config", str(TELEMAX_CONFIG), "--clean", "0:10")
     assert main(["-q", *cal[:1], str(world.run), *cal[1:], "--out", str(once)]) == 0
     caplog.clear()
     with caplog.at_level(logging.WARNING):
         code = main(["-q", *cal[:1], str(world.run), f"{world.run}/", str(tmp_path / "link"), str(world.run / "bag"),
-                     *cal[1:], "--out", str(four)])
+                     str(tmp_path / "copy"), *cal[1:], "--out", str(four)])
     assert code == 0 and "Traceback" not in capsys.readouterr().err
     said = [r.getMessage() for r in caplog.records if "repeat" in r.getMessage()]
-    assert len(said) == 1 and said[0].startswith("3 of the 4 runs given repeat a recording; each recording is learnt "
+    assert len(said) == 1 and said[0].startswith("4 of the 5 runs given repeat a recording; each recording is learnt "
                                                  "from once: "), said
+    assert f"{tmp_path / 'copy'} (a copy of the recording of {world.run})" in said[0]
     assert four.read_text() == once.read_text()

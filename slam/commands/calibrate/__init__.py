@@ -38,7 +38,8 @@ from slam.commands.calibrate.heading import HeadingOffset, learn_heading_offset
 from slam.commands.calibrate.lags import LagEstimate, learn_lags
 from slam.commands.calibrate.noise import CompassNoise, learn_compass_noise
 from slam.commands.calibrate.propose import Proposal, propose
-from slam.commands.calibrate.runs import CalibrationRun, distinct_runs, load_run, parse_clean
+from slam.commands.calibrate.distinct import distinct_runs
+from slam.commands.calibrate.runs import CalibrationRun, load_run, parse_clean
 from slam.commands.calibrate.select import (CheckChoice, Choice, FieldGyroChoice, calibrate_field_gyro, calibrate_magnetometer,
                                    calibrate_relation)
 from slam.commands.calibrate.support import Support, judge, uses_fitted_gain

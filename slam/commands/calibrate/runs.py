@@ -11,7 +11,6 @@ of faulty steps does not move.
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,7 +20,7 @@ from slam.config import PipelineConfig
 from slam.errors import GslamError
 from slam.pipeline.config_fit import check_fit
 from slam.pipeline.core import Mapping
-from slam.readers.read import is_run_folder, read_recording, run_recording
+from slam.readers.read import read_recording
 from validation.config import ValidationConfig
 from validation.observers import unary_checks
 from validation.observers.checks import UnaryCheck
@@ -47,39 +46,6 @@ def parse_clean(text: str | None) -> Clean | None:
         raise GslamError(f"--clean {text}: expected START:END in seconds from the run's start, END > START >= 0 "
                          "(END may be 'end'), e.g. 0:120")
     return a, b
-
-
-def _recording_identity(path: Path) -> tuple:
-    """What names one recording however it is spelled: the file (device,
-    inode: a link or a hard link is the same file) or the folder a path
-    leads to, a run folder's recording for the run folder. A path that
-    cannot be looked at is its own identity (its reader says why)."""
-    try:
-        if is_run_folder(path):
-            path = run_recording(path)
-        st = path.stat()
-    except OSError:
-        return ("path", str(path))
-    return ("file", st.st_dev, st.st_ino)
-
-
-def distinct_runs(runs: Sequence[str | Path]) -> list[str | Path]:
-    """``runs`` with every recording kept once, in the order given: one run
-    given twice (the same path, another spelling of it, a link to it, or a
-    run folder and its bag) would count its steps twice and halve each
-    false alarm's weight in silence. One warning line names the repeats."""
-    first: dict[tuple, str | Path] = {}
-    repeats: list[str] = []
-    for run in runs:
-        key = _recording_identity(Path(run))
-        if key in first:
-            repeats.append(f"{run} (the recording of {first[key]})")
-        else:
-            first[key] = run
-    if repeats:
-        log.warning("%d of the %d runs given repeat a recording; each recording is learnt from once: %s",
-                    len(repeats), len(runs), "; ".join(repeats))
-    return list(first.values())
 
 
 @dataclass
