@@ -996,6 +996,18 @@ ERRORS: list[Case] = [
          carmen(encoding=lambda s: s.encode("utf-16"))),
     Case("librsf-utf16-without-a-bom", LIBRSF, "X_Input.txt: cannot read: UTF-16 text; expected a libRSF text file",
          raw("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} 0.5 0 0 1 1 1\n" for k in range(50)).encode("utf-16-be"))),
+    # -- an output path that goes up from a name that is no folder, or a file named like a folder --
+    *(Case(f"{command}-out-up-from-a-missing-folder", (*argv, "{d}/typo/.."),
+           "typo/..: --out goes up from", text("mine.txt", "mine\n"))
+      for command, argv in (
+          ("map", (*MAP, *QUICK, "--out")),
+          ("simulate", ("simulate", "{scen}", "--out")),
+          ("inject", ("inject", "{run}", "--fault", "gyro_bias@2:4", "--out")),
+          ("calibrate", ("calibrate", "{run}", "--config", "{cfg}", "--out")),
+      )),
+    Case("calibrate-out-ends-in-a-slash", ("calibrate", "{run}", "--config", "{cfg}", "--out", "{d}/c.yaml/"), "c.yaml/: --out ends in '/', which names a folder"),
+    Case("inspect-config-out-ends-in-a-slash", ("inspect", "{run}", "--config-out", "{d}/c.yaml/"),
+         "c.yaml/: --config-out ends in '/', which names a folder"),
 ]
 
 
