@@ -1008,6 +1008,9 @@ ERRORS: list[Case] = [
     Case("calibrate-out-ends-in-a-slash", ("calibrate", "{run}", "--config", "{cfg}", "--out", "{d}/c.yaml/"), "c.yaml/: --out ends in '/', which names a folder"),
     Case("inspect-config-out-ends-in-a-slash", ("inspect", "{run}", "--config-out", "{d}/c.yaml/"),
          "c.yaml/: --config-out ends in '/', which names a folder"),
+    Case("scenario-laser-field-of-view-1e-9-deg", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "sensors.laser: fov_deg 1e-09 over beams 541 puts the beams 1.85e-12 deg apart; no 2D laser resolves",
+         scenario(lambda t: t.setdefault("sensors", {}).setdefault("laser", {}).update(fov_deg=1e-9))),
 ]
 
 

@@ -11,6 +11,7 @@ frame (x east, y north); angles in the YAML are degrees (keys say ``_deg``).
 
 from __future__ import annotations
 
+import math
 from enum import Enum
 from pathlib import Path
 from typing import Annotated
@@ -21,6 +22,7 @@ from pydantic import Field, ValidationError, field_validator, model_validator
 from slam.config import describe_validation_error
 from slam.results.records import PLAIN_NAME, PLAIN_NAME_RULE
 from slam.config.trees import check_finite
+from slam.readers.data_checks import MIN_BEAM_STEP_RAD
 from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
 from validation.base import bounds
@@ -177,6 +179,12 @@ class LaserConfig(Strict):
         if self.min_range_m >= self.max_range_m:
             raise ValueError(f"min_range_m {self.min_range_m:g} is not below max_range_m {self.max_range_m:g}: "
                              "the laser would return nothing")
+        # The same bound as on a recorded laser (slam.readers.data_checks): a
+        # simulated run must read back as a recording does.
+        step = self.fov_deg / (self.beams - 1)
+        if step < math.degrees(MIN_BEAM_STEP_RAD):
+            raise ValueError(f"fov_deg {self.fov_deg:g} over beams {self.beams} puts the beams {step:.3g} deg apart; "
+                             "no 2D laser resolves a thousandth of a degree")
         return self
 
 
