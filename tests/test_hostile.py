@@ -250,6 +250,15 @@ def scenario_waypoints(points) -> Callable[[Path, World], None]:
     return scenario(set_in("robot", "waypoints", points))
 
 
+def unreadable(name: str) -> Callable[[Path, World], None]:
+    """``{d}/name`` a link to /proc/self/mem, which no process reads at offset 0 (EIO), root included."""
+
+    def make(d: Path, world: World) -> None:
+        (d / name).symlink_to("/proc/self/mem")
+
+    return make
+
+
 def _truth_with(section: str, key: str, value: float) -> Callable[[Path], None]:
     """A run folder change: truth.json's ``section.key`` set to ``value``."""
 
@@ -1011,6 +1020,86 @@ ERRORS: list[Case] = [
     Case("scenario-laser-field-of-view-1e-9-deg", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
          "sensors.laser: fov_deg 1e-09 over beams 541 puts the beams 1.85e-12 deg apart; no 2D laser resolves",
          scenario(lambda t: t.setdefault("sensors", {}).setdefault("laser", {}).update(fov_deg=1e-9))),
+    # -- the fourth attack's kinds each reader and command already answers in one line, kept so that none
+    # -- turns into a traceback later: unreadable inputs (/proc/self/mem fails to read even for root, where
+    # -- chmod 000 hides nothing), NaN and infinity in fields no case had, folders where files go, --set forms
+    *(Case(f"{name}-unreadable", argv, f"{file}: cannot read{says}", unreadable(file))
+      for name, argv, file, says in (
+          ("config", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "c.yaml", " config (Input/output error)"),
+          ("scenario", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "s.yaml", " scenario (Input/output error)"),
+          ("spec", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "spec.yaml", " config (Input/output error)"),
+          ("variants", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"), "v.yaml",
+           " config (Input/output error)"),
+          ("carmen-log", CARMEN, "c.log", " (Input/output error)"),
+          ("librsf-log", LIBRSF, "X_Input.txt", " (Input/output error)"),
+          ("ros1-bag", ("map", "{d}/r.bag", "--config", "{cfg}", "--out", "{d}/o"), "r.bag", " (Input/output error)"),
+          ("broad-trial", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"), "t.mat",
+           " as a MATLAB v5 file ([Errno 5] Input/output error)"),
+          ("inspect-mcap", ("inspect", "{d}/r.mcap"), "r.mcap", " (Input/output error)"),
+          ("inject-carmen-log", ("inject", "{d}/c.log", "--fault", "slip@1:2", "--out", "{d}/o"), "c.log",
+           " (Input/output error)"),
+      )),
+    Case("truth-json-unreadable", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"),
+         "truth.json: cannot read truth.json sidecar (Input/output error)",
+         copy_run(lambda r: (r / "truth.json").unlink() or (r / "truth.json").symlink_to("/proc/self/mem"))),
+    *(Case(f"carmen-{name}", CARMEN, says, carmen(encoding=lambda s, old=old, new=new: s.replace(old, new, 1).encode()))
+      for name, old, new, says in (
+          ("stamp-inf", " 1000.000000 host 1000.000000", " inf host inf", "c.log:1: expected finite numbers in FLASER"),
+          ("odometry-theta-inf", "ODOM 0.000 0 0", "ODOM 0.000 0 inf", "c.log:2: expected finite numbers in ODOM"),
+      )),
+    Case("librsf-variance-inf", LIBRSF, "X_Input.txt:6: expected odom2 t vx vy wz var_vx var_vy var_wz",
+         text("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} 0.5 0 0.01 {'inf' if k == 5 else '0.01'} 0.01 0.01\n"
+                                     for k in range(50)))),
+    *(Case(f"bag-{name}", argv, says, bag(each(topic, change)))
+      for name, argv, topic, change, says in (
+          ("odometry-position-nan", BAG, "/odom", lambda t, m: setattr(m.pose.pose.position, "x", math.nan),
+           "odometry topic '/odom': non-finite pose.position at message 0"),
+          ("gyro-rate-nan", BAG, "/imu/data", lambda t, m: setattr(m.angular_velocity, "z", math.nan),
+           "gyro topic '/imu/data': non-finite angular_velocity.z at message 0"),
+          ("magnetic-field-nan", MAG_BAG, "/imu/mag", lambda t, m: setattr(m.magnetic_field, "x", math.nan),
+           "compass topic '/imu/mag': non-finite magnetic_field at message 0"),
+      )),
+    Case("truth-fault-ends-at-1e400", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"),
+         "truth.json: faults.GPS.0.1: Input should be a finite number", copy_run(lambda r: (r / "truth.json").write_text(
+             json.dumps({**json.loads((r / "truth.json").read_text()), "faults": {"GPS": [[1, "end"]]}}).replace('"end"', "1e400")))),
+    *(Case(f"{name}-a-folder", argv, says, text(f"{file}/keep", ""))
+      for name, argv, file, says in (
+          ("librsf-log", LIBRSF, "X_Input.txt", "X_Input.txt: expected exactly one *_Input.txt in the folder, found none"),
+          ("carmen-log", CARMEN, "c.log", "c.log: expected a CARMEN log file, got a directory"),
+      )),
+    Case("model-a-folder", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "m.yaml: cannot read YAML file (a folder; expected a file)",
+         both(text("m.yaml/keep", ""), config(lambda t: t["validation"].update(model="m.yaml")))),
+    Case("truth-json-a-folder", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"),
+         "truth.json: cannot read truth.json sidecar (a folder; expected a file)",
+         copy_run(lambda r: (r / "truth.json").unlink() or (r / "truth.json").mkdir())),
+    *(Case(f"set-{name}", (*MAP, "--out", "{d}/o", "--set", expr), f"--set {shown}: {says}")
+      for name, expr, shown, says in (
+          ("double-equals", "backend.optimizer==isam2", "backend.optimizer==isam2", "backend.optimizer: Input should be"),
+          ("a-section-to-a-number", "backend=3", "backend=3", "backend: Input should be a valid dictionary"),
+          ("a-section-to-null", "backend.factors=null", "backend.factors=null", "backend.factors: Input should be"),
+          ("a-python-tag", "backend.optimizer=!!python/name:os.system", "backend.optimizer=!!python/name:os.system",
+           "could not determine a constructor"),
+          ("a-newline-in-the-key", "backend\n.optimizer=isam2", "backend .optimizer=isam2", "unknown config key 'backend '"),
+      )),
+    *(Case(f"carmen-gz-{name}", ("map", "{d}/c.log.gz", "--config", str(CONFIGS / "datasets" / "carmen.yaml"), "--out", "{d}/o"),
+           f"c.log.gz: {says}", data("c.log.gz", gzip.compress(content)))
+      for name, content, says in (
+          ("of-nothing", b"", "no FLASER or ROBOTLASER1 scans"),
+          ("of-binary", bytes(range(256)) * 20, "cannot read: not a CARMEN text log (binary content)"),
+      )),
+    *(Case(f"marker-{name}", (*MAP, *QUICK, "--out", "{d}/m"), says, make)
+      for name, make, says in (
+          ("input-nan", text("m/.gslam-result.json", '{"command": "map", "files": [], "input": NaN}'), "its input nan is not a path"),
+          ("binary", data("m/.gslam-result.json", bytes(range(256))), "is not one gslam wrote"),
+          ("a-named-pipe", fifo("m/.gslam-result.json"), "is not one gslam wrote"),
+      )),
+    Case("map-input-path-with-a-newline-missing", ("map", "{d}/x\ny.log", "--config", "{cfg}", "--out", "{d}/o"),
+         "x y.log: no such file"),
+    Case("inject-fault-times-in-hex", ("inject", "{run}", "--fault", "gyro_bias@0x2:0x4", "--out", "{d}/o"),
+         "--fault gyro_bias@0x2:0x4: start_s: Input should be a valid number"),
+    Case("simulate-seed-1.5", ("simulate", "{scen}", "--seed", "1.5", "--out", "{d}/o"),
+         "argument --seed: expected a whole number, got '1.5'", code=2),
 ]
 
 
