@@ -1100,6 +1100,16 @@ ERRORS: list[Case] = [
          "--fault gyro_bias@0x2:0x4: start_s: Input should be a valid number"),
     Case("simulate-seed-1.5", ("simulate", "{scen}", "--seed", "1.5", "--out", "{d}/o"),
          "argument --seed: expected a whole number, got '1.5'", code=2),
+    # -- a key given twice in a JSON file read as input: json keeps the last in silence, as YAML here does not --
+    Case("truth-json-fault-component-twice", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"),
+         "truth.json: key 'GPS' given twice in one JSON object", copy_run(lambda r: (r / "truth.json").write_text(
+             json.dumps({**json.loads((r / "truth.json").read_text()), "faults": {"GPS": "first"}})
+             .replace('"GPS": "first"', '"GPS": [[1, 2]], "GPS": []')))),
+    Case("marker-files-twice", (*MAP, *QUICK, "--out", "{d}/m"), "its .gslam-result.json is not one gslam wrote",
+         text("m/.gslam-result.json", '{"command": "map", "files": ["../x"], "files": ["metrics.json"]}')),
+    Case("ablate-resumed-metrics-key-twice", ("ablate", "{spec}", "--out", "{d}/o"),
+         "metrics.json: expected the JSON object gslam writes, found invalid JSON (key 'ate_rmse_m' given twice",
+         finished_sweep('{"ate_rmse_m": 0.1, "ate_rmse_m": 1e9}')),
 ]
 
 

@@ -33,7 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from slam.config import GpsInputConfig, InputConfig
 from slam.readers.data_checks import check_recording, check_time_offsets
 from validation.base.yamlio import read_text
-from validation.base.yamlio import check_regular_file
+from validation.base.yamlio import check_regular_file, unique_keys
 from slam.errors import GslamError
 from validation.base import bounds
 from validation.base.bounds import within
@@ -174,7 +174,7 @@ def load_sidecar(path: str | Path) -> Sidecar:
     path = Path(path)
     text = read_text(path, "truth.json sidecar", "JSON")
     try:
-        data = json.loads(text, parse_constant=_no_constant)
+        data = json.loads(text, parse_constant=_no_constant, object_pairs_hook=unique_keys)
     except json.JSONDecodeError as e:
         raise GslamError(f"{path}: line {e.lineno}: invalid JSON ({e.msg})") from None
     except ValueError as e:

@@ -62,6 +62,18 @@ def check_regular_file(path: str | Path, what: str = "file") -> int:
     return st.st_size
 
 
+def unique_keys(pairs: list[tuple[str, object]]) -> dict:
+    """A JSON object from its ``pairs``, as ``json.loads``'s
+    ``object_pairs_hook``: a key given twice is a ValueError naming it
+    (``json`` keeps the last in silence; YAML here refuses it too)."""
+    out: dict = {}
+    for key, value in pairs:
+        if key in out:
+            raise ValueError(f"key {key!r} given twice in one JSON object")
+        out[key] = value
+    return out
+
+
 def wide_encoding(data: bytes) -> str | None:
     """``UTF-16`` or ``UTF-32`` if ``data`` is text in one of them, by its
     byte-order mark or, without one, by the zero bytes of ASCII characters
