@@ -250,6 +250,15 @@ def scenario_waypoints(points) -> Callable[[Path, World], None]:
     return scenario(set_in("robot", "waypoints", points))
 
 
+def _rewritten(name: str, change: Callable[[bytes], bytes]) -> Callable[[Path, World], None]:
+    """``{d}/name``'s bytes replaced by ``change(bytes)``."""
+
+    def make(d: Path, world: World) -> None:
+        (d / name).write_bytes(change((d / name).read_bytes()))
+
+    return make
+
+
 def unreadable(name: str) -> Callable[[Path, World], None]:
     """``{d}/name`` a link to /proc/self/mem, which no process reads at offset 0 (EIO), root included."""
 
@@ -1178,6 +1187,21 @@ WARNINGS: list[Warned] = [
            carmen(head="PARAM robot_front_laser_max 1e300")),
     Warned("librsf-without-ground-truth-anchored-once", LIBRSF, "no ground truth to anchor the first pose",
            librsf_with("loop 9.0 1.0 1")),
+    # -- Windows line ends and byte-order marks in every text input, and a path with a newline: read as they are --
+    Warned("carmen-crlf", CARMEN, "", carmen(encoding=lambda s: s.replace("\n", "\r\n").encode())),
+    Warned("librsf-crlf-with-a-bom", LIBRSF, "", both(librsf_with("loop 9.0 1.0 1"), _rewritten(
+        "X_Input.txt", lambda b: b"\xef\xbb\xbf" + b.replace(b"\n", b"\r\n")))),
+    Warned("config-crlf", (*MAP[:2], "--config", "{d}/c.yaml", *QUICK, "--out", "{d}/o"), "",
+           both(config(lambda t: None), _rewritten("c.yaml", lambda b: b.replace(b"\n", b"\r\n")))),
+    Warned("scenario-crlf-with-a-bom", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "", both(
+        scenario(lambda t: None), _rewritten("s.yaml", lambda b: b"\xef\xbb\xbf" + b.replace(b"\n", b"\r\n")))),
+    Warned("truth-json-with-a-bom", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"), "",
+           copy_run(lambda r: (r / "truth.json").write_bytes(b"\xef\xbb\xbf" + (r / "truth.json").read_bytes()))),
+    Warned("bag-metadata-crlf", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"), "",
+           copy_run(lambda r: (r / "bag" / "metadata.yaml").write_bytes(
+               (r / "bag" / "metadata.yaml").read_bytes().replace(b"\n", b"\r\n")))),
+    Warned("carmen-log-named-with-a-newline", ("map", "{d}/a\nb.log", "--config", str(CONFIGS / "datasets" / "carmen.yaml"),
+                                              *QUICK, "--out", "{d}/o"), "", carmen(name="a\nb.log")),
 ]
 
 
