@@ -1429,3 +1429,25 @@ def test_a_run_given_twice_is_learnt_from_once_with_one_warning(world: World, tm
                                                  "from once: "), said
     assert f"{tmp_path / 'copy'} (a copy of the recording of {world.run})" in said[0]
     assert four.read_text() == once.read_text()
+
+
+@pytest.mark.parametrize("command", ["map", "compare", "ablate", "simulate"])
+def test_a_removed_working_folder_is_one_line_before_any_work(command: str, world: World, tmp_path: Path):
+    """A shell whose folder was removed under it: gslam map, compare and
+    ablate said 'No such file or directory' naming nothing (the config's
+    loader asks for the working folder), and past that loading Open3D ends
+    the process in oneMKL's 'FATAL ERROR: Cannot load libOpen3D' (exit 2,
+    the temporary folder left); simulate ran. Every command now says so
+    first, before any work."""
+    argv = {"map": ["map", world.run, "--config", TELEMAX_CONFIG, *QUICK],
+            "compare": ["compare", world.run, "--config", TELEMAX_CONFIG, "--only", "ungated", *QUICK],
+            "ablate": ["ablate", world.spec], "simulate": ["simulate", world.scenario]}[command]
+    gone, out = tmp_path / "gone", tmp_path / "out"
+    gone.mkdir()
+    out.mkdir()
+    done = subprocess.run([sys.executable, "-m", "slam.cli", "-q", *map(str, argv), "--out", str(out / "o")], cwd=gone,
+                          preexec_fn=lambda: os.rmdir(gone), capture_output=True, text=True, timeout=TIME_LIMIT_S,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert (done.returncode, done.stderr) == (1, "gslam: error: the current folder no longer exists (removed while a "
+                                                 "shell was in it); cd to a folder that does and run again\n")
+    assert list(out.iterdir()) == []
