@@ -455,6 +455,19 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+_NO_WORKING_FOLDER = ("the current folder no longer exists (removed while a shell was in it); cd to a folder that "
+                      "does and run again")
+
+
+def _working_folder_exists() -> bool:
+    """False when the current folder was removed: os.getcwd's error names no file."""
+    try:
+        os.getcwd()
+    except FileNotFoundError:
+        return False
+    return True
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     args.command_line = shlex.join(["gslam", *(sys.argv[1:] if argv is None else argv)])  # as results name it
@@ -463,6 +476,9 @@ def main(argv: list[str] | None = None) -> int:
         format="%(levelname)s %(name)s: %(message)s",
     )
     warnings.showwarning = _show_warning
+    if not _working_folder_exists():  # libraries fail on it, some by ending the process (oneMKL, loading Open3D)
+        print(f"gslam: error: {_NO_WORKING_FOLDER}", file=sys.stderr)
+        return 1
     for stream in (sys.stdout, sys.stderr):  # a Latin-1 terminal cannot encode a path named in Greek
         if hasattr(stream, "reconfigure"):
             stream.reconfigure(errors="backslashreplace")
@@ -484,6 +500,9 @@ def main(argv: list[str] | None = None) -> int:
         if e.filename is None and getattr(sys.stdout, "failed", False):  # gslam ... > /dev/full
             sys.stdout = open(os.devnull, "w")  # the interpreter's last flush must not fail either
             print(f"gslam: error: standard output: {e.strerror or e}", file=sys.stderr)
+            return 1
+        if e.filename is None and not _working_folder_exists():  # removed while gslam ran
+            print(f"gslam: error: {_NO_WORKING_FOLDER}", file=sys.stderr)
             return 1
         where = f"{e.filename}: " if e.filename else ""
         print(f"gslam: error: {where}{e.strerror or e}", file=sys.stderr)

@@ -250,6 +250,40 @@ def scenario_waypoints(points) -> Callable[[Path, World], None]:
     return scenario(set_in("robot", "waypoints", points))
 
 
+def _rewritten(name: str, change: Callable[[bytes], bytes]) -> Callable[[Path, World], None]:
+    """``{d}/name``'s bytes replaced by ``change(bytes)``."""
+
+    def make(d: Path, world: World) -> None:
+        (d / name).write_bytes(change((d / name).read_bytes()))
+
+    return make
+
+
+def unreadable(name: str) -> Callable[[Path, World], None]:
+    """``{d}/name`` a link to /proc/self/mem, which no process reads at offset 0 (EIO), root included."""
+
+    def make(d: Path, world: World) -> None:
+        (d / name).symlink_to("/proc/self/mem")
+
+    return make
+
+
+def _truth_with(section: str, key: str, value: float) -> Callable[[Path], None]:
+    """A run folder change: truth.json's ``section.key`` set to ``value``."""
+
+    def change(run: Path) -> None:
+        truth = json.loads((run / "truth.json").read_text())
+        truth[section][key] = value
+        (run / "truth.json").write_text(json.dumps(truth))
+
+    return change
+
+
+def _an_hour_long(tree: dict) -> None:
+    """The short scenario made about 50 minutes long: a pause of 3000 s at its second waypoint."""
+    tree["robot"]["waypoints"][1] = [*tree["robot"]["waypoints"][1][:2], 3000.0]
+
+
 def link_loop(name: str) -> Callable[[Path, World], None]:
     """A link ``{d}/name`` to itself."""
 
@@ -893,6 +927,198 @@ ERRORS: list[Case] = [
                                                                                         "0 0 0 0 0 0 1.0 host 1.0\n")),
     Case("carmen-negative-beam-count", CARMEN, "c.log:1: expected a positive beam count",
          text("c.log", "FLASER -3 1 2 3 0 0 0 0 0 0 1.0 host 1.0\n")),
+    # -- a world whose size makes the simulation compute for hours (slam/sim/budget.py's check_work) --
+    *(Case(f"scenario-{name}", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), f"simulating would compute for about {says}",
+           scenario(lambda t, change=change: _an_hour_long(t) or change(t)))
+      for name, change, says in (
+          ("20000-walls-in-the-lasers-range", lambda t: t["world"]["walls"].append(
+              [[float(x), 5.0 + 0.1 * (k % 2)] for k, x in enumerate(np.linspace(0.0, 8.0, 20_001))]),
+           "1.9 h, most of it ray casting 30,290 scans (sensors.laser.rate_hz 10 over about 3029 s) of 541 beams"),
+          ("15000-steel-structures-at-1-khz", lambda t: t["world"].update(disturbers=[
+              {"name": f"d{k}", "position": [100.0, 100.0, 0.5], "moment_A_m2": 10.0} for k in range(15_000)])
+           or t["robot"].update(truth_rate_hz=1000.0) or t["sensors"]["magnetometer"].update(rate_hz=1000.0),
+           "1.6 h, most of it the field of 15,000 steel structures (world.disturbers)"),
+          ("25000-doors-in-25000-walls", lambda t: t["world"].update(
+              doors=[{"center": [1000.0 + k, 1000.0], "width_m": 0.5} for k in range(25_000)])
+           or t["world"]["walls"].append([[float(x), 500.0] for x in np.linspace(0.0, 100.0, 25_001)]),
+           "1.6 h, most of it cutting 25,000 doors (world.doors) into 25,0"),
+      )),
+    # -- a run folder's truth.json read as input: the physics of its reference and datum --
+    *(Case(f"truth-{name}", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"), f"truth.json: {says}",
+           copy_run(_truth_with(section, key, value)))
+      for name, section, key, value, says in (
+          ("field-negative", "magnetic_reference", "strength_T", -48e-6,
+           "magnetic_reference.strength_T: -4.8e-05 T is below 1e-06 T"),
+          ("field-of-1-tesla", "magnetic_reference", "strength_T", 1.0, "magnetic_reference.strength_T: 1 T is above 0.001 T"),
+          ("dip-10-rad", "magnetic_reference", "dip_rad", 10.0, "magnetic_reference.dip_rad: 10 rad is above 1.5708 rad"),
+          ("declination-1e6-rad", "magnetic_reference", "declination_rad", 1e6,
+           "magnetic_reference.declination_rad: 1e+06 rad is above 3.14159 rad"),
+          ("datum-latitude-100", "gps_datum", "lat_deg", 100.0, "gps_datum.lat_deg: 100 deg is above 90 deg"),
+      )),
+    # -- a scenario's coordinates and its legs' speeds: a site, driven by a ground robot --
+    *(Case(f"scenario-{name}", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), says, scenario(change))
+      for name, change, says in (
+          ("steel-at-1e300-m", lambda t: t["world"]["disturbers"].append(
+              {"name": "far", "position": [1e300, 1.0, 0.0], "moment_A_m2": 10.0}),
+           "world.disturbers.2.position.0: 1e+300 m is above 1e+06 m: a scenario's world is a site within 1000 km"),
+          ("wall-to-1e300-m", lambda t: t["world"]["walls"].append([[1e300, 0.0], [-1e300, 0.0]]),
+           "world.walls.7.0.0: 1e+300 m is above 1e+06 m"),
+          ("region-corner-at-minus-1e300-m", lambda t: t["world"]["regions"][0]["polygon"].__setitem__(0, [-1e300, 0.0]),
+           "world.regions.0.polygon.0.0: -1e+300 m is below -1e+06 m"),
+          ("waypoint-at-1e300-m", lambda t: t["robot"]["waypoints"].__setitem__(1, [1e300, 1.2]),
+           "robot.waypoints: waypoint 1 at (1e+300, 1.2) m lies beyond 1e+06 m of the origin"),
+          ("leg-speed-1e300", lambda t: t["robot"]["waypoints"].__setitem__(1, [1.0, 1.2, 0.0, 1e300]),
+           "robot.waypoints: waypoint 1's leg speed (fourth value) 1e+300 m/s is above 50 m/s"),
+          ("leg-speed-1e-300", lambda t: t["robot"]["waypoints"].__setitem__(1, [1.0, 1.2, 0.0, 1e-300]),
+           "s.yaml: the mission would take about 3.89e+296 h, most of it the 1.4 m leg to robot.waypoints.1 at its "
+           "speed 1e-300 m/s (its fourth value)"),
+      )),
+    # -- command-line values that say nothing, or say one thing twice --
+    *(Case(f"inject-{name}", ("inject", "{run}", "--fault", fault, "--out", "{d}/o"), f"--fault {fault}: {says}")
+      for name, fault, says in (
+          ("param-given-twice", "gyro_bias@2:4,bias_deg_s=1,bias_deg_s=50", "'bias_deg_s' given twice"),
+          ("start-given-as-a-param", "gyro_bias@2:4,start_s=3", "'start_s' given twice (KIND@T0:T1 gives it)"),
+      )),
+    *(Case(f"calibrate-false-alarm-{value}", ("calibrate", "{run}", "--config", "{cfg}", "--false-alarm", value, "--out",
+                                              "{d}/c.yaml"), f"--false-alarm {says}: expected a share of steps from 1e-06")
+      for value, says in (("1e-300", "1e-300"), ("0.9", "0.9"))),
+    # -- ablation specs that sweep nothing --
+    Case("ablate-grid-axis-empty", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "spec.yaml: sweep.grid.gating.inflation: List should have at least 1 item", spec(sweep={"grid": {"gating.inflation": []}})),
+    Case("ablate-input-grid-axis-empty", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "sweep.grid.1.gating.inflation: List",
+         spec(sweep={"grid": [{"gating.inflation": [2.0]}, {"gating.inflation": []}]})),
+    Case("ablate-name-empty", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "spec.yaml: name: String should have at least 1",
+         spec(name="")),
+    # -- BROAD fields MATLAB stored as something other than one real array of the trial's length --
+    *(Case(f"broad-{name}", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"), f"t.mat: {says}", broad_mat(**fields))
+      for name, fields, says in (
+          ("gyro-complex", {"imu_gyr": np.zeros((50, 3)) + 1j}, "imu_gyr: expected real numbers, got complex numbers"),
+          ("acceleration-text", {"imu_acc": "abc"}, "imu_acc: expected real numbers, got text"),
+          ("sampling-rate-two-values", {"sampling_rate": np.array([[100.0, 200.0]])},
+           "sampling_rate: expected one IMU rate in Hz (BROAD's is 285.7), got 2 values"),
+          ("positions-of-two-columns", {"opt_pos": np.zeros((50, 2))}, "opt_pos: expected shape (50, 3), got (50, 2)"),
+      )),
+    *(Case(f"broad-{name}", ("map", "{d}/t.mat", "--config", "{cfg}", "--set", "keyframes.period_s=0.05", "--out", "{d}/o"),
+           f"t.mat: opt_quat/opt_pos: no sample has a tracked pose (finite opt_quat and opt_pos) with the pitch within 60 deg",
+           broad_mat(**fields))
+      for name, fields in (
+          ("positions-all-nan", {"opt_pos": np.full((50, 3), np.nan)}),
+          ("truth-pitched-beyond-60-deg", {"opt_quat": np.tile([np.cos(0.7), 0.0, np.sin(0.7), 0.0], (50, 1))}),
+      )),
+    # -- text in a wide encoding, named as such (UTF-8 is expected) --
+    Case("config-utf32", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "c.yaml: UTF-32 text; expected a YAML config",
+         raw("c.yaml", "keyframes: {period_s: 0.5}\n".encode("utf-32"))),
+    Case("config-utf16-without-a-bom", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "c.yaml: UTF-16 text; expected",
+         raw("c.yaml", "keyframes: {period_s: 0.5}\n".encode("utf-16-le"))),
+    Case("carmen-utf16", CARMEN, "c.log: cannot read: UTF-16 text; expected a CARMEN text log in ASCII or UTF-8",
+         carmen(encoding=lambda s: s.encode("utf-16"))),
+    Case("librsf-utf16-without-a-bom", LIBRSF, "X_Input.txt: cannot read: UTF-16 text; expected a libRSF text file",
+         raw("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} 0.5 0 0 1 1 1\n" for k in range(50)).encode("utf-16-be"))),
+    # -- an output path that goes up from a name that is no folder, or a file named like a folder --
+    *(Case(f"{command}-out-up-from-a-missing-folder", (*argv, "{d}/typo/.."),
+           "typo/..: --out goes up from", text("mine.txt", "mine\n"))
+      for command, argv in (
+          ("map", (*MAP, *QUICK, "--out")),
+          ("simulate", ("simulate", "{scen}", "--out")),
+          ("inject", ("inject", "{run}", "--fault", "gyro_bias@2:4", "--out")),
+          ("calibrate", ("calibrate", "{run}", "--config", "{cfg}", "--out")),
+      )),
+    Case("calibrate-out-ends-in-a-slash", ("calibrate", "{run}", "--config", "{cfg}", "--out", "{d}/c.yaml/"), "c.yaml/: --out ends in '/', which names a folder"),
+    Case("inspect-config-out-ends-in-a-slash", ("inspect", "{run}", "--config-out", "{d}/c.yaml/"),
+         "c.yaml/: --config-out ends in '/', which names a folder"),
+    Case("scenario-laser-field-of-view-1e-9-deg", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "sensors.laser: fov_deg 1e-09 over beams 541 puts the beams 1.85e-12 deg apart; no 2D laser resolves",
+         scenario(lambda t: t.setdefault("sensors", {}).setdefault("laser", {}).update(fov_deg=1e-9))),
+    # -- the fourth attack's kinds each reader and command already answers in one line, kept so that none
+    # -- turns into a traceback later: unreadable inputs (/proc/self/mem fails to read even for root, where
+    # -- chmod 000 hides nothing), NaN and infinity in fields no case had, folders where files go, --set forms
+    *(Case(f"{name}-unreadable", argv, f"{file}: cannot read{says}", unreadable(file))
+      for name, argv, file, says in (
+          ("config", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "c.yaml", " config (Input/output error)"),
+          ("scenario", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "s.yaml", " scenario (Input/output error)"),
+          ("spec", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "spec.yaml", " config (Input/output error)"),
+          ("variants", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"), "v.yaml",
+           " config (Input/output error)"),
+          ("carmen-log", CARMEN, "c.log", " (Input/output error)"),
+          ("librsf-log", LIBRSF, "X_Input.txt", " (Input/output error)"),
+          ("ros1-bag", ("map", "{d}/r.bag", "--config", "{cfg}", "--out", "{d}/o"), "r.bag", " (Input/output error)"),
+          ("broad-trial", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"), "t.mat",
+           " as a MATLAB v5 file ([Errno 5] Input/output error)"),
+          ("inspect-mcap", ("inspect", "{d}/r.mcap"), "r.mcap", " (Input/output error)"),
+          ("inject-carmen-log", ("inject", "{d}/c.log", "--fault", "slip@1:2", "--out", "{d}/o"), "c.log",
+           " (Input/output error)"),
+      )),
+    Case("truth-json-unreadable", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"),
+         "truth.json: cannot read truth.json sidecar (Input/output error)",
+         copy_run(lambda r: (r / "truth.json").unlink() or (r / "truth.json").symlink_to("/proc/self/mem"))),
+    *(Case(f"carmen-{name}", CARMEN, says, carmen(encoding=lambda s, old=old, new=new: s.replace(old, new, 1).encode()))
+      for name, old, new, says in (
+          ("stamp-inf", " 1000.000000 host 1000.000000", " inf host inf", "c.log:1: expected finite numbers in FLASER"),
+          ("odometry-theta-inf", "ODOM 0.000 0 0", "ODOM 0.000 0 inf", "c.log:2: expected finite numbers in ODOM"),
+      )),
+    Case("librsf-variance-inf", LIBRSF, "X_Input.txt:6: expected odom2 t vx vy wz var_vx var_vy var_wz",
+         text("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} 0.5 0 0.01 {'inf' if k == 5 else '0.01'} 0.01 0.01\n"
+                                     for k in range(50)))),
+    *(Case(f"bag-{name}", argv, says, bag(each(topic, change)))
+      for name, argv, topic, change, says in (
+          ("odometry-position-nan", BAG, "/odom", lambda t, m: setattr(m.pose.pose.position, "x", math.nan),
+           "odometry topic '/odom': non-finite pose.position at message 0"),
+          ("gyro-rate-nan", BAG, "/imu/data", lambda t, m: setattr(m.angular_velocity, "z", math.nan),
+           "gyro topic '/imu/data': non-finite angular_velocity.z at message 0"),
+          ("magnetic-field-nan", MAG_BAG, "/imu/mag", lambda t, m: setattr(m.magnetic_field, "x", math.nan),
+           "compass topic '/imu/mag': non-finite magnetic_field at message 0"),
+      )),
+    Case("truth-fault-ends-at-1e400", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"),
+         "truth.json: faults.GPS.0.1: Input should be a finite number", copy_run(lambda r: (r / "truth.json").write_text(
+             json.dumps({**json.loads((r / "truth.json").read_text()), "faults": {"GPS": [[1, "end"]]}}).replace('"end"', "1e400")))),
+    *(Case(f"{name}-a-folder", argv, says, text(f"{file}/keep", ""))
+      for name, argv, file, says in (
+          ("librsf-log", LIBRSF, "X_Input.txt", "X_Input.txt: expected exactly one *_Input.txt in the folder, found none"),
+          ("carmen-log", CARMEN, "c.log", "c.log: expected a CARMEN log file, got a directory"),
+      )),
+    Case("model-a-folder", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "m.yaml: cannot read YAML file (a folder; expected a file)",
+         both(text("m.yaml/keep", ""), config(lambda t: t["validation"].update(model="m.yaml")))),
+    Case("truth-json-a-folder", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"),
+         "truth.json: cannot read truth.json sidecar (a folder; expected a file)",
+         copy_run(lambda r: (r / "truth.json").unlink() or (r / "truth.json").mkdir())),
+    *(Case(f"set-{name}", (*MAP, "--out", "{d}/o", "--set", expr), f"--set {shown}: {says}")
+      for name, expr, shown, says in (
+          ("double-equals", "backend.optimizer==isam2", "backend.optimizer==isam2", "backend.optimizer: Input should be"),
+          ("a-section-to-a-number", "backend=3", "backend=3", "backend: Input should be a valid dictionary"),
+          ("a-section-to-null", "backend.factors=null", "backend.factors=null", "backend.factors: Input should be"),
+          ("a-python-tag", "backend.optimizer=!!python/name:os.system", "backend.optimizer=!!python/name:os.system",
+           "could not determine a constructor"),
+          ("a-newline-in-the-key", "backend\n.optimizer=isam2", "backend .optimizer=isam2", "unknown config key 'backend '"),
+      )),
+    *(Case(f"carmen-gz-{name}", ("map", "{d}/c.log.gz", "--config", str(CONFIGS / "datasets" / "carmen.yaml"), "--out", "{d}/o"),
+           f"c.log.gz: {says}", data("c.log.gz", gzip.compress(content)))
+      for name, content, says in (
+          ("of-nothing", b"", "no FLASER or ROBOTLASER1 scans"),
+          ("of-binary", bytes(range(256)) * 20, "cannot read: not a CARMEN text log (binary content)"),
+      )),
+    *(Case(f"marker-{name}", (*MAP, *QUICK, "--out", "{d}/m"), says, make)
+      for name, make, says in (
+          ("input-nan", text("m/.gslam-result.json", '{"command": "map", "files": [], "input": NaN}'), "its input nan is not a path"),
+          ("binary", data("m/.gslam-result.json", bytes(range(256))), "is not one gslam wrote"),
+          ("a-named-pipe", fifo("m/.gslam-result.json"), "is not one gslam wrote"),
+      )),
+    Case("map-input-path-with-a-newline-missing", ("map", "{d}/x\ny.log", "--config", "{cfg}", "--out", "{d}/o"),
+         "x y.log: no such file"),
+    Case("inject-fault-times-in-hex", ("inject", "{run}", "--fault", "gyro_bias@0x2:0x4", "--out", "{d}/o"),
+         "--fault gyro_bias@0x2:0x4: start_s: Input should be a valid number"),
+    Case("simulate-seed-1.5", ("simulate", "{scen}", "--seed", "1.5", "--out", "{d}/o"),
+         "argument --seed: expected a whole number, got '1.5'", code=2),
+    # -- a key given twice in a JSON file read as input: json keeps the last in silence, as YAML here does not --
+    Case("truth-json-fault-component-twice", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"),
+         "truth.json: key 'GPS' given twice in one JSON object", copy_run(lambda r: (r / "truth.json").write_text(
+             json.dumps({**json.loads((r / "truth.json").read_text()), "faults": {"GPS": "first"}})
+             .replace('"GPS": "first"', '"GPS": [[1, 2]], "GPS": []')))),
+    Case("marker-files-twice", (*MAP, *QUICK, "--out", "{d}/m"), "its .gslam-result.json is not one gslam wrote",
+         text("m/.gslam-result.json", '{"command": "map", "files": ["../x"], "files": ["metrics.json"]}')),
+    Case("ablate-resumed-metrics-key-twice", ("ablate", "{spec}", "--out", "{d}/o"),
+         "metrics.json: expected the JSON object gslam writes, found invalid JSON (key 'ate_rmse_m' given twice",
+         finished_sweep('{"ate_rmse_m": 0.1, "ate_rmse_m": 1e9}')),
 ]
 
 
@@ -961,6 +1187,21 @@ WARNINGS: list[Warned] = [
            carmen(head="PARAM robot_front_laser_max 1e300")),
     Warned("librsf-without-ground-truth-anchored-once", LIBRSF, "no ground truth to anchor the first pose",
            librsf_with("loop 9.0 1.0 1")),
+    # -- Windows line ends and byte-order marks in every text input, and a path with a newline: read as they are --
+    Warned("carmen-crlf", CARMEN, "", carmen(encoding=lambda s: s.replace("\n", "\r\n").encode())),
+    Warned("librsf-crlf-with-a-bom", LIBRSF, "", both(librsf_with("loop 9.0 1.0 1"), _rewritten(
+        "X_Input.txt", lambda b: b"\xef\xbb\xbf" + b.replace(b"\n", b"\r\n")))),
+    Warned("config-crlf", (*MAP[:2], "--config", "{d}/c.yaml", *QUICK, "--out", "{d}/o"), "",
+           both(config(lambda t: None), _rewritten("c.yaml", lambda b: b.replace(b"\n", b"\r\n")))),
+    Warned("scenario-crlf-with-a-bom", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "", both(
+        scenario(lambda t: None), _rewritten("s.yaml", lambda b: b"\xef\xbb\xbf" + b.replace(b"\n", b"\r\n")))),
+    Warned("truth-json-with-a-bom", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"), "",
+           copy_run(lambda r: (r / "truth.json").write_bytes(b"\xef\xbb\xbf" + (r / "truth.json").read_bytes()))),
+    Warned("bag-metadata-crlf", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"), "",
+           copy_run(lambda r: (r / "bag" / "metadata.yaml").write_bytes(
+               (r / "bag" / "metadata.yaml").read_bytes().replace(b"\n", b"\r\n")))),
+    Warned("carmen-log-named-with-a-newline", ("map", "{d}/a\nb.log", "--config", str(CONFIGS / "datasets" / "carmen.yaml"),
+                                              *QUICK, "--out", "{d}/o"), "", carmen(name="a\nb.log")),
 ]
 
 
@@ -1165,3 +1406,48 @@ def test_a_huge_sparse_file_is_refused_on_its_first_bytes(tmp_path, capsys, name
     err = capsys.readouterr().err
     assert code == 1 and err.count("\n") == 1 and str(path) in err
     assert "binary content" in err or "not a readable ROS bag" in err
+
+
+def test_a_run_given_twice_is_learnt_from_once_with_one_warning(world: World, tmp_path: Path, capsys, caplog):
+    """gslam calibrate given one recording five ways (its path, the path with
+    a slash, a link to it, its bag, a copy of the run folder) learns from it
+    once, says so in one warning line, and writes what it writes for the run
+    given once: counted five times, each step's false alarm would weigh a
+    fifth."""
+    (tmp_path / "link").symlink_to(world.run)
+    shutil.copytree(world.run, tmp_path / "copy")
+    once, four = tmp_path / "once.yaml", tmp_path / "four.yaml"
+    cal = ("calibrate", "--config", str(TELEMAX_CONFIG), "--clean", "0:10")
+    assert main(["-q", *cal[:1], str(world.run), *cal[1:], "--out", str(once)]) == 0
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        code = main(["-q", *cal[:1], str(world.run), f"{world.run}/", str(tmp_path / "link"), str(world.run / "bag"),
+                     str(tmp_path / "copy"), *cal[1:], "--out", str(four)])
+    assert code == 0 and "Traceback" not in capsys.readouterr().err
+    said = [r.getMessage() for r in caplog.records if "repeat" in r.getMessage()]
+    assert len(said) == 1 and said[0].startswith("4 of the 5 runs given repeat a recording; each recording is learnt "
+                                                 "from once: "), said
+    assert f"{tmp_path / 'copy'} (a copy of the recording of {world.run})" in said[0]
+    assert four.read_text() == once.read_text()
+
+
+@pytest.mark.parametrize("command", ["map", "compare", "ablate", "simulate"])
+def test_a_removed_working_folder_is_one_line_before_any_work(command: str, world: World, tmp_path: Path):
+    """A shell whose folder was removed under it: gslam map, compare and
+    ablate said 'No such file or directory' naming nothing (the config's
+    loader asks for the working folder), and past that loading Open3D ends
+    the process in oneMKL's 'FATAL ERROR: Cannot load libOpen3D' (exit 2,
+    the temporary folder left); simulate ran. Every command now says so
+    first, before any work."""
+    argv = {"map": ["map", world.run, "--config", TELEMAX_CONFIG, *QUICK],
+            "compare": ["compare", world.run, "--config", TELEMAX_CONFIG, "--only", "ungated", *QUICK],
+            "ablate": ["ablate", world.spec], "simulate": ["simulate", world.scenario]}[command]
+    gone, out = tmp_path / "gone", tmp_path / "out"
+    gone.mkdir()
+    out.mkdir()
+    done = subprocess.run([sys.executable, "-m", "slam.cli", "-q", *map(str, argv), "--out", str(out / "o")], cwd=gone,
+                          preexec_fn=lambda: os.rmdir(gone), capture_output=True, text=True, timeout=TIME_LIMIT_S,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert (done.returncode, done.stderr) == (1, "gslam: error: the current folder no longer exists (removed while a "
+                                                 "shell was in it); cd to a folder that does and run again\n")
+    assert list(out.iterdir()) == []

@@ -363,3 +363,26 @@ def test_unbounded_missions_are_refused_before_simulating(tmp_path):
     with pytest.raises(GslamError, match="at most 4 h"):
         simulate_scenario(slow, tmp_path / "run")
     assert not (tmp_path / "run").exists() and list(tmp_path.iterdir()) == []
+
+
+def test_the_blocks_of_the_world_look_ups_give_what_one_at_a_time_gives():
+    """Ray casting, wall distances and regions work in blocks of at most a
+    million tests (slam/sim/world.py): a world of 4,000 segments in range
+    takes several blocks per scan, and each beam, point and region comes out
+    exactly as cast or looked up alone."""
+    from slam.sim.world import World, distance_to_segments, point_in_polygon
+
+    rng = np.random.default_rng(3)
+    segments = rng.uniform(-5.0, 5.0, (4000, 2, 2))
+    world = World(segments, np.zeros((4000, 2)), [], None)
+    angles = np.linspace(-np.pi, np.pi, 541)
+    ranges, hits = world.cast(np.zeros(2), angles, 10.0)
+    alone = [world.cast(np.zeros(2), angles[i : i + 1], 10.0) for i in range(len(angles))]
+    assert np.array_equal(ranges, [r[0] for r, _ in alone]) and np.array_equal(hits, [h[0] for _, h in alone])
+    points = rng.uniform(-6.0, 6.0, (600, 2))
+    dist, away = distance_to_segments(points, segments)
+    one = [distance_to_segments(p[None], segments) for p in points]
+    assert np.array_equal(dist, [d[0] for d, _ in one]) and np.array_equal(away, [a[0] for _, a in one])
+    polygon = np.column_stack([np.cos(np.linspace(0, 6.2, 3000)), np.sin(np.linspace(0, 6.2, 3000))]) * 4
+    inside = point_in_polygon(points, polygon)
+    assert np.array_equal(inside, [point_in_polygon(p[None], polygon)[0] for p in points]) and 0 < inside.sum() < 600

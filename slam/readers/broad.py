@@ -110,12 +110,31 @@ def _load(path: Path) -> dict[str, np.ndarray]:
     n = len(data["imu_gyr"])
     if n < 2:
         raise GslamError(f"{path}: no samples; expected a BROAD trial with N x 3 IMU arrays")
-    for key, width in (("imu_gyr", 3), ("imu_acc", 3), ("imu_mag", 3), ("opt_quat", 4)):
-        a = np.asarray(data[key], dtype=np.float64)
+    for key, width in (("imu_gyr", 3), ("imu_acc", 3), ("imu_mag", 3), ("opt_quat", 4), ("opt_pos", 3)):
+        if key not in data:  # opt_pos: a trial without positions has its heading truth still
+            continue
+        a = _real(path, key, data[key])
         if a.shape != (n, width):
             raise GslamError(f"{path}: {key}: expected shape ({n}, {width}), got {a.shape}")
         data[key] = a
+    if np.asarray(data["sampling_rate"]).size != 1:
+        raise GslamError(f"{path}: sampling_rate: expected one IMU rate in Hz (BROAD's is 285.7), got "
+                         f"{np.asarray(data['sampling_rate']).size} values")
     return data
+
+
+_KINDS = {"c": "complex numbers", "U": "text", "S": "text", "O": "a cell array or a struct", "V": "a struct",
+          "b": "true/false values"}
+
+
+def _real(path: Path, key: str, value: object) -> np.ndarray:
+    """``value`` as float64, or a one-line :class:`GslamError` naming
+    ``key`` if MATLAB stored something else (text, complex numbers, cells):
+    numpy would raise on text and drop an imaginary part in silence."""
+    a = np.asarray(value)
+    if a.dtype.kind not in "iuf":
+        raise GslamError(f"{path}: {key}: expected real numbers, got {_KINDS.get(a.dtype.kind, str(a.dtype))}")
+    return a.astype(np.float64)
 
 
 def up_direction(acc: np.ndarray, gyr: np.ndarray, dt: float, time_constant_s: float = TILT_TIME_CONSTANT_S) -> np.ndarray:
@@ -325,10 +344,11 @@ def read_broad(
     compass = Compass(t=t[keep], yaw=wrap_angle(heading[keep] - offset), field=field_level[keep])
 
     good = tracked & (np.abs(true_pitch) <= max_pitch)
-    pos = np.asarray(d["opt_pos"], dtype=np.float64) if "opt_pos" in d else np.zeros((n, 3))
-    if pos.shape != (n, 3):
-        pos = np.zeros((n, 3))
+    pos = d["opt_pos"] if "opt_pos" in d else np.zeros((n, 3))
     good &= np.isfinite(pos).all(axis=1)
+    if not good.any():  # a trial must have its truth: the headings are scored against it
+        raise GslamError(f"{path}: opt_quat/opt_pos: no sample has a tracked pose (finite opt_quat and opt_pos) with "
+                         f"the pitch within {max_pitch_deg:g} deg; expected a BROAD trial with its optical truth")
     groundtruth = Trajectory(t=t[good], x=pos[good, 0], y=pos[good, 1], yaw=true_yaw[good])
 
     # 5: the undisturbed field at the start.

@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 from slam.errors import GslamError
+from validation.base.yamlio import wide_encoding
 
 
 SNIFF_BYTES = 1 << 20
@@ -43,6 +44,9 @@ def decode_log(data: bytes, source: str | Path, what: str) -> str:
     are binary content."""
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
+    wide = wide_encoding(data)
+    if wide is not None:
+        raise GslamError(f"{source}: cannot read: {wide} text; expected a {what} in ASCII or UTF-8 (save it as UTF-8)")
     text = data.decode("utf-8", errors="replace")
     if "\0" in text or text.count("\ufffd") > 0.1 * max(len(text), 1):
         raise GslamError(f"{source}: cannot read: not a {what} (binary content)")

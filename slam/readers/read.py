@@ -22,18 +22,21 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
-from typing import Callable, Mapping, Protocol
+from typing import Annotated, Callable, Mapping, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from slam.config import GpsInputConfig, InputConfig
 from slam.readers.data_checks import check_recording, check_time_offsets
 from validation.base.yamlio import read_text
-from validation.base.yamlio import check_regular_file
+from validation.base.yamlio import check_regular_file, unique_keys
 from slam.errors import GslamError
+from validation.base import bounds
+from validation.base.bounds import within
 from slam.readers import broad, carmen, librsf
 from slam.readers.files import check_exists
 from slam.readers.rosbag import BAG_SUFFIXES, RosbagReader, ScansHook, is_rosbag
@@ -135,14 +138,19 @@ class _Sidecar(BaseModel):
 
 
 class _MagneticReference(_Sidecar):
-    strength_T: float
-    dip_rad: float
-    declination_rad: float = 0.0
+    # The Earth's field as any scenario may set it (slam.sim.scenario): a
+    # reference outside it turns every compass check into a false alarm.
+    strength_T: Annotated[float, bounds.EARTH_FIELD_T]
+    dip_rad: Annotated[float, within(-math.pi / 2, math.pi / 2, "rad", "a field points at most straight up",
+                                     "a field points at most straight down")]
+    declination_rad: Annotated[float, within(-math.pi, math.pi, "rad", "a declination is at most half a turn west",
+                                             "a declination is at most half a turn east")] = 0.0
 
 
 class _Datum(_Sidecar):
-    lat_deg: float
-    lon_deg: float
+    lat_deg: Annotated[float, within(-90.0, 90.0, "deg", "south of the South Pole", "north of the North Pole")]
+    lon_deg: Annotated[float, within(-180.0, 180.0, "deg", "a longitude is at most half a turn west",
+                                     "a longitude is at most half a turn east")]
 
 
 class Sidecar(_Sidecar):
@@ -166,7 +174,7 @@ def load_sidecar(path: str | Path) -> Sidecar:
     path = Path(path)
     text = read_text(path, "truth.json sidecar", "JSON")
     try:
-        data = json.loads(text, parse_constant=_no_constant)
+        data = json.loads(text, parse_constant=_no_constant, object_pairs_hook=unique_keys)
     except json.JSONDecodeError as e:
         raise GslamError(f"{path}: line {e.lineno}: invalid JSON ({e.msg})") from None
     except ValueError as e:
@@ -178,7 +186,7 @@ def load_sidecar(path: str | Path) -> Sidecar:
     except ValidationError as e:
         first = e.errors()[0]
         loc = ".".join(str(p) for p in first["loc"]) or "top level"
-        raise GslamError(f"{path}: {loc}: {first['msg']}") from None
+        raise GslamError(f"{path}: {loc}: {first['msg'].removeprefix('Value error, ')}") from None
     unknown = sorted(set(sidecar.faults) - set(COMPONENTS) - set(SENSOR_MODALITIES))
     if unknown:
         raise GslamError(

@@ -50,6 +50,7 @@ def check_out_path(out: str | Path, flag: str = "--out") -> Path:
     if isinstance(out, str) and not out.strip():
         raise GslamError(f"{flag} is empty; give a path (an unset shell variable?)")
     out = Path(out)
+    _check_way_up(out, flag)
     try:
         mode = out.lstat().st_mode
     except OSError:
@@ -61,6 +62,18 @@ def check_out_path(out: str | Path, flag: str = "--out") -> Path:
     if resolve_path(out).parent == resolve_path(out):
         raise refuse(out, "is the file system root; give a new folder name", flag)
     return out
+
+
+def _check_way_up(out: Path, flag: str) -> None:
+    """A ``..`` after a name that is no folder (``runs/typo/..``) leads
+    nowhere the system can go, while ``Path.resolve`` reads it as the folder
+    above: the output would be checked as new and found full only when it is
+    moved into place, after the work. Such a path is refused first."""
+    walked = Path(out.anchor)
+    for part in out.parts[1 if out.anchor else 0:]:
+        if part == ".." and not (walked or Path(".")).is_dir():
+            raise refuse(out, f"goes up from {walked}, which is not a folder; give the path without '..'", flag)
+        walked /= part
 
 
 def _same_file(a: Path, b: Path) -> bool:

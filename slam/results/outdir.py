@@ -317,6 +317,8 @@ def check_new_file(path: str | Path, inputs: Iterable[str | Path] = (), force: b
     :func:`result_file_mark`), or with ``force`` a result of another gslam
     command; never an input or a file inside an input folder, a folder, a
     link, a device, a pipe or a file of the user's."""
+    if str(path).endswith((os.sep, os.sep + ".")):  # Path() would drop it, and write a file where a folder was meant
+        raise refuse(path, "ends in '/', which names a folder; give a file name", flag)
     path = check_out_path(path, flag)
     target = resolve_path(path)
     check_inputs(path, target, inputs, flag)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 from slam.errors import GslamError
+from validation.base.yamlio import unique_keys
 
 RESULT_MARKER = ".gslam-result.json"
 # A name read from a file that becomes a file or folder name (a scenario's,
@@ -64,7 +65,7 @@ def _read_json(path: Path) -> dict | None:
         st = path.lstat()
         if not stat.S_ISREG(st.st_mode) or st.st_size > 64 * 2**20:
             return None
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(), object_pairs_hook=unique_keys)
     except (OSError, ValueError, RecursionError):  # RecursionError: JSON nested too deeply
         return None
     return data if isinstance(data, dict) else None

@@ -8,6 +8,17 @@ planned motion for the shipped scenarios (tests/test_sim.py). A mission
 longer than :data:`MAX_DURATION_S`, or one whose streams would hold more
 samples than the limits below, is refused with the estimate in the
 message instead of running for hours.
+
+The time the simulator computes grows with the world as well as with the
+mission: every scan's beams are cast against the wall segments in range,
+every GPS fix measures its distance to every wall, every sample looks up
+its region and sums the steel's fields, and doors and the route check
+walk the walls in Python. :func:`check_work` adds these up, each as a
+count of elementary tests times what one costs (measured on one core of
+the development machine, numpy 2), and refuses a simulation estimated at
+more than :data:`MAX_WORK_S` naming the keys of its largest part. Memory
+does not grow with the world: the ray casting and the distance and region
+look-ups work in blocks (:mod:`slam.sim.world`).
 """
 
 from __future__ import annotations
@@ -19,7 +30,8 @@ import numpy as np
 from slam.errors import GslamError
 from validation.base.geometry import wrap_angle
 from slam.sim.route import check_route
-from slam.sim.scenario import RobotConfig, Scenario
+from slam.sim.scenario import RegionKind, RobotConfig, Scenario
+from slam.sim.world import segments_near_count, wall_segments
 
 MAX_DURATION_S = 4 * 3600.0
 """Longest mission simulated: 4 h (the 2-hour benchmark run fits twice)."""
@@ -29,6 +41,17 @@ MAX_MESSAGES = 20_000_000
 """Most messages of one stream (ground truth at 100 Hz for 4 h is 1.44 M)."""
 MAX_LASER_VALUES = 100_000_000
 """Most laser ranges in all (scans x beams; 400 MB as float32)."""
+MAX_WORK_S = 3600.0
+"""Longest computation a simulation may be estimated at (:func:`check_work`): an hour."""
+
+# Nanoseconds of one elementary test of the simulator, measured on one core:
+# a beam against a segment (slam.sim.world.World.cast), a scan's position
+# against a segment (its segments in range), a point's distance to a segment
+# (GPS multipath, indoor regions), a point against a polygon corner (regions),
+# a sample's field of one dipole, a door against a segment and a route leg
+# against a segment (both Python loops).
+_NS = {"ray": 20.0, "near": 100.0, "distance": 200.0, "corner": 20.0, "dipole": 65.0, "door": 4500.0,
+       "crossing": 2000.0}
 
 
 @dataclass(frozen=True)
@@ -64,7 +87,8 @@ def _estimate(robot: RobotConfig, path: list) -> tuple[float, float]:
     w_max = np.radians(robot.max_turn_rate_deg_s)
     spot_limit = np.radians(robot.spot_turn_above_deg)
     alpha = np.radians(robot.max_turn_accel_deg_s2)
-    seconds = path_m / v + robot.start_pause_s + robot.end_pause_s + sum(pauses)
+    driving = float(np.sum(lengths / _leg_speeds(robot, path)))
+    seconds = driving + robot.start_pause_s + robot.end_pause_s + sum(pauses)
     yaw = np.radians(robot.start_yaw_deg)
     for i, (leg, length) in enumerate(zip(legs, lengths)):
         if length == 0.0:
@@ -83,6 +107,12 @@ def _estimate(robot: RobotConfig, path: list) -> tuple[float, float]:
     return float(seconds), path_m
 
 
+def _leg_speeds(robot: RobotConfig, path: list) -> np.ndarray:
+    """The speed limit (m/s) of each leg of ``path``: the fourth value of
+    the waypoint it ends at, else ``max_speed_m_s``."""
+    return np.array([w[3] if len(w) > 3 else robot.max_speed_m_s for w in path[1:]], dtype=float)
+
+
 def _hours(seconds: float) -> str:
     """``seconds`` in hours to a tenth, or to three digits once beyond a
     million hours (an acceleration of 1e-300 m/s^2 takes 1e300 s)."""
@@ -94,7 +124,15 @@ def _longest_part(robot: RobotConfig, duration: float, path_m: float) -> str:
     """What takes most of a mission's ``duration``: driving, a pause
     (naming its waypoint) or turning, in the words of the scenario's keys."""
     laps = robot.laps
-    parts = {f"{path_m:.1f} m of path at robot.max_speed_m_s {robot.max_speed_m_s:g}": path_m / robot.max_speed_m_s}
+    pts = np.array([w[:2] for w in robot.waypoints], dtype=float)
+    lengths = np.hypot(*np.diff(pts, axis=0).T)
+    own = [i for i, w in enumerate(robot.waypoints) if len(w) > 3 and i > 0]
+    rest_m = path_m - laps * sum(lengths[i - 1] for i in own)
+    parts = {f"{rest_m:.1f} m of path at robot.max_speed_m_s {robot.max_speed_m_s:g}": rest_m / robot.max_speed_m_s}
+    for i in own:
+        speed = robot.waypoints[i][3]
+        parts[f"the {lengths[i - 1]:.1f} m leg to robot.waypoints.{i} at its speed {speed:g} m/s (its fourth value)"
+              + (f" (x {laps} laps)" if laps > 1 else "")] = laps * lengths[i - 1] / speed
     for i, w in enumerate(robot.waypoints):
         if len(w) > 2 and w[2] > 0:
             times = laps if i > 0 else 1
@@ -136,8 +174,59 @@ def check_bounded(scenario: Scenario, source: str) -> MissionEstimate:
     if scans * sensors.laser.beams > MAX_LASER_VALUES:
         raise GslamError(f"{source}: {scans} scans of {sensors.laser.beams} beams (sensors.laser) over about "
                          f"{duration:.0f} s; at most {MAX_LASER_VALUES:.0e} ranges in all")
+    check_work(scenario, source, duration, scans)
     check_route(scenario, source)
     return MissionEstimate(duration, path_m, scans)
+
+
+def _route_points(robot: RobotConfig, count: int = 200) -> np.ndarray:
+    """``count`` points (count, 2) m spread evenly along one lap's legs."""
+    pts = np.array([w[:2] for w in robot.waypoints], dtype=float)
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    at = np.linspace(0.0, along[-1], count)
+    return np.column_stack([np.interp(at, along, pts[:, 0]), np.interp(at, along, pts[:, 1])])
+
+
+def check_work(scenario: Scenario, source: str, duration: float, scans: int) -> None:
+    """A one-line :class:`GslamError` naming ``source`` if the simulation
+    of a mission of ``duration`` s and ``scans`` laser scans would compute
+    for longer than :data:`MAX_WORK_S` (module docstring). The beams are
+    counted against the segments within the laser's range of points along
+    the route, on average; a world of many walls far from the route costs
+    only their look-up."""
+    world, robot, sensors = scenario.world, scenario.robot, scenario.sensors
+    laser = sensors.laser
+    walls_xy = wall_segments(world)
+    segments = len(walls_xy)
+    walls = f"{segments:,} wall segments (world.walls, world.obstacles)"
+    near = segments_near_count(walls_xy, _route_points(robot), laser.max_range_m)
+    fixes = duration * sensors.gps.rate_hz
+    truth = duration * robot.truth_rate_hz
+    located = truth + duration * sensors.odometry.rate_hz + 3 * fixes
+    corners = sum(len(r.polygon) for r in world.regions) + len(world.default_region.polygon)
+    indoor = sum(len(r.polygon) for r in world.regions if r.kind is RegionKind.INDOOR)
+    fields = truth + duration * sensors.magnetometer.rate_hz
+    legs = len(robot.waypoints) - 1 + (robot.laps > 1)
+    parts = {  # what each part is, its elementary tests, their kind
+        f"ray casting {scans:,} scans (sensors.laser.rate_hz {laser.rate_hz:g} over about {duration:.0f} s) of "
+        f"{laser.beams:,} beams (sensors.laser.beams) against the {near:,.0f} of {walls} within "
+        f"sensors.laser.max_range_m {laser.max_range_m:g}": [(scans * laser.beams * near, "ray"), (scans * segments, "near")],
+        f"the distance of {fixes:,.0f} GPS fixes (sensors.gps.rate_hz {sensors.gps.rate_hz:g}) to {walls}":
+            [(fixes * segments, "distance"), (fixes * indoor, "distance")],
+        f"the region of {located:,.0f} samples (robot.truth_rate_hz, sensors.odometry.rate_hz, sensors.gps.rate_hz) "
+        f"among {corners:,} region corners (world.regions)": [(located * corners, "corner")],
+        f"the field of {len(world.disturbers):,} steel structures (world.disturbers) at {fields:,.0f} samples "
+        "(robot.truth_rate_hz, sensors.magnetometer.rate_hz)": [(fields * len(world.disturbers), "dipole")],
+        f"cutting {len(world.doors):,} doors (world.doors) into {walls}": [(2 * len(world.doors) * segments, "door")],
+        f"checking {legs:,} legs (robot.waypoints) against {walls}": [(legs * segments, "crossing")],
+    }
+    seconds = {what: sum(n * _NS[kind] for n, kind in tests) / 1e9 for what, tests in parts.items()}
+    total = sum(seconds.values())
+    if total > MAX_WORK_S:
+        largest = max(seconds, key=seconds.get)
+        raise GslamError(f"{source}: simulating would compute for about {_hours(total)} h, most of it "
+                         f"{largest}; at most {MAX_WORK_S / 3600:.0f} h of it is started (a smaller world, fewer "
+                         "beams or samples, or a shorter mission)")
 
 
 # Bytes of one message of each stream as the simulator writes it (CDR), measured on its bags.

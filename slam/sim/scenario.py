@@ -11,6 +11,7 @@ frame (x east, y north); angles in the YAML are degrees (keys say ``_deg``).
 
 from __future__ import annotations
 
+import math
 from enum import Enum
 from pathlib import Path
 from typing import Annotated
@@ -21,13 +22,20 @@ from pydantic import Field, ValidationError, field_validator, model_validator
 from slam.config import describe_validation_error
 from slam.results.records import PLAIN_NAME, PLAIN_NAME_RULE
 from slam.config.trees import check_finite
+from slam.readers.data_checks import MIN_BEAM_STEP_RAD
 from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
 from validation.base import bounds
 from validation.base.bounds import within
 from validation.base.yamlio import Strict
 
-Point = tuple[float, float]
+MAX_COORDINATE_M = 1e6
+"""How far from the origin of its ENU frame a scenario's world reaches (m): a
+site, not a continent (and the squares of 1e300 m overflow)."""
+Coordinate_m = Annotated[float, within(-MAX_COORDINATE_M, MAX_COORDINATE_M, "m", "a scenario's world is a site "
+                                       "within 1000 km of its origin", "a scenario's world is a site within 1000 km "
+                                       "of its origin")]
+Point = tuple[Coordinate_m, Coordinate_m]
 Polyline = Annotated[list[Point], Field(min_length=2)]
 Polygon = Annotated[list[Point], Field(min_length=3)]
 
@@ -65,7 +73,7 @@ class Disturber(Strict):
     in the world frame (normalised on load)."""
 
     name: str
-    position: tuple[float, float, float]
+    position: tuple[Coordinate_m, Coordinate_m, Coordinate_m]
     moment_A_m2: bounds.DipoleMoment_A_m2 = Field(gt=0.0)
     direction: tuple[float, float, float] = (0.0, 0.0, 1.0)
 
@@ -94,6 +102,9 @@ class WorldConfig(Strict):
 
 # --- robot ---------------------------------------------------------------
 
+MAX_SPEED_M_S = 50.0
+"""The fastest a simulated robot drives, on any leg (m/s)."""
+
 
 class RobotConfig(Strict):
     """A tracked vehicle driving through ``waypoints``: ``[x, y]``,
@@ -108,7 +119,7 @@ class RobotConfig(Strict):
     ] = Field(min_length=2)
     # What a ground robot can do: the fastest drive at tens of m/s and brake
     # at about 1 g; none turns faster than a gyro measures.
-    max_speed_m_s: Annotated[float, within(None, 50.0, "m/s", high="no ground robot drives at 180 km/h")] = Field(
+    max_speed_m_s: Annotated[float, within(None, MAX_SPEED_M_S, "m/s", high="no ground robot drives at 180 km/h")] = Field(
         0.5, gt=0.0)
     max_accel_m_s2: Annotated[float, within(None, 100.0, "m/s^2", high="ten times gravity: no ground robot's "
                                             "wheels or tracks grip that")] = Field(0.3, gt=0.0)
@@ -131,6 +142,13 @@ class RobotConfig(Strict):
             raise ValueError("a waypoint's pause (third value, s) must be >= 0")
         if any(len(w) == 4 and not w[3] > 0.0 for w in v):
             raise ValueError("a waypoint's leg speed (fourth value, m/s) must be > 0")
+        for i, w in enumerate(v):
+            if max(abs(w[0]), abs(w[1])) > MAX_COORDINATE_M:
+                raise ValueError(f"waypoint {i} at ({w[0]:g}, {w[1]:g}) m lies beyond {MAX_COORDINATE_M:g} m of the "
+                                 "origin: a scenario's world is a site within 1000 km of its origin")
+            if len(w) == 4 and w[3] > MAX_SPEED_M_S:
+                raise ValueError(f"waypoint {i}'s leg speed (fourth value) {w[3]:g} m/s is above {MAX_SPEED_M_S:g} "
+                                 "m/s: no ground robot drives at 180 km/h")
         return v
 
     @model_validator(mode="after")
@@ -161,6 +179,12 @@ class LaserConfig(Strict):
         if self.min_range_m >= self.max_range_m:
             raise ValueError(f"min_range_m {self.min_range_m:g} is not below max_range_m {self.max_range_m:g}: "
                              "the laser would return nothing")
+        # The same bound as on a recorded laser (slam.readers.data_checks): a
+        # simulated run must read back as a recording does.
+        step = self.fov_deg / (self.beams - 1)
+        if step < math.degrees(MIN_BEAM_STEP_RAD):
+            raise ValueError(f"fov_deg {self.fov_deg:g} over beams {self.beams} puts the beams {step:.3g} deg apart; "
+                             "no 2D laser resolves a thousandth of a degree")
         return self
 
 

@@ -3,7 +3,10 @@
 Walls and obstacle outlines become one array of segments ``(S, 2, 2)`` in
 the ENU world frame, metres. Doors cut gaps into the walls they lie on.
 Ray casting is vectorised over all beams x all segments near the sensor,
-which keeps a 10 Hz laser over a two-hour run within minutes.
+which keeps a 10 Hz laser over a two-hour run within minutes. It and the
+distance and region look-ups work in blocks of at most :data:`_BLOCK`
+tests, so that their memory does not grow with the world (a block's rows
+are computed exactly as the whole array's would be).
 """
 
 from __future__ import annotations
@@ -18,6 +21,13 @@ from slam.sim.scenario import Door, Region, RegionKind, WorldConfig
 log = logging.getLogger(__name__)
 
 _EPS = 1e-12
+_BLOCK = 1 << 20
+"""Most elementary tests (beam x segment, point x segment, point x corner) of one numpy block."""
+
+
+def _rows(n: int, width: int) -> range:
+    """Starts of the blocks of rows of an (n, width) array of tests."""
+    return range(0, n, max(1, _BLOCK // max(width, 1)))
 
 
 def _cut_doors(segments: list[np.ndarray], doors: list[Door]) -> list[np.ndarray]:
@@ -47,6 +57,9 @@ def _cut_doors(segments: list[np.ndarray], doors: list[Door]) -> list[np.ndarray
 
 def point_in_polygon(xy: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     """Even-odd rule for points ``xy`` (n, 2) in ``polygon`` (k, 2): (n,) bool."""
+    blocks = _rows(len(xy), len(polygon))
+    if len(blocks) > 1:
+        return np.concatenate([point_in_polygon(xy[i : i + blocks.step], polygon) for i in blocks])
     x, y = xy[:, 0:1], xy[:, 1:2]
     px, py = polygon[:, 0], polygon[:, 1]
     qx, qy = np.roll(px, -1), np.roll(py, -1)
@@ -61,6 +74,10 @@ def distance_to_segments(xy: np.ndarray, segments: np.ndarray) -> tuple[np.ndarr
     vector (n, 2) from that nearest point towards the query point."""
     if len(segments) == 0:
         return np.full(len(xy), np.inf), np.zeros((len(xy), 2))
+    blocks = _rows(len(xy), len(segments))
+    if len(blocks) > 1:
+        parts = [distance_to_segments(xy[i : i + blocks.step], segments) for i in blocks]
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
     a, b = segments[:, 0], segments[:, 1]
     d = b - a
     dd = np.maximum(np.sum(d * d, axis=1), _EPS)
@@ -76,6 +93,19 @@ def distance_to_segments(xy: np.ndarray, segments: np.ndarray) -> tuple[np.ndarr
     return best, away
 
 
+def wall_segments(cfg: WorldConfig) -> np.ndarray:
+    """The walls' and obstacles' segments (S, 2, 2) m, doors not cut, none of zero length."""
+    segs: list[np.ndarray] = []
+    for line in cfg.walls:
+        p = np.asarray(line, dtype=float)
+        segs += [p[i : i + 2] for i in range(len(p) - 1)]
+    for poly in cfg.obstacles:
+        p = np.asarray(poly, dtype=float)
+        p = np.vstack([p, p[:1]])
+        segs += [p[i : i + 2] for i in range(len(p) - 1)]
+    return np.asarray([s for s in segs if np.hypot(*(s[1] - s[0])) > 1e-9], dtype=float).reshape(-1, 2, 2)
+
+
 @dataclass
 class World:
     """Segments ``(S, 2, 2)`` m, their unit normals ``(S, 2)``, the regions
@@ -88,16 +118,7 @@ class World:
 
     @classmethod
     def from_config(cls, cfg: WorldConfig) -> "World":
-        segs: list[np.ndarray] = []
-        for line in cfg.walls:
-            p = np.asarray(line, dtype=float)
-            segs += [p[i : i + 2] for i in range(len(p) - 1)]
-        for poly in cfg.obstacles:
-            p = np.asarray(poly, dtype=float)
-            p = np.vstack([p, p[:1]])
-            segs += [p[i : i + 2] for i in range(len(p) - 1)]
-        segs = [s for s in segs if np.hypot(*(s[1] - s[0])) > 1e-9]
-        segs = _cut_doors(segs, cfg.doors)
+        segs = _cut_doors(list(wall_segments(cfg)), cfg.doors)
         segments = np.asarray(segs, dtype=float).reshape(-1, 2, 2)
         d = segments[:, 1] - segments[:, 0]
         normals = np.column_stack([-d[:, 1], d[:, 0]])
@@ -158,19 +179,10 @@ class World:
             return rng, hit
         a = self.segments[segs, 0] - origin  # (S, 2) relative to the sensor
         e = self.segments[segs, 1] - self.segments[segs, 0]
-        dx, dy = np.cos(angles)[:, None], np.sin(angles)[:, None]  # (B, 1)
-        # Solve origin + t*d = a + u*e for t >= 0, u in [0, 1] (Cramer's rule).
-        den = dx * e[None, :, 1] - dy * e[None, :, 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (a[None, :, 0] * e[None, :, 1] - a[None, :, 1] * e[None, :, 0]) / den
-            u = (a[None, :, 0] * dy - a[None, :, 1] * dx) / den
-        valid = (np.abs(den) > _EPS) & (t > 0.0) & (u >= 0.0) & (u <= 1.0)
-        t = np.where(valid, t, np.inf)
-        k = np.argmin(t, axis=1)
-        best = t[np.arange(len(angles)), k]
-        ok = best <= max_range
-        rng[ok] = best[ok]
-        hit[ok] = segs[k[ok]]
+        blocks = _rows(len(angles), len(segs))
+        for i in blocks:
+            rng[i : i + blocks.step], hit[i : i + blocks.step] = _first_hits(a, e, segs, angles[i : i + blocks.step],
+                                                                             max_range)
         return rng, hit
 
     def _near(self, origin: np.ndarray, radius: float) -> np.ndarray:
@@ -178,6 +190,38 @@ class World:
         if len(self.segments) == 0:
             return np.zeros(0, dtype=int)
         return np.flatnonzero(_segment_distances(origin, self.segments) <= radius)
+
+
+def _first_hits(a: np.ndarray, e: np.ndarray, segs: np.ndarray, angles: np.ndarray,
+                max_range: float) -> tuple[np.ndarray, np.ndarray]:
+    """Range (B,) m and segment index (B,) of the first of the segments
+    ``segs`` (starts ``a`` relative to the sensor, directions ``e``, (S, 2))
+    hit along each of ``angles`` (B,) rad; inf and -1 for none."""
+    rng = np.full(len(angles), np.inf)
+    hit = np.full(len(angles), -1)
+    dx, dy = np.cos(angles)[:, None], np.sin(angles)[:, None]  # (B, 1)
+    # Solve origin + t*d = a + u*e for t >= 0, u in [0, 1] (Cramer's rule).
+    den = dx * e[None, :, 1] - dy * e[None, :, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (a[None, :, 0] * e[None, :, 1] - a[None, :, 1] * e[None, :, 0]) / den
+        u = (a[None, :, 0] * dy - a[None, :, 1] * dx) / den
+    valid = (np.abs(den) > _EPS) & (t > 0.0) & (u >= 0.0) & (u <= 1.0)
+    t = np.where(valid, t, np.inf)
+    k = np.argmin(t, axis=1)
+    best = t[np.arange(len(angles)), k]
+    ok = best <= max_range
+    rng[ok] = best[ok]
+    hit[ok] = segs[k[ok]]
+    return rng, hit
+
+
+def segments_near_count(segments: np.ndarray, points: np.ndarray, radius: float) -> float:
+    """How many of ``segments`` (S, 2, 2) lie within ``radius`` m of
+    ``points`` (n, 2), on average: the segments a laser of that range casts
+    its beams against there."""
+    if len(segments) == 0 or len(points) == 0:
+        return 0.0
+    return float(np.mean([np.count_nonzero(_segment_distances(p, segments) <= radius) for p in points]))
 
 
 def _segment_distances(p: np.ndarray, segments: np.ndarray) -> np.ndarray:

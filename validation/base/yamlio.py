@@ -62,14 +62,47 @@ def check_regular_file(path: str | Path, what: str = "file") -> int:
     return st.st_size
 
 
+def unique_keys(pairs: list[tuple[str, object]]) -> dict:
+    """A JSON object from its ``pairs``, as ``json.loads``'s
+    ``object_pairs_hook``: a key given twice is a ValueError naming it
+    (``json`` keeps the last in silence; YAML here refuses it too)."""
+    out: dict = {}
+    for key, value in pairs:
+        if key in out:
+            raise ValueError(f"key {key!r} given twice in one JSON object")
+        out[key] = value
+    return out
+
+
+def wide_encoding(data: bytes) -> str | None:
+    """``UTF-16`` or ``UTF-32`` if ``data`` is text in one of them, by its
+    byte-order mark or, without one, by the zero bytes of ASCII characters
+    at every second (fourth) place of its first bytes; else None."""
+    if data.startswith((b"\xff\xfe\x00\x00", b"\x00\x00\xfe\xff")):
+        return "UTF-32"
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return "UTF-16"
+    head = data[:512]
+    if len(head) < 8:
+        return None
+    for width, name in ((4, "UTF-32"), (2, "UTF-16")):
+        head = head[: len(head) // width * width]
+        lanes = [head[i::width] for i in range(width)]
+        text = [i for i, lane in enumerate(lanes) if lane.count(0) < len(lane) // 2]
+        if len(text) == 1 and all(not any(lane) for i, lane in enumerate(lanes) if i != text[0]):
+            return name
+    return None
+
+
 def decode_text(data: bytes, source: str, what: str = "file", kind: str = "text") -> str:
     """UTF-8 text (a leading byte-order mark dropped), with a one-line
-    error that says what the bytes are: binary, UTF-16, or text with a byte
+    error that says what the bytes are: binary, UTF-16 or UTF-32, or text with a byte
     that is not UTF-8 (Latin-1?) at a line."""
     if data.startswith(_BOM):
         data = data[len(_BOM):]
-    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
-        raise ValidationError(f"{source}: UTF-16 text; expected a {kind} {what} in UTF-8 (save it as UTF-8)")
+    wide = wide_encoding(data)
+    if wide is not None:
+        raise ValidationError(f"{source}: {wide} text; expected a {kind} {what} in UTF-8 (save it as UTF-8)")
     if b"\0" in data:
         raise ValidationError(f"{source}: binary content; expected a {kind} {what} (text)")
     try:

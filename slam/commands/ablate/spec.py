@@ -62,13 +62,30 @@ class RandomSweep(StrictFrozen):
     params: dict[str, Distribution] = Field(min_length=1)
 
 
+Axis = Annotated[list[Any], Field(min_length=1)]
+"""The values one key is swept over: an empty list would sweep nothing and
+leave the key at the config's value in silence."""
+
+
+def _grid_form(value: Any) -> str:
+    return "[list]" if isinstance(value, list) else "[mapping]"
+
+
+# One grid or a list of them, told apart by their form as Seeds are below,
+# so that an error names the key of the form given (sweep.grid.1.KEY).
+Grid = Annotated[
+    Annotated[dict[str, Axis], Tag("[mapping]")] | Annotated[list[dict[str, Axis]], Tag("[list]")],
+    Discriminator(_grid_form),
+]
+
+
 class SweepSpec(StrictFrozen):
     """``grid``: a mapping key -> values (their full product), or a list of
     such mappings (the union of their products: one-at-a-time sweeps).
     ``random``: seeded random samples. With both, every grid point is
     combined with every random sample."""
 
-    grid: dict[str, list[Any]] | list[dict[str, list[Any]]] = Field(default_factory=dict)
+    grid: Grid = Field(default_factory=dict)
     random: RandomSweep | None = None
 
     def grids(self) -> list[dict[str, list[Any]]]:
@@ -167,7 +184,7 @@ class AblationSpec(StrictFrozen):
     isolation precision and recall, faults missed, runtime).
     """
 
-    name: str
+    name: str = Field(min_length=1)
     description: str = ""
     config: Path
     inputs: InputsSpec

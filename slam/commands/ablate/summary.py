@@ -25,6 +25,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from slam.errors import GslamError
+from validation.base.yamlio import unique_keys
 from slam.outputs import report
 from slam.commands.ablate.jobs import Job
 from slam.commands.ablate.spec import AblationSpec
@@ -101,7 +102,7 @@ def _job_json(path: Path, remove: Path) -> dict[str, Any]:
     writes (edited, or not gslam's), and what to remove to run the job
     again."""
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(), object_pairs_hook=unique_keys)
         why = None if isinstance(data, dict) else f"a JSON {type(data).__name__}"
     except ValueError as e:  # not UTF-8, not JSON
         why = f"invalid JSON ({str(e).splitlines()[0]})"

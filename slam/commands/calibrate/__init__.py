@@ -38,6 +38,7 @@ from slam.commands.calibrate.heading import HeadingOffset, learn_heading_offset
 from slam.commands.calibrate.lags import LagEstimate, learn_lags
 from slam.commands.calibrate.noise import CompassNoise, learn_compass_noise
 from slam.commands.calibrate.propose import Proposal, propose
+from slam.commands.calibrate.distinct import distinct_runs
 from slam.commands.calibrate.runs import CalibrationRun, load_run, parse_clean
 from slam.commands.calibrate.select import (CheckChoice, Choice, FieldGyroChoice, calibrate_field_gyro, calibrate_magnetometer,
                                    calibrate_relation)
@@ -54,6 +55,8 @@ log = logging.getLogger(__name__)
 
 DEFAULT_FALSE_ALARM = 0.005
 """Share of a run's validation steps with a false alarm that calibration aims at."""
+MIN_FALSE_ALARM, MAX_FALSE_ALARM = 1e-6, 0.5
+"""The shares ``--false-alarm`` may ask for."""
 
 
 @dataclass
@@ -103,9 +106,12 @@ def calibrate(
     out the relations the data do not support (:mod:`slam.commands.calibrate.support`)."""
     if not runs:
         raise GslamError("gslam calibrate: no run given")
-    if not 0.0 < false_alarm < 1.0:
-        raise GslamError(f"--false-alarm {false_alarm:g}: expected a share of steps between 0 and 1, e.g. 0.005")
+    if not MIN_FALSE_ALARM <= false_alarm <= MAX_FALSE_ALARM:
+        raise GslamError(f"--false-alarm {false_alarm:g}: expected a share of steps from {MIN_FALSE_ALARM:g} (one "
+                         f"false alarm in a million steps; no run tells a smaller share from none) to "
+                         f"{MAX_FALSE_ALARM:g} (half the steps alarmed validates nothing), e.g. 0.005")
     out = check_new_file(out, [*runs, *config_files(config_path)], force, command="calibrate")
+    runs = distinct_runs(runs)
     stretch = parse_clean(clean)
     config = load_config(config_path, list(overrides))
     vcfg, _ = validation_sections(config)

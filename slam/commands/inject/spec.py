@@ -162,6 +162,9 @@ def parse_fault(text: str) -> Fault:
         key, eq, value = item.partition("=")
         if not eq or not key.strip():
             raise GslamError(f"{where}: expected param=value, got '{item}'")
+        if key.strip() in data:  # the last would win in silence, over the interval's own too
+            given = " (KIND@T0:T1 gives it)" if key.strip() in ("kind", "start_s", "end_s") else ""
+            raise GslamError(f"{where}: '{key.strip()}' given twice{given}")
         data[key.strip()] = value.strip()
     model = KINDS[kind]
     try:
