@@ -919,6 +919,8 @@ ERRORS: list[Case] = [
         ("loop-weight-1e300", "loop 9.0 1.0 1e300", "loop line #1: weight 1e+300; expected 0 to 1e+06"),
         ("loop-weight-negative", "loop 9.0 1.0 -1", "loop line #1: weight -1; expected 0 to 1e+06"),
         ("loop-after-the-log", "loop 9.0 1e6 1", "loop line #1: t_other 1e+06 s is outside the odom2 lines' 0 to 9.9 s"),
+        ("loop-from-a-pose-to-itself", "loop 9.0 1.0 1\nloop 5.0 5.0 1",
+         "loop line #2: t and t_other are both 5 s, a pose joined to itself"),
         ("loop-weight-nan", "loop 9.0 1.0 nan", "X_Input.txt:101: expected loop t t_other weight"),
     )),
     Case("librsf-ground-truth-goes-back", LIBRSF, "X_GT.txt: point2 line #51: expected increasing times",

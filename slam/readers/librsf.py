@@ -152,14 +152,20 @@ the Corridor's last loop is 0.2 s after its last odom2 line."""
 
 def _physical_loops(path: Path, loops: np.ndarray, t: np.ndarray) -> None:
     """One-line errors for loop lines that cannot be: a weight below 0 or
-    beyond :data:`MAX_LOOP_WEIGHT`, stamps outside the odometry's span by
-    more than :data:`LOOP_STAMP_SLACK_S` (another log's, or another unit)."""
+    beyond :data:`MAX_LOOP_WEIGHT`, a pose joined to itself (t equal to
+    t_other says nothing), stamps outside the odometry's span by more than
+    :data:`LOOP_STAMP_SLACK_S` (another log's, or another unit)."""
     weight = loops[:, 2]
     bad = (weight < 0.0) | (weight > MAX_LOOP_WEIGHT)
     if bad.any():
         k = int(np.argmax(bad))
         raise GslamError(f"{path}: loop line #{k + 1}: weight {weight[k]:g}; expected 0 to {MAX_LOOP_WEIGHT:g} (it "
                          "scales the loop's information)")
+    same = loops[:, 0] == loops[:, 1]
+    if same.any():
+        k = int(np.argmax(same))
+        raise GslamError(f"{path}: loop line #{k + 1}: t and t_other are both {loops[k, 0]:g} s, a pose joined to "
+                         "itself; expected the times of two visits to one place")
     lo, hi = t[0] - LOOP_STAMP_SLACK_S, t[-1] + LOOP_STAMP_SLACK_S
     outside = (loops[:, :2] < lo) | (loops[:, :2] > hi)
     if outside.any():
