@@ -1057,7 +1057,19 @@ ERRORS: list[Case] = [
       for name, old, new, says in (
           ("stamp-inf", " 1000.000000 host 1000.000000", " inf host inf", "c.log:1: expected finite numbers in FLASER"),
           ("odometry-theta-inf", "ODOM 0.000 0 0", "ODOM 0.000 0 inf", "c.log:2: expected finite numbers in ODOM"),
+          # fields the reader does not use are a corrupt line all the same, and the error names the field
+          ("odometry-velocity-nan", "ODOM 0.000 0 0 0 0 0", "ODOM 0.000 0 0 nan 0 0",
+           "c.log:2: expected finite numbers in ODOM x y theta tv rv accel ts host logger_ts; tv is nan"),
+          ("odometry-rotation-rate-inf", "ODOM 0.100 0 0 0 0 0", "ODOM 0.100 0 0 0 -inf 0", "c.log:3: expected finite "
+           "numbers in ODOM x y theta tv rv accel ts host logger_ts; rv is -inf"),
+          ("odometry-stamp-nan", "0 0 0 1000.250000 host", "0 0 0 NaN host", "c.log:3: expected finite numbers in ODOM "
+           "x y theta tv rv accel ts host logger_ts; ts is NaN"),
+          ("range-nan-named", "FLASER 181 ", "FLASER 181 nan ", "c.log:1: expected finite numbers in FLASER n r_1..r_n x "
+           "y theta odom_x odom_y odom_theta ts host logger_ts; r_1 is nan"),
       )),
+    Case("carmen-robotlaser-accuracy-nan", CARMEN, "c.log:1: expected finite numbers in ROBOTLASER1 type start fov "
+         "resolution max_range accuracy mode n r_1..r_n m rem_1..rem_m poses ... ts; accuracy is nan",
+         carmen(robotlaser=(-1.57, 3.14, 0.0174), encoding=lambda s: s.replace(" 50 0.01 0 181", " 50 nan 0 181").encode())),
     Case("librsf-variance-inf", LIBRSF, "X_Input.txt:6: expected odom2 t vx vy wz var_vx var_vy var_wz",
          text("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} 0.5 0 0.01 {'inf' if k == 5 else '0.01'} 0.01 0.01\n"
                                      for k in range(50)))),
