@@ -1133,6 +1133,26 @@ ERRORS: list[Case] = [
     Case("ablate-resumed-metrics-key-twice", ("ablate", "{spec}", "--out", "{d}/o"),
          "metrics.json: expected the JSON object gslam writes, found invalid JSON (key 'ate_rmse_m' given twice",
          finished_sweep('{"ate_rmse_m": 0.1, "ate_rmse_m": 1e9}')),
+    # -- the sixth attack: a key given twice inside what a merge key (<<) brings, which PyYAML flattens unseen --
+    Case("config-merge-brings-a-key-twice", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: line 3: key 'sigma_yaw_deg' given twice (earlier on the same line)",
+         text("c.yaml", "backend:\n  factors:\n    compass: {<<: {sigma_yaw_deg: 300, sigma_yaw_deg: 3}}\n")),
+    Case("config-merge-list-brings-a-key-twice", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: line 4: key 'distance_m' given twice (first on line 3)",
+         text("c.yaml", "keyframes:\n  <<: [{period_s: 0.5},\n        {distance_m: 0.2,\n         distance_m: 20}]\n")),
+    Case("scenario-merge-brings-a-key-twice", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "s.yaml: line 2: key 'max_speed_m_s' given twice",
+         lambda d, w: (d / "s.yaml").write_text("robot:\n  <<: {max_speed_m_s: 0.4, max_speed_m_s: 40}\n"
+                                                + w.scenario.read_text().replace("robot:\n", "", 1))),
+    Case("variants-merge-brings-a-key-twice", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml",
+                                               "--out", "{d}/o"), "v.yaml: line 1: key 'validation.mode' given twice",
+         text("v.yaml", "a: {<<: {validation.mode: 'off', validation.mode: 'on'}}\n")),
+    Case("set-merge-brings-a-key-twice", (*MAP, "--out", "{d}/o", "--set",
+                                          "backend.factors.compass={{<<: {{sigma_yaw_deg: 300, sigma_yaw_deg: 3}}}}"),
+         "key 'sigma_yaw_deg' given twice"),
+    Case("config-merges-itself", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: line 2: invalid YAML (a mapping merges itself (<<: an alias of its own anchor))",
+         text("c.yaml", "backend: &b\n  <<: *b\n")),
 ]
 
 
