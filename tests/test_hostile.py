@@ -1153,6 +1153,26 @@ ERRORS: list[Case] = [
     Case("config-merges-itself", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
          "c.yaml: line 2: invalid YAML (a mapping merges itself (<<: an alias of its own anchor))",
          text("c.yaml", "backend: &b\n  <<: *b\n")),
+    # -- values one step (ulp) past a bound: the message shows the value, not the bound it passes --
+    *(Case(f"set-{key}-one-ulp-past-its-bound", (*MAP, *extra, "--out", "{d}/o", "--set", f"{key}={value!r}"), says)
+      for key, extra, value, says in (
+          ("keyframes.period_s", (), float(np.nextafter(1e-4, 0)),
+           "keyframes.period_s: 9.999999999999999e-05 s is below 0.0001 s"),
+          ("output.map_voxel_m", (), float(np.nextafter(100.0, 200)), "output.map_voxel_m: 100.00000000000001 m is above 100 m"),
+          ("gating.inflation", ("--gating", "on"), float(np.nextafter(1e3, 2e3)),
+           "inflation: 1000.0000000000001 is above 1000"),
+          ("backend.factors.odometry.sigma_xy_m", (), float(np.nextafter(1e-4, 0)),
+           "sigma_xy_m: 9.999999999999999e-05 m is below 0.0001 m"),
+      )),
+    Case("relation-k-sigma-one-ulp-below-its-bound", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "relations.5.k_sigma: 0.49999999999999994 sigmas is below 0.5 sigmas",
+         config(relation(5, k_sigma=float(np.nextafter(0.5, 0))))),
+    Case("scenario-leg-speed-one-ulp-past-its-bound", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "leg speed (fourth value) 50.00000000000001 m/s is above 50 m/s",
+         scenario(lambda t: t["robot"]["waypoints"].__setitem__(1, [1.0, 1.2, 0.0, float(np.nextafter(50.0, 100))]))),
+    Case("librsf-speed-one-ulp-past-its-bound", LIBRSF, "odom2 line #3: speed 100.00000000000001 m/s",
+         text("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} {'100.00000000000001' if k == 2 else '0.5'} 0 0 0.01 0.01 0.01\n"
+                                     for k in range(50)))),
 ]
 
 

@@ -37,6 +37,7 @@ import numpy as np
 
 from slam.config import InputConfig
 from slam.errors import GslamError
+from validation.base.bounds import shown_beside
 from validation.base.geometry import wrap_angle
 from slam.readers.carmen import chain_steps
 from slam.readers.files import SNIFF_BYTES, check_exists, decode_log, sniff_log
@@ -131,7 +132,7 @@ def _physical_odometry(path: Path, rows: np.ndarray) -> None:
     speed = np.hypot(rows[:, 1], rows[:, 2])
     if np.any(speed > MAX_SPEED_M_S):
         k = int(np.argmax(speed > MAX_SPEED_M_S))
-        raise GslamError(f"{path}: odom2 line #{k + 1}: speed {speed[k]:.3g} m/s (vx {rows[k, 1]:g}, vy {rows[k, 2]:g}); "
+        raise GslamError(f"{path}: odom2 line #{k + 1}: speed {shown_beside(speed[k], MAX_SPEED_M_S)} m/s (vx {rows[k, 1]:g}, vy {rows[k, 2]:g}); "
                          f"no ground robot drives faster than {MAX_SPEED_M_S:g} m/s (expected m/s)")
     for column, name in zip((4, 5, 6), _VARIANCES):
         if np.any(rows[:, column] < 0.0):
