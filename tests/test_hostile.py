@@ -318,6 +318,17 @@ def librsf_with(loops: str, groundtruth: str | None = None) -> Callable[[Path, W
     return make
 
 
+def _listing(files: Callable[[Path], list[str]]) -> Callable[[Path], None]:
+    """A run folder change: its bag's metadata.yaml lists ``files(bag)``."""
+
+    def change(run: Path) -> None:
+        meta = yaml.safe_load((run / "bag" / "metadata.yaml").read_text())
+        meta["rosbag2_bagfile_information"]["relative_file_paths"] = files(run / "bag")
+        (run / "bag" / "metadata.yaml").write_text(yaml.safe_dump(meta))
+
+    return change
+
+
 def _covariance(variance: float) -> Callable[[float, object], None]:
     def change(t: float, msg) -> None:
         msg.position_covariance[0] = msg.position_covariance[4] = variance
@@ -1173,6 +1184,23 @@ ERRORS: list[Case] = [
     Case("librsf-speed-one-ulp-past-its-bound", LIBRSF, "odom2 line #3: speed 100.00000000000001 m/s",
          text("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} {'100.00000000000001' if k == 2 else '0.5'} 0 0 0.01 0.01 0.01\n"
                                      for k in range(50)))),
+    # -- a ROS 2 bag whose metadata.yaml lists files that are not its own --
+    *(Case(f"bag-metadata-{name}", argv, f"metadata.yaml: relative_file_paths lists {says}", copy_run(_listing(change)))
+      for name, argv, change, says in (
+          ("lists-a-file-up", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), lambda b: ["../truth.json"],
+           "'../truth.json', which is not the name of a file in the bag's folder"),
+          ("lists-an-absolute-path", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), lambda b: ["/etc/passwd"],
+           "'/etc/passwd', which is not the name of a file in the bag's folder"),
+          ("lists-another-recording", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"),
+           lambda b: shutil.copy(b / "bag.db3", b.parent / "other.db3") and ["../other.db3"], "'../other.db3', which is not"),
+          ("lists-a-missing-file", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), lambda b: ["bag.db3", "bag_1.db3"],
+           "'bag_1.db3', which is no file in"),
+          ("lists-a-folder", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"),
+           lambda b: (b / "sub").mkdir() or ["sub"], "'sub', which is no file in"),
+          ("inspect-lists-a-file-up", ("inspect", "{d}/run"), lambda b: ["../scenario.yaml"], "'../scenario.yaml', which is not"),
+          ("inject-lists-another-recording", ("inject", "{d}/run", "--fault", "gyro_bias@2:4", "--out", "{d}/o"),
+           lambda b: shutil.copy(b / "bag.db3", b.parent / "other.db3") and ["../other.db3"], "'../other.db3', which is not"),
+      )),
 ]
 
 
