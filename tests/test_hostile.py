@@ -305,6 +305,17 @@ def finished_sweep(metrics: str) -> Callable[[Path, World], None]:
     return make
 
 
+def earlier_result(command: str) -> Callable[[Path, World], None]:
+    """``gslam map`` or ``compare`` (ungated) of the run into ``{d}/r``."""
+
+    def make(d: Path, world: World) -> None:
+        only = ("--only", "ungated") if command == "compare" else ()
+        assert main(["-q", command, str(world.run), "--config", str(TELEMAX_CONFIG), *only, *QUICK, "--out",
+                     str(d / "r")]) == 0
+
+    return make
+
+
 def librsf_with(loops: str, groundtruth: str | None = None) -> Callable[[Path, World], None]:
     """A libRSF log of 10 s (odom2 lines, a turn in the middle), ``loops``
     lines after them, and ``groundtruth`` as its X_GT.txt if given."""
@@ -1200,6 +1211,18 @@ ERRORS: list[Case] = [
           ("inspect-lists-a-file-up", ("inspect", "{d}/run"), lambda b: ["../scenario.yaml"], "'../scenario.yaml', which is not"),
           ("inject-lists-another-recording", ("inject", "{d}/run", "--fault", "gyro_bias@2:4", "--out", "{d}/o"),
            lambda b: shutil.copy(b / "bag.db3", b.parent / "other.db3") and ["../other.db3"], "'../other.db3', which is not"),
+      )),
+    # -- a result folder of gslam's given back as the recording ('run.mcap: scan topic not in the bag' before) --
+    *(Case(f"{name}-of-a-{made}-result", argv if name == "inspect" else (*argv, "--out", "{d}/o"),
+           f"r: a gslam {made} result (its output), not a recording; give the recording it was made from, ",
+           earlier_result(made))
+      for name, argv, made in (
+          ("map", ("map", "{d}/r", "--config", "{cfg}"), "map"),
+          ("compare", ("compare", "{d}/r", "--config", "{cfg}", "--only", "ungated"), "compare"),
+          ("calibrate", ("calibrate", "{d}/r", "--config", "{cfg}"), "map"),
+          ("inject", ("inject", "{d}/r", "--fault", "gyro_bias@2:4"), "map"),
+          ("inspect", ("inspect", "{d}/r"), "map"),
+          ("map", ("map", "{d}/r", "--config", "{cfg}"), "compare"),
       )),
 ]
 
