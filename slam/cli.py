@@ -4,6 +4,7 @@ library; every command is a library function returning a result object."""
 from __future__ import annotations
 
 import argparse
+import codecs
 import json
 import logging
 import math
@@ -468,6 +469,23 @@ def _working_folder_exists() -> bool:
     return True
 
 
+def _as_given_or_escaped(err: UnicodeError) -> tuple[str | bytes, int]:
+    """Encoding errors on the terminal: a path's bytes that were no text in
+    the locale (Python holds them as lone surrogates) go out as the bytes
+    the user gave, as the shell shows them; any other character the
+    terminal cannot encode as a backslash escape."""
+    if not isinstance(err, UnicodeEncodeError):
+        raise err
+    part = err.object[err.start : err.end]
+    if all(0xDC80 <= ord(c) <= 0xDCFF for c in part):
+        return bytes(ord(c) - 0xDC00 for c in part), err.end
+    return codecs.backslashreplace_errors(err)
+
+
+_TERMINAL_ERRORS = "gslam-terminal"
+codecs.register_error(_TERMINAL_ERRORS, _as_given_or_escaped)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     args.command_line = shlex.join(["gslam", *(sys.argv[1:] if argv is None else argv)])  # as results name it
@@ -481,7 +499,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     for stream in (sys.stdout, sys.stderr):  # a Latin-1 terminal cannot encode a path named in Greek
         if hasattr(stream, "reconfigure"):
-            stream.reconfigure(errors="backslashreplace")
+            stream.reconfigure(errors=_TERMINAL_ERRORS)
     received: list[int] = []
     if sys.stdout is not None and not isinstance(sys.stdout, _WatchedStdout):
         sys.stdout = _WatchedStdout(sys.stdout)

@@ -1559,3 +1559,25 @@ def test_a_removed_working_folder_is_one_line_before_any_work(command: str, worl
     assert (done.returncode, done.stderr) == (1, "gslam: error: the current folder no longer exists (removed while a "
                                                  "shell was in it); cd to a folder that does and run again\n")
     assert list(out.iterdir()) == []
+
+
+@pytest.mark.parametrize("encoding", [None, "latin-1"])
+def test_a_path_in_a_c_locale_is_named_by_the_bytes_given(encoding: str | None, world: World, tmp_path: Path):
+    """Under LC_ALL=C without Python's UTF-8 mode, a path's non-ASCII bytes
+    are no text: the error and the 'wrote' line named them as Python's
+    escapes ('\\udcc3\\udcb1'), a name the user never typed; they name the
+    bytes given, as the shell shows them, and the result goes where it was
+    asked to."""
+    env = {**os.environ, "PYTHONPATH": str(REPO), "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0"}
+    env.pop("PYTHONIOENCODING", None)
+    if encoding is not None:
+        env["PYTHONIOENCODING"] = encoding
+    missing, out = os.fsencode(tmp_path) + "/ñone".encode(), os.fsencode(tmp_path) + "/résultat→".encode()
+    gslam = [sys.executable, "-m", "slam.cli"]
+    done = subprocess.run([*gslam, "-q", "map", missing, "--config", str(TELEMAX_CONFIG), "--out", os.fsencode(tmp_path / "o")],
+                          capture_output=True, env=env, timeout=TIME_LIMIT_S)
+    assert (done.returncode, done.stderr) == (1, b"gslam: error: " + missing + b": no such file or directory\n")
+    done = subprocess.run([*gslam, "map", str(world.run), "--config", str(TELEMAX_CONFIG), *QUICK, "--out", out],
+                          capture_output=True, env=env, timeout=TIME_LIMIT_S)
+    assert done.returncode == 0 and done.stdout.startswith(b"wrote " + out + b"\n"), done
+    assert os.listdir(os.fsencode(tmp_path)) == ["résultat→".encode()]
