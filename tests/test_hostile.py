@@ -1453,6 +1453,21 @@ def test_a_terminated_sweep_stops_its_workers_at_once(world: World, tmp_path: Pa
     assert time.monotonic() - start < 10
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupted_sweep_leaves_no_half_written_job(sig: int, world: World, tmp_path: Path):
+    """A sweep stopped while a worker writes a job: the workers were ended
+    and the job's temporary folder left in jobs/ for the next run to find;
+    the sweep removes it once its workers are gone."""
+    proc = _gslam(["ablate", world.spec, "--out", tmp_path / "sweep"], tmp_path)
+    _wait_for(lambda: any("jobs" in p.parts for p in _temps(tmp_path)), proc)
+    assert proc.poll() is None, proc.communicate()[1]
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=30)
+    what = "interrupted" if sig == signal.SIGINT else "terminated (SIGTERM)"
+    assert proc.returncode == 128 + sig and _said(err) == f"gslam: {what}\n", err
+    assert not _temps(tmp_path)
+
+
 def test_a_killed_runs_temporary_folder_goes_with_the_next_run_into_its_folder(world: World, tmp_path: Path, capsys):
     proc = _gslam(["compare", world.run, "--config", TELEMAX_CONFIG, "--only", "ungated", "--out", tmp_path / "a"], tmp_path)
     _wait_for(lambda: bool(_temps(tmp_path)), proc)
