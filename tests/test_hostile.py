@@ -1596,3 +1596,23 @@ def test_a_path_in_a_c_locale_is_named_by_the_bytes_given(encoding: str | None, 
                           capture_output=True, env=env, timeout=TIME_LIMIT_S)
     assert done.returncode == 0 and done.stdout.startswith(b"wrote " + out + b"\n"), done
     assert os.listdir(os.fsencode(tmp_path)) == ["résultat→".encode()]
+
+
+@pytest.mark.parametrize("command", ["map", "map-again", "simulate", "inject", "compare", "calibrate", "inspect"])
+def test_an_out_name_near_the_file_systems_limit_is_written(command: str, world: World, tmp_path: Path, capsys):
+    """A result's name of 250 bytes is a valid file name (at most 255), but
+    the temporary name built beside it ('.NAME.gslam-tmp-PID-HOST-TAG')
+    was not: every command said '--out cannot be written: ... (File name
+    too long)' about a name the user may give. The temporary name keeps
+    only the start of a long name."""
+    long = tmp_path / ("r" * 246 + (".yaml" if command in ("calibrate", "inspect") else ""))
+    cfg = ("--config", str(TELEMAX_CONFIG))
+    argv = {"map": ["map", world.run, *cfg, *QUICK, "--out"], "map-again": ["map", world.run, *cfg, *QUICK, "--out"],
+            "simulate": ["simulate", world.scenario, "--out"],
+            "inject": ["inject", world.run, "--fault", "gyro_bias@2:4", "--out"],
+            "compare": ["compare", world.run, *cfg, "--only", "ungated", *QUICK, "--out"],
+            "calibrate": ["calibrate", world.run, *cfg, "--clean", "0:10", "--out"],
+            "inspect": ["inspect", world.run, "--config-out"]}[command]
+    for _ in range(2 if command == "map-again" else 1):
+        assert main(["-q", *map(str, argv), str(long)]) == 0, capsys.readouterr().err
+    assert [p.name for p in tmp_path.iterdir()] == [long.name]
