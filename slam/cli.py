@@ -510,7 +510,7 @@ def main(argv: list[str] | None = None) -> int:
         # (a destructor, a callback) stopped nothing: the command finished.
         return _stopped(received[0]) if received else code
     except InputError as e:
-        print(f"gslam: error: {_one_line(str(e))}", file=sys.stderr)
+        print(f"gslam: error: {_shortened(_one_line(str(e)))}", file=sys.stderr)
         return 1
     except BrokenPipeError:  # the reader left (gslam inspect ... | head): no more to say
         return reader_left()
@@ -588,6 +588,19 @@ class _WatchedStdout:
 
 def _one_line(text: str) -> str:
     return " ".join(text.split("\n"))
+
+
+LONGEST_WORD = 400
+"""Characters of one word of an error line shown whole: a key, a name or a
+value of the input echoed back (a 1 MB key was a 1 MB line)."""
+
+
+def _shortened(line: str) -> str:
+    """``line`` with each word longer than :data:`LONGEST_WORD` cut to its
+    start and end and its length, so that an echoed input leaves the
+    message readable."""
+    words = line.split(" ")
+    return " ".join(w if len(w) <= LONGEST_WORD else f"{w[:200]}...({len(w):,} characters)...{w[-60:]}" for w in words)
 
 
 def _say(text: str) -> None:

@@ -58,6 +58,7 @@ from tests.test_fuzz import (  # noqa: F401 - world is a fixture
 pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
 
 TIME_LIMIT_S = 60
+LONGEST_LINE = 2000  # characters of an error line: what it echoes of the input is cut to its start and end
 MAP = ("map", "{run}", "--config", "{cfg}")
 QUICK = ("--set", "output.plots=false")
 
@@ -1224,6 +1225,17 @@ ERRORS: list[Case] = [
           ("inspect", ("inspect", "{d}/r"), "map"),
           ("map", ("map", "{d}/r", "--config", "{cfg}"), "compare"),
       )),
+    # -- an input echoed back in the error line: a 1 MB key was a 1 MB line; a long word keeps its start and end --
+    Case("config-unknown-key-of-a-megabyte", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: unknown config key 'kkkkk", text("c.yaml", "? " + "k" * 1_000_000 + "\n: 1\n")),
+    Case("set-value-of-100-kb", (*MAP, "--out", "{d}/o", "--set", "backend.optimizer=" + "i" * 100_000),
+         "...(100,019 characters)...iiii"),
+    Case("variant-name-of-a-megabyte", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+         "v.yaml: variant 'vvv", text("v.yaml", "? " + "v" * 1_000_000 + "\n: {validation.mode: 'off'}\n")),
+    Case("compare-only-of-100-kb", ("compare", "{run}", "--config", "{cfg}", "--only", "x" * 100_000, "--out", "{d}/o"),
+         "unknown variant 'xxx"),
+    Case("inject-fault-parameter-of-100-kb", ("inject", "{run}", "--fault", "gyro_bias@2:4," + "b" * 100_000 + "=1", "--out",
+                                              "{d}/o"), "unknown parameter 'bbb"),
 ]
 
 
@@ -1332,6 +1344,7 @@ def test_hostile_input_gives_one_clean_error(case: Case, world: World, tmp_path:
     code, err, leaked = _run(expand(case.argv, d, world), capsys)
     assert code == case.code, f"exit {code}: {err[-800:]}"
     check_error_output(code, err, case)
+    assert max(map(len, err.splitlines())) <= LONGEST_LINE, f"a line of {max(map(len, err.splitlines())):,} characters"
     assert not leaked, [str(w.message) for w in leaked]
     assert checksums(*watched) == before, "an input changed, or something was left behind"
 
