@@ -1234,6 +1234,18 @@ ERRORS: list[Case] = [
          "v.yaml: variant 'vvv", text("v.yaml", "? " + "v" * 1_000_000 + "\n: {validation.mode: 'off'}\n")),
     Case("compare-only-of-100-kb", ("compare", "{run}", "--config", "{cfg}", "--only", "x" * 100_000, "--out", "{d}/o"),
          "unknown variant 'xxx"),
+    # -- a bag's metadata.yaml as hostile YAML: rosbags reads it, one line each (passed before; kept so none turns
+    # -- into a traceback or a run of another file)
+    *(Case(f"bag-metadata-{name}", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), says,
+           copy_run(lambda r, change=change: (r / "bag" / "metadata.yaml").write_text(
+               change((r / "bag" / "metadata.yaml").read_text()))))
+      for name, change, says in (
+          ("key-twice", lambda m: m.replace("  storage_identifier: sqlite3\n",
+                                            "  storage_identifier: sqlite3\n  storage_identifier: mcap\n"),
+           "metadata.yaml: while constructing a mapping"),
+          ("python-tag", lambda m: m + "z: !!python/object/apply:os.system ['true']\n",
+           "could not determine a constructor for the tag 'tag:yaml.org,2002:python/object/apply:os.system'"),
+      )),
     Case("inject-fault-parameter-of-100-kb", ("inject", "{run}", "--fault", "gyro_bias@2:4," + "b" * 100_000 + "=1", "--out",
                                               "{d}/o"), "unknown parameter 'bbb"),
 ]
@@ -1464,6 +1476,19 @@ def test_a_terminated_sweep_stops_its_workers_at_once(world: World, tmp_path: Pa
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 143 and _said(err) == "gslam: terminated (SIGTERM)\n", err
     assert time.monotonic() - start < 10
+
+
+def test_two_maps_into_one_new_out_at_once_leave_one_result_and_one_line(world: World, tmp_path: Path):
+    """Two gslam map runs started together into the same new --out: one
+    result, whole, and the other says so in one line; no temporary left."""
+    argv = ["map", world.run, "--config", TELEMAX_CONFIG, *QUICK, "--out", tmp_path / "o"]
+    procs = [_gslam(argv, tmp_path), _gslam([*argv, "--gating", "on"], tmp_path)]
+    errs = [_said(p.communicate(timeout=120)[1]) for p in procs]
+    assert sorted(p.returncode for p in procs) == [0, 1], errs
+    lost = errs[[p.returncode for p in procs].index(1)]
+    assert lost.count("\n") == 1 and "--out was filled by someone else while this command ran" in lost, lost
+    assert json.loads((tmp_path / "o" / ".gslam-result.json").read_text())["command"] == "map"
+    assert not _temps(tmp_path) and [p.name for p in tmp_path.iterdir()] == ["o"]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
