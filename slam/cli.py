@@ -13,6 +13,7 @@ import platform
 import shlex
 import signal
 import sys
+import unicodedata
 import warnings
 from pathlib import Path
 
@@ -523,7 +524,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"gslam: error: {_NO_WORKING_FOLDER}", file=sys.stderr)
             return 1
         where = f"{e.filename}: " if e.filename else ""
-        print(f"gslam: error: {where}{e.strerror or e}", file=sys.stderr)
+        print(f"gslam: error: {_shortened(_one_line(f'{where}{e.strerror or e}'))}", file=sys.stderr)
         return 1
     except MemoryError as e:
         print(f"gslam: error: not enough memory ({_one_line(str(e)) or 'MemoryError'})", file=sys.stderr)
@@ -587,7 +588,13 @@ class _WatchedStdout:
 
 
 def _one_line(text: str) -> str:
-    return " ".join(text.split("\n"))
+    """``text`` on one line, its control characters written as escapes: a
+    key or a file name holding ESC sequences would otherwise clear or
+    retitle the user's terminal."""
+    text = " ".join(text.split("\n"))
+    if text.isprintable():
+        return text
+    return "".join(f"\\x{ord(c):02x}" if unicodedata.category(c) == "Cc" and c != "\t" else c for c in text)
 
 
 LONGEST_WORD = 400

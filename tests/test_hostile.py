@@ -1234,6 +1234,16 @@ ERRORS: list[Case] = [
          "v.yaml: variant 'vvv", text("v.yaml", "? " + "v" * 1_000_000 + "\n: {validation.mode: 'off'}\n")),
     Case("compare-only-of-100-kb", ("compare", "{run}", "--config", "{cfg}", "--only", "x" * 100_000, "--out", "{d}/o"),
          "unknown variant 'xxx"),
+    # -- control characters reach the terminal as escapes, and a key with brackets is named, not its section --
+    Case("config-unknown-key-with-terminal-escapes", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: unknown config key '\\x1b]0;pwned\\x07\\x1b[2Jboom'", text("c.yaml", '"\\e]0;pwned\\a\\e[2Jboom": 1\n')),
+    Case("map-input-path-with-a-terminal-escape", ("map", "{d}/x\x1b[31mred", "--config", "{cfg}", "--out", "{d}/o"),
+         "x\\x1b[31mred: no such file or directory"),
+    Case("config-unknown-key-with-brackets", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: unknown config key 'keyframes.period[s]'; did you mean 'period_s'?",
+         text("c.yaml", "keyframes:\n  period[s]: 0.5\n")),
+    Case("set-unknown-key-with-brackets", (*MAP, "--out", "{d}/o", "--set", "backend.x[2]=1"),
+         "--set backend.x[2]=1: unknown config key 'backend.x[2]'"),
     # -- a bag's metadata.yaml as hostile YAML: rosbags reads it, one line each (passed before; kept so none turns
     # -- into a traceback or a run of another file)
     *(Case(f"bag-metadata-{name}", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), says,
