@@ -1244,6 +1244,16 @@ ERRORS: list[Case] = [
          text("c.yaml", "keyframes:\n  period[s]: 0.5\n")),
     Case("set-unknown-key-with-brackets", (*MAP, "--out", "{d}/o", "--set", "backend.x[2]=1"),
          "--set backend.x[2]=1: unknown config key 'backend.x[2]'"),
+    # -- an output name longer than a file system takes, under a folder still to be made: refused before the work --
+    *(Case(f"{command}-out-name-of-300-bytes-in-a-new-folder", (*argv, "{d}/new/" + "o" * 300 + suffix),
+           f"{flag} has a name of {300 + len(suffix)} bytes (oooo", text("mine.txt", "mine\n"))
+      for command, argv, flag, suffix in (
+          ("map", (*MAP, *QUICK, "--out"), "--out", ""),
+          ("simulate", ("simulate", "{scen}", "--out"), "--out", ""),
+          ("compare", ("compare", "{run}", "--config", "{cfg}", "--only", "ungated", *QUICK, "--out"), "--out", ""),
+          ("calibrate", ("calibrate", "{run}", "--config", "{cfg}", "--out"), "--out", ".yaml"),
+          ("inspect", ("inspect", "{run}", "--config-out"), "--config-out", ".yaml"),
+      )),
     # -- a bag's metadata.yaml as hostile YAML: rosbags reads it, one line each (passed before; kept so none turns
     # -- into a traceback or a run of another file)
     *(Case(f"bag-metadata-{name}", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), says,
