@@ -132,8 +132,8 @@ def _physical_odometry(path: Path, rows: np.ndarray) -> None:
     speed = np.hypot(rows[:, 1], rows[:, 2])
     if np.any(speed > MAX_SPEED_M_S):
         k = int(np.argmax(speed > MAX_SPEED_M_S))
-        raise GslamError(f"{path}: odom2 line #{k + 1}: speed {shown_beside(speed[k], MAX_SPEED_M_S)} m/s (vx {rows[k, 1]:g}, vy {rows[k, 2]:g}); "
-                         f"no ground robot drives faster than {MAX_SPEED_M_S:g} m/s (expected m/s)")
+        raise GslamError(f"{path}: odom2 line #{k + 1}: speed {shown_beside(speed[k], MAX_SPEED_M_S)} m/s "
+                         f"(vx {rows[k, 1]:g}, vy {rows[k, 2]:g}); no ground robot drives faster than {MAX_SPEED_M_S:g} m/s (expected m/s)")
     for column, name in zip((4, 5, 6), _VARIANCES):
         if np.any(rows[:, column] < 0.0):
             k = int(np.argmax(rows[:, column] < 0.0))
