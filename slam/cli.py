@@ -4,6 +4,7 @@ library; every command is a library function returning a result object."""
 from __future__ import annotations
 
 import argparse
+import codecs
 import json
 import logging
 import math
@@ -12,6 +13,7 @@ import platform
 import shlex
 import signal
 import sys
+import unicodedata
 import warnings
 from pathlib import Path
 
@@ -468,6 +470,23 @@ def _working_folder_exists() -> bool:
     return True
 
 
+def _as_given_or_escaped(err: UnicodeError) -> tuple[str | bytes, int]:
+    """Encoding errors on the terminal: a path's bytes that were no text in
+    the locale (Python holds them as lone surrogates) go out as the bytes
+    the user gave, as the shell shows them; any other character the
+    terminal cannot encode as a backslash escape."""
+    if not isinstance(err, UnicodeEncodeError):
+        raise err
+    part = err.object[err.start : err.end]
+    if all(0xDC80 <= ord(c) <= 0xDCFF for c in part):
+        return bytes(ord(c) - 0xDC00 for c in part), err.end
+    return codecs.backslashreplace_errors(err)
+
+
+_TERMINAL_ERRORS = "gslam-terminal"
+codecs.register_error(_TERMINAL_ERRORS, _as_given_or_escaped)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     args.command_line = shlex.join(["gslam", *(sys.argv[1:] if argv is None else argv)])  # as results name it
@@ -481,7 +500,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     for stream in (sys.stdout, sys.stderr):  # a Latin-1 terminal cannot encode a path named in Greek
         if hasattr(stream, "reconfigure"):
-            stream.reconfigure(errors="backslashreplace")
+            stream.reconfigure(errors=_TERMINAL_ERRORS)
     received: list[int] = []
     if sys.stdout is not None and not isinstance(sys.stdout, _WatchedStdout):
         sys.stdout = _WatchedStdout(sys.stdout)
@@ -492,7 +511,7 @@ def main(argv: list[str] | None = None) -> int:
         # (a destructor, a callback) stopped nothing: the command finished.
         return _stopped(received[0]) if received else code
     except InputError as e:
-        print(f"gslam: error: {_one_line(str(e))}", file=sys.stderr)
+        print(f"gslam: error: {_shortened(_one_line(str(e)))}", file=sys.stderr)
         return 1
     except BrokenPipeError:  # the reader left (gslam inspect ... | head): no more to say
         return reader_left()
@@ -505,7 +524,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"gslam: error: {_NO_WORKING_FOLDER}", file=sys.stderr)
             return 1
         where = f"{e.filename}: " if e.filename else ""
-        print(f"gslam: error: {where}{e.strerror or e}", file=sys.stderr)
+        print(f"gslam: error: {_shortened(_one_line(f'{where}{e.strerror or e}'))}", file=sys.stderr)
         return 1
     except MemoryError as e:
         print(f"gslam: error: not enough memory ({_one_line(str(e)) or 'MemoryError'})", file=sys.stderr)
@@ -569,7 +588,26 @@ class _WatchedStdout:
 
 
 def _one_line(text: str) -> str:
-    return " ".join(text.split("\n"))
+    """``text`` on one line, its control characters written as escapes: a
+    key or a file name holding ESC sequences would otherwise clear or
+    retitle the user's terminal."""
+    text = " ".join(text.split("\n"))
+    if text.isprintable():
+        return text
+    return "".join(f"\\x{ord(c):02x}" if unicodedata.category(c) == "Cc" and c != "\t" else c for c in text)
+
+
+LONGEST_WORD = 400
+"""Characters of one word of an error line shown whole: a key, a name or a
+value of the input echoed back (a 1 MB key was a 1 MB line)."""
+
+
+def _shortened(line: str) -> str:
+    """``line`` with each word longer than :data:`LONGEST_WORD` cut to its
+    start and end and its length, so that an echoed input leaves the
+    message readable."""
+    words = line.split(" ")
+    return " ".join(w if len(w) <= LONGEST_WORD else f"{w[:200]}...({len(w):,} characters)...{w[-60:]}" for w in words)
 
 
 def _say(text: str) -> None:

@@ -58,6 +58,7 @@ from tests.test_fuzz import (  # noqa: F401 - world is a fixture
 pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
 
 TIME_LIMIT_S = 60
+LONGEST_LINE = 2000  # characters of an error line: what it echoes of the input is cut to its start and end
 MAP = ("map", "{run}", "--config", "{cfg}")
 QUICK = ("--set", "output.plots=false")
 
@@ -305,6 +306,17 @@ def finished_sweep(metrics: str) -> Callable[[Path, World], None]:
     return make
 
 
+def earlier_result(command: str) -> Callable[[Path, World], None]:
+    """``gslam map`` or ``compare`` (ungated) of the run into ``{d}/r``."""
+
+    def make(d: Path, world: World) -> None:
+        only = ("--only", "ungated") if command == "compare" else ()
+        assert main(["-q", command, str(world.run), "--config", str(TELEMAX_CONFIG), *only, *QUICK, "--out",
+                     str(d / "r")]) == 0
+
+    return make
+
+
 def librsf_with(loops: str, groundtruth: str | None = None) -> Callable[[Path, World], None]:
     """A libRSF log of 10 s (odom2 lines, a turn in the middle), ``loops``
     lines after them, and ``groundtruth`` as its X_GT.txt if given."""
@@ -316,6 +328,17 @@ def librsf_with(loops: str, groundtruth: str | None = None) -> Callable[[Path, W
             (d / "X_GT.txt").write_text(groundtruth)
 
     return make
+
+
+def _listing(files: Callable[[Path], list[str]]) -> Callable[[Path], None]:
+    """A run folder change: its bag's metadata.yaml lists ``files(bag)``."""
+
+    def change(run: Path) -> None:
+        meta = yaml.safe_load((run / "bag" / "metadata.yaml").read_text())
+        meta["rosbag2_bagfile_information"]["relative_file_paths"] = files(run / "bag")
+        (run / "bag" / "metadata.yaml").write_text(yaml.safe_dump(meta))
+
+    return change
 
 
 def _covariance(variance: float) -> Callable[[float, object], None]:
@@ -919,6 +942,8 @@ ERRORS: list[Case] = [
         ("loop-weight-1e300", "loop 9.0 1.0 1e300", "loop line #1: weight 1e+300; expected 0 to 1e+06"),
         ("loop-weight-negative", "loop 9.0 1.0 -1", "loop line #1: weight -1; expected 0 to 1e+06"),
         ("loop-after-the-log", "loop 9.0 1e6 1", "loop line #1: t_other 1e+06 s is outside the odom2 lines' 0 to 9.9 s"),
+        ("loop-from-a-pose-to-itself", "loop 9.0 1.0 1\nloop 5.0 5.0 1",
+         "loop line #2: t and t_other are both 5 s, a pose joined to itself"),
         ("loop-weight-nan", "loop 9.0 1.0 nan", "X_Input.txt:101: expected loop t t_other weight"),
     )),
     Case("librsf-ground-truth-goes-back", LIBRSF, "X_GT.txt: point2 line #51: expected increasing times",
@@ -1055,7 +1080,19 @@ ERRORS: list[Case] = [
       for name, old, new, says in (
           ("stamp-inf", " 1000.000000 host 1000.000000", " inf host inf", "c.log:1: expected finite numbers in FLASER"),
           ("odometry-theta-inf", "ODOM 0.000 0 0", "ODOM 0.000 0 inf", "c.log:2: expected finite numbers in ODOM"),
+          # fields the reader does not use are a corrupt line all the same, and the error names the field
+          ("odometry-velocity-nan", "ODOM 0.000 0 0 0 0 0", "ODOM 0.000 0 0 nan 0 0",
+           "c.log:2: expected finite numbers in ODOM x y theta tv rv accel ts host logger_ts; tv is nan"),
+          ("odometry-rotation-rate-inf", "ODOM 0.100 0 0 0 0 0", "ODOM 0.100 0 0 0 -inf 0", "c.log:3: expected finite "
+           "numbers in ODOM x y theta tv rv accel ts host logger_ts; rv is -inf"),
+          ("odometry-stamp-nan", "0 0 0 1000.250000 host", "0 0 0 NaN host", "c.log:3: expected finite numbers in ODOM "
+           "x y theta tv rv accel ts host logger_ts; ts is NaN"),
+          ("range-nan-named", "FLASER 181 ", "FLASER 181 nan ", "c.log:1: expected finite numbers in FLASER n r_1..r_n x "
+           "y theta odom_x odom_y odom_theta ts host logger_ts; r_1 is nan"),
       )),
+    Case("carmen-robotlaser-accuracy-nan", CARMEN, "c.log:1: expected finite numbers in ROBOTLASER1 type start fov "
+         "resolution max_range accuracy mode n r_1..r_n m rem_1..rem_m poses ... ts; accuracy is nan",
+         carmen(robotlaser=(-1.57, 3.14, 0.0174), encoding=lambda s: s.replace(" 50 0.01 0 181", " 50 nan 0 181").encode())),
     Case("librsf-variance-inf", LIBRSF, "X_Input.txt:6: expected odom2 t vx vy wz var_vx var_vy var_wz",
          text("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} 0.5 0 0.01 {'inf' if k == 5 else '0.01'} 0.01 0.01\n"
                                      for k in range(50)))),
@@ -1119,6 +1156,118 @@ ERRORS: list[Case] = [
     Case("ablate-resumed-metrics-key-twice", ("ablate", "{spec}", "--out", "{d}/o"),
          "metrics.json: expected the JSON object gslam writes, found invalid JSON (key 'ate_rmse_m' given twice",
          finished_sweep('{"ate_rmse_m": 0.1, "ate_rmse_m": 1e9}')),
+    # -- the sixth attack: a key given twice inside what a merge key (<<) brings, which PyYAML flattens unseen --
+    Case("config-merge-brings-a-key-twice", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: line 3: key 'sigma_yaw_deg' given twice (earlier on the same line)",
+         text("c.yaml", "backend:\n  factors:\n    compass: {<<: {sigma_yaw_deg: 300, sigma_yaw_deg: 3}}\n")),
+    Case("config-merge-list-brings-a-key-twice", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: line 4: key 'distance_m' given twice (first on line 3)",
+         text("c.yaml", "keyframes:\n  <<: [{period_s: 0.5},\n        {distance_m: 0.2,\n         distance_m: 20}]\n")),
+    Case("scenario-merge-brings-a-key-twice", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "s.yaml: line 2: key 'max_speed_m_s' given twice",
+         lambda d, w: (d / "s.yaml").write_text("robot:\n  <<: {max_speed_m_s: 0.4, max_speed_m_s: 40}\n"
+                                                + w.scenario.read_text().replace("robot:\n", "", 1))),
+    Case("variants-merge-brings-a-key-twice", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml",
+                                               "--out", "{d}/o"), "v.yaml: line 1: key 'validation.mode' given twice",
+         text("v.yaml", "a: {<<: {validation.mode: 'off', validation.mode: 'on'}}\n")),
+    Case("set-merge-brings-a-key-twice", (*MAP, "--out", "{d}/o", "--set",
+                                          "backend.factors.compass={{<<: {{sigma_yaw_deg: 300, sigma_yaw_deg: 3}}}}"),
+         "key 'sigma_yaw_deg' given twice"),
+    Case("config-merges-itself", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: line 2: invalid YAML (a mapping merges itself (<<: an alias of its own anchor))",
+         text("c.yaml", "backend: &b\n  <<: *b\n")),
+    # -- values one step (ulp) past a bound: the message shows the value, not the bound it passes --
+    *(Case(f"set-{key}-one-ulp-past-its-bound", (*MAP, *extra, "--out", "{d}/o", "--set", f"{key}={value!r}"), says)
+      for key, extra, value, says in (
+          ("keyframes.period_s", (), float(np.nextafter(1e-4, 0)),
+           "keyframes.period_s: 9.999999999999999e-05 s is below 0.0001 s"),
+          ("output.map_voxel_m", (), float(np.nextafter(100.0, 200)), "output.map_voxel_m: 100.00000000000001 m is above 100 m"),
+          ("gating.inflation", ("--gating", "on"), float(np.nextafter(1e3, 2e3)),
+           "inflation: 1000.0000000000001 is above 1000"),
+          ("backend.factors.odometry.sigma_xy_m", (), float(np.nextafter(1e-4, 0)),
+           "sigma_xy_m: 9.999999999999999e-05 m is below 0.0001 m"),
+      )),
+    Case("relation-k-sigma-one-ulp-below-its-bound", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "relations.5.k_sigma: 0.49999999999999994 sigmas is below 0.5 sigmas",
+         config(relation(5, k_sigma=float(np.nextafter(0.5, 0))))),
+    Case("scenario-leg-speed-one-ulp-past-its-bound", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "leg speed (fourth value) 50.00000000000001 m/s is above 50 m/s",
+         scenario(lambda t: t["robot"]["waypoints"].__setitem__(1, [1.0, 1.2, 0.0, float(np.nextafter(50.0, 100))]))),
+    Case("librsf-speed-one-ulp-past-its-bound", LIBRSF, "odom2 line #3: speed 100.00000000000001 m/s",
+         text("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} {'100.00000000000001' if k == 2 else '0.5'} 0 0 0.01 0.01 0.01\n"
+                                     for k in range(50)))),
+    # -- a ROS 2 bag whose metadata.yaml lists files that are not its own --
+    *(Case(f"bag-metadata-{name}", argv, f"metadata.yaml: relative_file_paths lists {says}", copy_run(_listing(change)))
+      for name, argv, change, says in (
+          ("lists-a-file-up", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), lambda b: ["../truth.json"],
+           "'../truth.json', which is not the name of a file in the bag's folder"),
+          ("lists-an-absolute-path", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), lambda b: ["/etc/passwd"],
+           "'/etc/passwd', which is not the name of a file in the bag's folder"),
+          ("lists-another-recording", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"),
+           lambda b: shutil.copy(b / "bag.db3", b.parent / "other.db3") and ["../other.db3"], "'../other.db3', which is not"),
+          ("lists-a-missing-file", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), lambda b: ["bag.db3", "bag_1.db3"],
+           "'bag_1.db3', which is no file in"),
+          ("lists-a-folder", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"),
+           lambda b: (b / "sub").mkdir() or ["sub"], "'sub', which is no file in"),
+          ("inspect-lists-a-file-up", ("inspect", "{d}/run"), lambda b: ["../scenario.yaml"], "'../scenario.yaml', which is not"),
+          ("inject-lists-another-recording", ("inject", "{d}/run", "--fault", "gyro_bias@2:4", "--out", "{d}/o"),
+           lambda b: shutil.copy(b / "bag.db3", b.parent / "other.db3") and ["../other.db3"], "'../other.db3', which is not"),
+      )),
+    # -- a result folder of gslam's given back as the recording ('run.mcap: scan topic not in the bag' before) --
+    *(Case(f"{name}-of-a-{made}-result", argv if name == "inspect" else (*argv, "--out", "{d}/o"),
+           f"r: a gslam {made} result (its output), not a recording; give the recording it was made from, ",
+           earlier_result(made))
+      for name, argv, made in (
+          ("map", ("map", "{d}/r", "--config", "{cfg}"), "map"),
+          ("compare", ("compare", "{d}/r", "--config", "{cfg}", "--only", "ungated"), "compare"),
+          ("calibrate", ("calibrate", "{d}/r", "--config", "{cfg}"), "map"),
+          ("inject", ("inject", "{d}/r", "--fault", "gyro_bias@2:4"), "map"),
+          ("inspect", ("inspect", "{d}/r"), "map"),
+          ("map", ("map", "{d}/r", "--config", "{cfg}"), "compare"),
+      )),
+    # -- an input echoed back in the error line: a 1 MB key was a 1 MB line; a long word keeps its start and end --
+    Case("config-unknown-key-of-a-megabyte", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: unknown config key 'kkkkk", text("c.yaml", "? " + "k" * 1_000_000 + "\n: 1\n")),
+    Case("set-value-of-100-kb", (*MAP, "--out", "{d}/o", "--set", "backend.optimizer=" + "i" * 100_000),
+         "...(100,019 characters)...iiii"),
+    Case("variant-name-of-a-megabyte", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+         "v.yaml: variant 'vvv", text("v.yaml", "? " + "v" * 1_000_000 + "\n: {validation.mode: 'off'}\n")),
+    Case("compare-only-of-100-kb", ("compare", "{run}", "--config", "{cfg}", "--only", "x" * 100_000, "--out", "{d}/o"),
+         "unknown variant 'xxx"),
+    # -- control characters reach the terminal as escapes, and a key with brackets is named, not its section --
+    Case("config-unknown-key-with-terminal-escapes", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: unknown config key '\\x1b]0;pwned\\x07\\x1b[2Jboom'", text("c.yaml", '"\\e]0;pwned\\a\\e[2Jboom": 1\n')),
+    Case("map-input-path-with-a-terminal-escape", ("map", "{d}/x\x1b[31mred", "--config", "{cfg}", "--out", "{d}/o"),
+         "x\\x1b[31mred: no such file or directory"),
+    Case("config-unknown-key-with-brackets", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: unknown config key 'keyframes.period[s]'; did you mean 'period_s'?",
+         text("c.yaml", "keyframes:\n  period[s]: 0.5\n")),
+    Case("set-unknown-key-with-brackets", (*MAP, "--out", "{d}/o", "--set", "backend.x[2]=1"),
+         "--set backend.x[2]=1: unknown config key 'backend.x[2]'"),
+    # -- an output name longer than a file system takes, under a folder still to be made: refused before the work --
+    *(Case(f"{command}-out-name-of-300-bytes-in-a-new-folder", (*argv, "{d}/new/" + "o" * 300 + suffix),
+           f"{flag} has a name of {300 + len(suffix)} bytes (oooo", text("mine.txt", "mine\n"))
+      for command, argv, flag, suffix in (
+          ("map", (*MAP, *QUICK, "--out"), "--out", ""),
+          ("simulate", ("simulate", "{scen}", "--out"), "--out", ""),
+          ("compare", ("compare", "{run}", "--config", "{cfg}", "--only", "ungated", *QUICK, "--out"), "--out", ""),
+          ("calibrate", ("calibrate", "{run}", "--config", "{cfg}", "--out"), "--out", ".yaml"),
+          ("inspect", ("inspect", "{run}", "--config-out"), "--config-out", ".yaml"),
+      )),
+    # -- a bag's metadata.yaml as hostile YAML: rosbags reads it, one line each (passed before; kept so none turns
+    # -- into a traceback or a run of another file)
+    *(Case(f"bag-metadata-{name}", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), says,
+           copy_run(lambda r, change=change: (r / "bag" / "metadata.yaml").write_text(
+               change((r / "bag" / "metadata.yaml").read_text()))))
+      for name, change, says in (
+          ("key-twice", lambda m: m.replace("  storage_identifier: sqlite3\n",
+                                            "  storage_identifier: sqlite3\n  storage_identifier: mcap\n"),
+           "metadata.yaml: while constructing a mapping"),
+          ("python-tag", lambda m: m + "z: !!python/object/apply:os.system ['true']\n",
+           "could not determine a constructor for the tag 'tag:yaml.org,2002:python/object/apply:os.system'"),
+      )),
+    Case("inject-fault-parameter-of-100-kb", ("inject", "{run}", "--fault", "gyro_bias@2:4," + "b" * 100_000 + "=1", "--out",
+                                              "{d}/o"), "unknown parameter 'bbb"),
 ]
 
 
@@ -1181,6 +1330,9 @@ WARNINGS: list[Warned] = [
     Warned("scenario-leg-through-an-obstacle", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
            "the leg from robot.waypoints.1 to robot.waypoints.2 crosses world.obstacles.",
            scenario(lambda t: t["world"]["obstacles"].append([[4, 1.0], [4.4, 1.0], [4.4, 1.4], [4, 1.4]]))),
+    Warned("scenario-waypoints-all-one-point", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+           "s.yaml: robot.waypoints are all (1, 1.2): the simulated robot stands still for the whole run",
+           scenario_waypoints([[1.0, 1.2], [1.0, 1.2, 2.0], [1.0, 1.2]])),
     Warned("scenario-leg-through-a-wall", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "crosses world.walls.",
            scenario(lambda t: t["world"]["walls"].append([[5, 0.5], [5, 2.0]]))),
     Warned("carmen-range-limit-param-1e300", CARMEN, "the laser's range limit is 1e+300 m, beyond 10000 m",
@@ -1224,6 +1376,7 @@ def test_hostile_input_gives_one_clean_error(case: Case, world: World, tmp_path:
     code, err, leaked = _run(expand(case.argv, d, world), capsys)
     assert code == case.code, f"exit {code}: {err[-800:]}"
     check_error_output(code, err, case)
+    assert max(map(len, err.splitlines())) <= LONGEST_LINE, f"a line of {max(map(len, err.splitlines())):,} characters"
     assert not leaked, [str(w.message) for w in leaked]
     assert checksums(*watched) == before, "an input changed, or something was left behind"
 
@@ -1345,6 +1498,34 @@ def test_a_terminated_sweep_stops_its_workers_at_once(world: World, tmp_path: Pa
     assert time.monotonic() - start < 10
 
 
+def test_two_maps_into_one_new_out_at_once_leave_one_result_and_one_line(world: World, tmp_path: Path):
+    """Two gslam map runs started together into the same new --out: one
+    result, whole, and the other says so in one line; no temporary left."""
+    argv = ["map", world.run, "--config", TELEMAX_CONFIG, *QUICK, "--out", tmp_path / "o"]
+    procs = [_gslam(argv, tmp_path), _gslam([*argv, "--gating", "on"], tmp_path)]
+    errs = [_said(p.communicate(timeout=120)[1]) for p in procs]
+    assert sorted(p.returncode for p in procs) == [0, 1], errs
+    lost = errs[[p.returncode for p in procs].index(1)]
+    assert lost.count("\n") == 1 and "--out was filled by someone else while this command ran" in lost, lost
+    assert json.loads((tmp_path / "o" / ".gslam-result.json").read_text())["command"] == "map"
+    assert not _temps(tmp_path) and [p.name for p in tmp_path.iterdir()] == ["o"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupted_sweep_leaves_no_half_written_job(sig: int, world: World, tmp_path: Path):
+    """A sweep stopped while a worker writes a job: the workers were ended
+    and the job's temporary folder left in jobs/ for the next run to find;
+    the sweep removes it once its workers are gone."""
+    proc = _gslam(["ablate", world.spec, "--out", tmp_path / "sweep"], tmp_path)
+    _wait_for(lambda: any("jobs" in p.parts for p in _temps(tmp_path)), proc)
+    assert proc.poll() is None, proc.communicate()[1]
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=30)
+    what = "interrupted" if sig == signal.SIGINT else "terminated (SIGTERM)"
+    assert proc.returncode == 128 + sig and _said(err) == f"gslam: {what}\n", err
+    assert not _temps(tmp_path)
+
+
 def test_a_killed_runs_temporary_folder_goes_with_the_next_run_into_its_folder(world: World, tmp_path: Path, capsys):
     proc = _gslam(["compare", world.run, "--config", TELEMAX_CONFIG, "--only", "ungated", "--out", tmp_path / "a"], tmp_path)
     _wait_for(lambda: bool(_temps(tmp_path)), proc)
@@ -1451,3 +1632,45 @@ def test_a_removed_working_folder_is_one_line_before_any_work(command: str, worl
     assert (done.returncode, done.stderr) == (1, "gslam: error: the current folder no longer exists (removed while a "
                                                  "shell was in it); cd to a folder that does and run again\n")
     assert list(out.iterdir()) == []
+
+
+@pytest.mark.parametrize("encoding", [None, "latin-1"])
+def test_a_path_in_a_c_locale_is_named_by_the_bytes_given(encoding: str | None, world: World, tmp_path: Path):
+    """Under LC_ALL=C without Python's UTF-8 mode, a path's non-ASCII bytes
+    are no text: the error and the 'wrote' line named them as Python's
+    escapes ('\\udcc3\\udcb1'), a name the user never typed; they name the
+    bytes given, as the shell shows them, and the result goes where it was
+    asked to."""
+    env = {**os.environ, "PYTHONPATH": str(REPO), "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0"}
+    env.pop("PYTHONIOENCODING", None)
+    if encoding is not None:
+        env["PYTHONIOENCODING"] = encoding
+    missing, out = os.fsencode(tmp_path) + "/ñone".encode(), os.fsencode(tmp_path) + "/résultat→".encode()
+    gslam = [sys.executable, "-m", "slam.cli"]
+    done = subprocess.run([*gslam, "-q", "map", missing, "--config", str(TELEMAX_CONFIG), "--out", os.fsencode(tmp_path / "o")],
+                          capture_output=True, env=env, timeout=TIME_LIMIT_S)
+    assert (done.returncode, done.stderr) == (1, b"gslam: error: " + missing + b": no such file or directory\n")
+    done = subprocess.run([*gslam, "map", str(world.run), "--config", str(TELEMAX_CONFIG), *QUICK, "--out", out],
+                          capture_output=True, env=env, timeout=TIME_LIMIT_S)
+    assert done.returncode == 0 and done.stdout.startswith(b"wrote " + out + b"\n"), done
+    assert os.listdir(os.fsencode(tmp_path)) == ["résultat→".encode()]
+
+
+@pytest.mark.parametrize("command", ["map", "map-again", "simulate", "inject", "compare", "calibrate", "inspect"])
+def test_an_out_name_near_the_file_systems_limit_is_written(command: str, world: World, tmp_path: Path, capsys):
+    """A result's name of 250 bytes is a valid file name (at most 255), but
+    the temporary name built beside it ('.NAME.gslam-tmp-PID-HOST-TAG')
+    was not: every command said '--out cannot be written: ... (File name
+    too long)' about a name the user may give. The temporary name keeps
+    only the start of a long name."""
+    long = tmp_path / ("r" * 246 + (".yaml" if command in ("calibrate", "inspect") else ""))
+    cfg = ("--config", str(TELEMAX_CONFIG))
+    argv = {"map": ["map", world.run, *cfg, *QUICK, "--out"], "map-again": ["map", world.run, *cfg, *QUICK, "--out"],
+            "simulate": ["simulate", world.scenario, "--out"],
+            "inject": ["inject", world.run, "--fault", "gyro_bias@2:4", "--out"],
+            "compare": ["compare", world.run, *cfg, "--only", "ungated", *QUICK, "--out"],
+            "calibrate": ["calibrate", world.run, *cfg, "--clean", "0:10", "--out"],
+            "inspect": ["inspect", world.run, "--config-out"]}[command]
+    for _ in range(2 if command == "map-again" else 1):
+        assert main(["-q", *map(str, argv), str(long)]) == 0, capsys.readouterr().err
+    assert [p.name for p in tmp_path.iterdir()] == [long.name]

@@ -430,10 +430,12 @@ def _section_defaults() -> tuple[dict[str, Any], dict[str, Any]]:
 # --- loading -------------------------------------------------------------
 
 
-def _loc_text(loc: tuple) -> str:
+def _loc_text(loc: tuple, unknown: bool = False) -> str:
     # pydantic names the member of a union it tried ("tuple[float, float]"):
-    # not a key the user wrote.
-    return ".".join(str(p) for p in loc if not (isinstance(p, str) and "[" in p))
+    # not a key the user wrote. An unknown key's own name is the user's,
+    # brackets or not ('period[s]' was dropped, naming its section instead).
+    kept = [str(p) for p in loc[: -1 if unknown else None] if not (isinstance(p, str) and "[" in p)]
+    return ".".join(kept + ([str(loc[-1])] if unknown and loc else []))
 
 
 def describe_validation_error(source: str, err: ValidationError, what: str = "config", prefix: str = "",
@@ -443,7 +445,7 @@ def describe_validation_error(source: str, err: ValidationError, what: str = "co
     must see, with the nearest known key of ``model`` at that place."""
     errors = err.errors()
     first = next((e for e in errors if e["type"] == "extra_forbidden"), errors[0])
-    loc = prefix + _loc_text(first["loc"])
+    loc = prefix + _loc_text(first["loc"], unknown=first["type"] == "extra_forbidden")
     if first["type"] == "extra_forbidden":
         hint = _did_you_mean(model, first["loc"]) if model is not None else ""
         return f"{source}: unknown {what} key '{loc}'{hint}"

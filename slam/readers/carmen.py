@@ -48,7 +48,10 @@ What becomes of them:
   (intel: 4 of 909, by up to 0.9 s) are moved just after their predecessor,
   with a warning.
 
-Errors are one line: ``FILE:LINE: expected ...`` for a malformed line.
+Errors are one line: ``FILE:LINE: expected ...`` for a malformed line. Every
+numeric field of a line read must be a finite number, used or not (an
+ODOM line's velocities, a ROBOTLASER1's remissions): the error names the
+field.
 """
 
 from __future__ import annotations
@@ -56,6 +59,7 @@ from __future__ import annotations
 import gzip
 import logging
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -129,14 +133,28 @@ def _open_lines(path: Path) -> list[str]:
     return decode_log(data, path, "CARMEN text log").splitlines()
 
 
-def _floats(parts: list[str], where: str, expected: str) -> np.ndarray:
+def _floats(parts: list[str], where: str, expected: str, names: Callable[[int], str]) -> np.ndarray:
+    """``parts`` as numbers, every one finite, used or not: a NaN the reader
+    skips today is a corrupt line all the same. ``names(k)`` names field k
+    of ``parts`` in the error."""
     try:
         values = np.array(parts, dtype=np.float64)
     except ValueError:
         raise GslamError(f"{where}: expected {expected}") from None
-    if not np.all(np.isfinite(values)):
-        raise GslamError(f"{where}: expected finite numbers in {expected}")
+    bad = ~np.isfinite(values)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise GslamError(f"{where}: expected finite numbers in {expected}; {names(k)} is {parts[k]}")
     return values
+
+
+def _named(*fields: str) -> Callable[[int], str]:
+    return lambda k: fields[k]
+
+
+def _ranges_then(n: int, *fields: str) -> Callable[[int], str]:
+    """Names of ``n`` ranges r_1..r_n followed by ``fields``."""
+    return lambda k: f"r_{k + 1}" if k < n else fields[k - n]
 
 
 def _count(parts: list[str], i: int, where: str, expected: str) -> int:
@@ -181,7 +199,8 @@ def _parse_flaser(d: _Log, parts: list[str], where: str) -> None:
     n = _count(parts, 1, where, _FLASER)
     if len(parts) < n + 11:
         raise GslamError(f"{where}: expected {_FLASER} ({n + 11} fields, got {len(parts)})")
-    values = _floats(parts[2 : n + 9], where, _FLASER)
+    values = _floats(parts[2 : n + 9], where, _FLASER,
+                     _ranges_then(n, "x", "y", "theta", "odom_x", "odom_y", "odom_theta", "ts"))
     try:
         fov = float(d.params.get("laser_front_laser_fov", DEFAULT_FOV_DEG))
     except ValueError:
@@ -202,10 +221,13 @@ def _parse_robotlaser(d: _Log, parts: list[str], where: str) -> None:
     tail = 10 + n + max(m, 0)  # laser pose, robot pose, tv rv fwd side turn_axis, ts
     if m < 0 or len(parts) < tail + 14:
         raise GslamError(f"{where}: expected {_ROBOTLASER1} ({tail + 14} fields, got {len(parts)})")
-    head = _floats(parts[2:6], where, _ROBOTLASER1)
-    ranges = _floats(parts[9 : 9 + n], where, _ROBOTLASER1)
-    rest = _floats(parts[tail : tail + 12], where, _ROBOTLASER1)
-    start, _fov, res, max_range = head
+    head = _floats(parts[2:7], where, _ROBOTLASER1, _named("start", "fov", "resolution", "max_range", "accuracy"))
+    ranges = _floats(parts[9 : 9 + n], where, _ROBOTLASER1, _ranges_then(n))
+    _floats(parts[10 + n : tail], where, _ROBOTLASER1, lambda k: f"rem_{k + 1}")
+    rest = _floats(parts[tail : tail + 12], where, _ROBOTLASER1, _named(
+        "laser_x", "laser_y", "laser_theta", "robot_x", "robot_y", "robot_theta", "tv", "rv", "fwd", "side",
+        "turn_axis", "ts"))
+    start, _fov, res, max_range, _accuracy = head
     angles = start + res * np.arange(n)
     _add_scan(d, where, ranges, angles, (rest[0], rest[1], rest[2]), rest[11], float(max_range))
 
@@ -213,7 +235,7 @@ def _parse_robotlaser(d: _Log, parts: list[str], where: str) -> None:
 def _parse_odom(d: _Log, parts: list[str], where: str) -> None:
     if len(parts) < 8:
         raise GslamError(f"{where}: expected {_ODOM}")
-    x, y, theta = _floats(parts[1:4], where, _ODOM)
+    x, y, theta, *_ = _floats(parts[1:8], where, _ODOM, _named("x", "y", "theta", "tv", "rv", "accel", "ts"))
     if d.poses:
         d.last_odom[-1] = (x, y, theta)
         d.raw_readings[-1] += 1

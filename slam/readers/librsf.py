@@ -37,6 +37,7 @@ import numpy as np
 
 from slam.config import InputConfig
 from slam.errors import GslamError
+from validation.base.bounds import shown_beside
 from validation.base.geometry import wrap_angle
 from slam.readers.carmen import chain_steps
 from slam.readers.files import SNIFF_BYTES, check_exists, decode_log, sniff_log
@@ -131,8 +132,8 @@ def _physical_odometry(path: Path, rows: np.ndarray) -> None:
     speed = np.hypot(rows[:, 1], rows[:, 2])
     if np.any(speed > MAX_SPEED_M_S):
         k = int(np.argmax(speed > MAX_SPEED_M_S))
-        raise GslamError(f"{path}: odom2 line #{k + 1}: speed {speed[k]:.3g} m/s (vx {rows[k, 1]:g}, vy {rows[k, 2]:g}); "
-                         f"no ground robot drives faster than {MAX_SPEED_M_S:g} m/s (expected m/s)")
+        raise GslamError(f"{path}: odom2 line #{k + 1}: speed {shown_beside(speed[k], MAX_SPEED_M_S)} m/s "
+                         f"(vx {rows[k, 1]:g}, vy {rows[k, 2]:g}); no ground robot drives faster than {MAX_SPEED_M_S:g} m/s (expected m/s)")
     for column, name in zip((4, 5, 6), _VARIANCES):
         if np.any(rows[:, column] < 0.0):
             k = int(np.argmax(rows[:, column] < 0.0))
@@ -152,14 +153,20 @@ the Corridor's last loop is 0.2 s after its last odom2 line."""
 
 def _physical_loops(path: Path, loops: np.ndarray, t: np.ndarray) -> None:
     """One-line errors for loop lines that cannot be: a weight below 0 or
-    beyond :data:`MAX_LOOP_WEIGHT`, stamps outside the odometry's span by
-    more than :data:`LOOP_STAMP_SLACK_S` (another log's, or another unit)."""
+    beyond :data:`MAX_LOOP_WEIGHT`, a pose joined to itself (t equal to
+    t_other says nothing), stamps outside the odometry's span by more than
+    :data:`LOOP_STAMP_SLACK_S` (another log's, or another unit)."""
     weight = loops[:, 2]
     bad = (weight < 0.0) | (weight > MAX_LOOP_WEIGHT)
     if bad.any():
         k = int(np.argmax(bad))
         raise GslamError(f"{path}: loop line #{k + 1}: weight {weight[k]:g}; expected 0 to {MAX_LOOP_WEIGHT:g} (it "
                          "scales the loop's information)")
+    same = loops[:, 0] == loops[:, 1]
+    if same.any():
+        k = int(np.argmax(same))
+        raise GslamError(f"{path}: loop line #{k + 1}: t and t_other are both {loops[k, 0]:g} s, a pose joined to "
+                         "itself; expected the times of two visits to one place")
     lo, hi = t[0] - LOOP_STAMP_SLACK_S, t[-1] + LOOP_STAMP_SLACK_S
     outside = (loops[:, :2] < lo) | (loops[:, :2] > hi)
     if outside.any():

@@ -40,6 +40,7 @@ from validation.base.bounds import within
 from slam.readers import broad, carmen, librsf
 from slam.readers.files import check_exists
 from slam.readers.rosbag import BAG_SUFFIXES, RosbagReader, ScansHook, is_rosbag
+from slam.results.records import result_command, result_input
 from slam.recording import COMPONENTS, SENSOR_MODALITIES, MagneticReference, Recording, expand_sensor_labels
 
 log = logging.getLogger(__name__)
@@ -99,12 +100,31 @@ def run_recording(path: Path) -> Path:
     return bag
 
 
+RECORDING_COMMANDS = ("simulate", "inject")
+"""The commands whose result folder is a run folder, a recording to read."""
+
+
+def _not_a_result(path: Path) -> None:
+    """Refuse a result folder of a command that writes no recording (a map,
+    a comparison, a sweep, a demo): read as one, it said 'run.mcap: scan
+    topic '/scan': not in the bag' about gslam's own output, or that the
+    format is unknown."""
+    made_by = result_command(path) if path.is_dir() else None
+    if made_by is None or made_by in RECORDING_COMMANDS:
+        return
+    made_from = result_input(path)
+    raise GslamError(f"{path}: a gslam {made_by} result (its output), not a recording; "
+                     + (f"give the recording it was made from, {made_from}" if made_from else
+                        "give the recording it was made from"))
+
+
 def guess_format(path: str | Path) -> str:
     """The registry key of the reader for ``path`` (a run folder's recording)."""
     path = Path(path)
     check_exists(path)
     if not path.is_dir():
         check_regular_file(path, "recording")
+    _not_a_result(path)
     if is_run_folder(path):
         path = run_recording(path)
         if path.is_dir() and not is_rosbag(path):

@@ -39,8 +39,10 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Any
+
+import yaml
 
 from slam.config import InputConfig
 from slam.errors import GslamError
@@ -50,7 +52,7 @@ from slam.readers.rosbag_imu import _CompassImuStream, _CompassMagStream, _GyroS
 from slam.readers.rosbag_poses import _GpsStream, _PoseStream
 from slam.readers.rosbag_scans import _ScanStream
 from slam.readers.rosbag_streams import _NS, IMU, LASER_SCAN, MAGNETIC_FIELD, NAV_SAT_FIX, ODOMETRY, POSE_STAMPED, _Stream
-from validation.base.yamlio import check_regular_file
+from validation.base.yamlio import SAFE_LOADER, check_regular_file
 from slam.recording import Recording, Scans
 
 # The reader's public names, with the message types and world_yaw_rate of the
@@ -98,6 +100,7 @@ def resolve_bag_path(path: Path) -> Path:
         for member in path.iterdir():  # a named pipe among them would block the reader forever
             if not member.is_dir():
                 check_regular_file(member, "file of a ROS 2 bag")
+        _check_listed_files(path)
         return path
     inside = sorted(p for p in path.iterdir() if p.suffix in BAG_SUFFIXES)
     if len(inside) != 1:
@@ -107,6 +110,27 @@ def resolve_bag_path(path: Path) -> Path:
         )
     check_regular_file(inside[0], "ROS bag")
     return inside[0]
+
+
+def _check_listed_files(path: Path) -> None:
+    """Each file a rosbag2 folder's metadata.yaml lists is a name of a file
+    in that folder: rosbags reads '../x.db3' or '/elsewhere/x.db3' as
+    'x.db3' of the folder (and says that one is missing), the plain reader
+    of :mod:`rosbag2_sqlite` would read the file outside, another
+    recording's. Metadata that is not a mapping of names is left to rosbags
+    to refuse."""
+    try:
+        info = yaml.load((path / "metadata.yaml").read_text(), Loader=SAFE_LOADER)["rosbag2_bagfile_information"]
+        listed = list(info["relative_file_paths"])
+    except Exception:  # any YAML, or none: rosbags says what it makes of it
+        return
+    for name in listed:
+        if not isinstance(name, str) or name in ("", ".", "..") or PurePath(name).name != name:
+            raise GslamError(f"{path / 'metadata.yaml'}: relative_file_paths lists {name!r}, which is not the name "
+                             "of a file in the bag's folder; expected the bag's own files, beside metadata.yaml")
+        if not (path / name).is_file():
+            raise GslamError(f"{path / 'metadata.yaml'}: relative_file_paths lists {name!r}, which is no file "
+                             f"in {path}; expected the bag's own files, beside metadata.yaml (a bag copied in part?)")
 
 
 def open_bag(path: Path) -> Any:

@@ -12,6 +12,7 @@ from enum import Enum
 from pathlib import Path
 
 from slam.errors import GslamError
+from slam.results.tempfiles import NAME_MAX
 from slam.results.records import MARKERS, RESULT_MARKER, Record, in_the_way, result_command, result_input
 from validation.base.yamlio import special_file
 
@@ -50,6 +51,7 @@ def check_out_path(out: str | Path, flag: str = "--out") -> Path:
     if isinstance(out, str) and not out.strip():
         raise GslamError(f"{flag} is empty; give a path (an unset shell variable?)")
     out = Path(out)
+    _check_name_lengths(out, flag)
     _check_way_up(out, flag)
     try:
         mode = out.lstat().st_mode
@@ -62,6 +64,19 @@ def check_out_path(out: str | Path, flag: str = "--out") -> Path:
     if resolve_path(out).parent == resolve_path(out):
         raise refuse(out, "is the file system root; give a new folder name", flag)
     return out
+
+
+def _check_name_lengths(out: Path, flag: str) -> None:
+    """Each name of the path within :data:`NAME_MAX` bytes: under a folder
+    still to be made, a longer one was found only when the result was moved
+    into place, after the work, and said '--out was filled by someone
+    else'."""
+    for part in out.parts:
+        size = len(os.fsencode(part))
+        if size > NAME_MAX:
+            shown = part if len(part) <= 60 else f"{part[:40]}...{part[-12:]}"
+            raise refuse(out, f"has a name of {size} bytes ({shown}); a file system takes at most {NAME_MAX}, give a "
+                              "shorter one", flag)
 
 
 def _check_way_up(out: Path, flag: str) -> None:

@@ -38,11 +38,21 @@ def host_tag() -> str:
     return hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]
 
 
+NAME_MAX = 255
+"""The longest file name (bytes) of Linux's file systems."""
+
+
 def temp_name(target: Path, kind: str = "", suffix: str = "") -> Path:
     """A fresh temporary name beside ``target`` that says who made it;
-    ``kind`` is ``""`` or ``"old"`` (a replaced result on its way out)."""
+    ``kind`` is ``""`` or ``"old"`` (a replaced result on its way out).
+    Within :data:`NAME_MAX` bytes: of a long ``target`` name (an --out of
+    250 characters is a valid name) only the start is kept, else the
+    temporary name alone would be too long and the result could not be
+    written."""
     tag = f"{os.getpid()}-{host_tag()}-{kind}{secrets.token_hex(4)}"
-    return target.with_name(f".{target.name}{TEMP_TAG}{tag}{suffix}")
+    around = len(f".{TEMP_TAG}{tag}".encode()) + len(os.fsencode(suffix))
+    name = os.fsencode(target.name)[: max(NAME_MAX - around, 1)]
+    return target.with_name(f".{os.fsdecode(name)}{TEMP_TAG}{tag}{suffix}")
 
 
 def new_temp_file(path: Path) -> Path:

@@ -7,6 +7,8 @@ stands on the route; this check says so before anything is simulated:
 * a leg that crosses a wall or an obstacle (doors are gaps): a warning
   naming the waypoints and the wall, since the run can still be simulated
   (the shipped ``hall_clean`` crosses a container on one leg).
+* waypoints that are all one point: a warning naming the key, since a robot
+  standing still still makes a bag (of its sensors at rest) that maps.
 
 Legs are the straight lines between consecutive waypoints (and, for more
 than one lap, from the last waypoint back to the second); corners are
@@ -76,6 +78,10 @@ def check_route(scenario: Scenario, source: str) -> None:
             i = int(np.flatnonzero(inside)[0])
             raise GslamError(f"{source}: robot.waypoints.{i} ({pts[i, 0]:g}, {pts[i, 1]:g}) lies inside "
                              f"world.obstacles.{k}; move it out")
+    if np.all(pts == pts[0]):
+        log.warning("%s: robot.waypoints are all (%g, %g): the simulated robot stands still for the whole run",
+                    source, pts[0, 0], pts[0, 1])
+        return
     segments = _labelled_segments(scenario)
     for i, j in legs(scenario):
         for key, seg in segments:

@@ -147,8 +147,8 @@ class RobotConfig(Strict):
                 raise ValueError(f"waypoint {i} at ({w[0]:g}, {w[1]:g}) m lies beyond {MAX_COORDINATE_M:g} m of the "
                                  "origin: a scenario's world is a site within 1000 km of its origin")
             if len(w) == 4 and w[3] > MAX_SPEED_M_S:
-                raise ValueError(f"waypoint {i}'s leg speed (fourth value) {w[3]:g} m/s is above {MAX_SPEED_M_S:g} "
-                                 "m/s: no ground robot drives at 180 km/h")
+                raise ValueError(f"waypoint {i}'s leg speed (fourth value) {bounds.shown_beside(w[3], MAX_SPEED_M_S)} m/s "
+                                 f"is above {MAX_SPEED_M_S:g} m/s: no ground robot drives at 180 km/h")
         return v
 
     @model_validator(mode="after")

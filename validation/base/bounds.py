@@ -29,12 +29,19 @@ def within(lo: float | None, hi: float | None, unit: str, low: str = "", high: s
         if value is None:
             return value
         if lo is not None and value < lo:
-            raise ValueError(f"{value:g}{u} is below {lo:g}{u}: {low}")
+            raise ValueError(f"{shown_beside(value, lo)}{u} is below {lo:g}{u}: {low}")
         if hi is not None and value > hi:
-            raise ValueError(f"{value:g}{u} is above {hi:g}{u}: {high}")
+            raise ValueError(f"{shown_beside(value, hi)}{u} is above {hi:g}{u}: {high}")
         return value
 
     return AfterValidator(check)
+
+
+def shown_beside(value: float, bound: float) -> str:
+    """``value`` as ``{:g}`` writes it, or in full where that would read as
+    the bound it passes (a value a hair past 100 is not '100 is above 100')."""
+    short = f"{value:g}"
+    return short if short != f"{bound:g}" else repr(float(value))
 
 
 # --- noise of measurements (sigmas of factors and observers) ---------------

@@ -131,23 +131,36 @@ def read_text(path: str | Path, what: str = "file", kind: str = "YAML") -> str:
 
 class UniqueKeyLoader(SAFE_LOADER):  # type: ignore[misc, valid-type]
     """The safe loader, refusing a key given twice in one mapping (YAML
-    would keep the second silently)."""
+    would keep the second silently). A key a merge (``<<``) brings beside
+    one given in the mapping itself is YAML's override, as meant; but the
+    mappings a merge brings are checked too, which PyYAML flattens without
+    constructing them (``{<<: {a: 1, a: 2}}`` kept the second in silence)."""
 
     def construct_mapping(self, node, deep=False):
         if isinstance(node, yaml.MappingNode):
-            seen: dict[Any, int] = {}
-            for key_node, _ in node.value:
-                if key_node.tag == "tag:yaml.org,2002:merge":
-                    continue
-                key = self.construct_object(key_node, deep=True)
-                line = key_node.start_mark.line + 1
-                try:
-                    if key in seen:  # on another line, or the same one ({a: 1, a: 2})
-                        raise DuplicateKey(key, seen[key], line)
-                    seen[key] = line
-                except TypeError:  # an unhashable key: the constructor says so
-                    continue
+            self._unique_keys(node)
         return super().construct_mapping(node, deep=deep)
+
+    def _unique_keys(self, node: yaml.MappingNode, merging: tuple[int, ...] = ()) -> None:
+        seen: dict[Any, int] = {}
+        for key_node, value_node in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                merged = value_node.value if isinstance(value_node, yaml.SequenceNode) else [value_node]
+                for m in merged:
+                    if isinstance(m, yaml.MappingNode):
+                        if id(m) in (*merging, id(node)):
+                            raise yaml.constructor.ConstructorError(
+                                None, None, "a mapping merges itself (<<: an alias of its own anchor)", key_node.start_mark)
+                        self._unique_keys(m, (*merging, id(node)))
+                continue
+            key = self.construct_object(key_node, deep=True)
+            line = key_node.start_mark.line + 1
+            try:
+                if key in seen:  # on another line, or the same one ({a: 1, a: 2})
+                    raise DuplicateKey(key, seen[key], line)
+                seen[key] = line
+            except TypeError:  # an unhashable key: the constructor says so
+                continue
 
 
     def construct_yaml_int(self, node):

@@ -159,6 +159,7 @@ def _local(groups: list[list[Job]], out_dir: Path, workers: int) -> Iterator[Job
                     yield from (JobOutcome(job.id, error, 0.0) for job in group)
     except BaseException:
         _interrupt_workers(pool)
+        _clean_leftovers(out_dir)  # what the workers were writing, now that none lives
         raise
     pool.shutdown(wait=True)
 
@@ -166,8 +167,8 @@ def _local(groups: list[list[Job]], out_dir: Path, workers: int) -> Iterator[Job
 def _interrupt_workers(pool: ProcessPoolExecutor) -> None:
     """Stop a pool whose sweep was interrupted without waiting for its
     jobs: Ctrl-C reaches the workers from the terminal, SIGTERM and SIGHUP
-    only this process. The next run removes what a job leaves and runs the
-    unfinished jobs again."""
+    only this process. The caller then removes what their jobs left half
+    written; the next run runs the unfinished jobs again."""
     workers = list(getattr(pool, "_processes", {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
     for process in workers:
