@@ -128,3 +128,19 @@ def test_an_injected_stretch_is_found_where_one_of_its_components_is_blamed():
     expand = {"SM": ["SM_DIST", "SM_LAT", "SM_YAW"]}
     assert stretches_found(t, results, [], stretches, expand) == 2
     assert stretches_found(t, results, [], stretches) == 1
+
+
+def test_a_floor_is_met_from_above_and_the_rows_read_back_summarise_as_they_were(tmp_path):
+    from scripts.bench.common import csv_text
+    from scripts.bench.real_faults import read_rows
+
+    rows = _rows("a", "cut3", {"gated": 0.5, "cauchy": 0.8, "interval_oracle": 0.25},
+                 alarm_fraction=0.1, precision=0.9, recall=0.5, detected=3, missed=1, delay_s=1.0,
+                 stretches_found=1, stretches=3)
+    text, f = summarise(rows)
+    assert f["injected stretches found"] == pytest.approx(1 / 3)
+    assert "| injected stretches found | 0.33 | ≥ 0.8 | missed |" in text
+    assert "| step precision | 0.90 | ≥ 0.7 | met |" in text
+    path = tmp_path / "real_faults.csv"
+    path.write_text(csv_text(rows, sorted({k for r in rows for k in r})))
+    assert summarise(read_rows(path)) == (text, f)
