@@ -78,7 +78,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from scripts.bench.common import KERNELS, csv_text, include_in_readme, publish, quiet_logging, table
+from scripts.bench.common import KERNELS, commit, csv_text, include_in_readme, publish, quiet_logging, table
 from scripts.bench.husky_faults import judged_alarms
 from scripts.bench.judges import ate_vs_gps, gps_wanders
 from slam.commands.compare import load_variants
@@ -441,10 +441,14 @@ def main(argv: list[str] | None = None) -> int:
             for (name, _, kind), future in zip(units, futures):
                 rows += future.result()
                 log.info("%s %s: done, %.0f s in", name, kind or "as recorded", time.perf_counter() - t_all)
+        measured_at = commit()
+        rows = [{**r, "commit": measured_at} for r in rows]
     text, _ = summarise(rows)
     if args.rows is not None:
-        text = (f"The rows below were measured by an earlier run of this bench and read back from its "
-                f"`{args.rows.name}`; this command summarised them.\n\n") + text
+        at = sorted({str(r["commit"]) for r in rows if r.get("commit")})
+        text = (f"The rows below were measured by an earlier run of this bench"
+                + (f" at commit {', '.join(at)}" if at else "")
+                + f" and read back from its `{args.rows.name}`; this command summarised them.\n\n") + text
     page = "real_faults_tuning" if args.tuning else "real_faults"
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / f"{page}.md", text)
