@@ -490,10 +490,9 @@ codecs.register_error(_TERMINAL_ERRORS, _as_given_or_escaped)
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     args.command_line = shlex.join(["gslam", *(sys.argv[1:] if argv is None else argv)])  # as results name it
-    logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
+    stderr = logging.StreamHandler()
+    stderr.setFormatter(_WarningLines("%(levelname)s %(name)s: %(message)s"))
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, handlers=[stderr])
     warnings.showwarning = _show_warning
     if not _working_folder_exists():  # libraries fail on it, some by ending the process (oneMKL, loading Open3D)
         print(f"gslam: error: {_NO_WORKING_FOLDER}", file=sys.stderr)
@@ -608,6 +607,16 @@ def _shortened(line: str) -> str:
     message readable."""
     words = line.split(" ")
     return " ".join(w if len(w) <= LONGEST_WORD else f"{w[:200]}...({len(w):,} characters)...{w[-60:]}" for w in words)
+
+
+class _WarningLines(logging.Formatter):
+    """Warnings and errors logged as the error line is written: one line,
+    control characters escaped, an echoed input cut to its start and end
+    (a scenario or file name holding ESC sequences, a key of a megabyte)."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = super().format(record)
+        return _shortened(_one_line(text)) if record.levelno >= logging.WARNING else text
 
 
 def _say(text: str) -> None:

@@ -1674,3 +1674,23 @@ def test_an_out_name_near_the_file_systems_limit_is_written(command: str, world:
     for _ in range(2 if command == "map-again" else 1):
         assert main(["-q", *map(str, argv), str(long)]) == 0, capsys.readouterr().err
     assert [p.name for p in tmp_path.iterdir()] == [long.name]
+
+
+def test_a_warning_that_echoes_the_input_is_one_short_line_with_its_control_characters_escaped(world: World,
+                                                                                                 tmp_path: Path):
+    # The log's name holds a newline and an ESC sequence (retitling a
+    # terminal), and its odometry has a gap, which a warning names the log
+    # for; a PARAM value of 100,000 characters is echoed back.
+    name = "a\nb\x1b]0;t\x07.log"
+    carmen(n=20, head="PARAM robot_front_laser_max " + "x" * 100_000 + " host 0", name=name)(tmp_path, world)
+    lines = (tmp_path / name).read_text().splitlines()
+    gap = [i for i, line in enumerate(lines) if line.startswith("ODOM")][20:24]
+    (tmp_path / name).write_text("\n".join(line for i, line in enumerate(lines) if i not in gap) + "\n")
+    proc = _gslam(["map", tmp_path / name, "--config", CONFIGS / "datasets" / "carmen.yaml", *QUICK,
+                   "--out", tmp_path / "o"], tmp_path)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err[-800:]
+    warned = [line for line in err.splitlines() if line.startswith("WARNING ")]
+    assert any("robot_front_laser_max" in line and "characters" in line for line in warned), warned
+    assert any("b\\x1b]0;t\\x07.log: " in line and "odometry" in line for line in warned), warned
+    assert max(map(len, err.splitlines())) <= 2_000 and "\x1b" not in err and "\x07" not in err, err[:300]
