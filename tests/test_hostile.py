@@ -1446,7 +1446,11 @@ def _said(err: str) -> str:
 
 
 def _temps(root: Path) -> list[Path]:
-    return [p for p in root.rglob("*") if ".gslam-tmp-" in p.name]
+    """gslam's temporary files and folders under ``root``, while gslam may
+    be renaming them (os.walk passes over a folder gone between listing it
+    and entering it; rglob raised)."""
+    return [Path(folder) / name for folder, dirs, files in os.walk(root) for name in (*dirs, *files)
+            if ".gslam-tmp-" in name]
 
 
 SIGNALLED = {
