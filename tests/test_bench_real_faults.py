@@ -144,3 +144,20 @@ def test_a_floor_is_met_from_above_and_the_rows_read_back_summarise_as_they_were
     path = tmp_path / "real_faults.csv"
     path.write_text(csv_text(rows, sorted({k for r in rows for k in r})))
     assert summarise(read_rows(path)) == (text, f)
+
+
+def test_the_readme_table_of_a_page_summarised_from_earlier_rows_says_where_they_were_measured(tmp_path, monkeypatch):
+    import scripts.bench.common as common
+
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "real_faults.md").write_text(
+        "# Title\n\nWritten by `python -m scripts.bench real_faults --rows r.csv` at commit abc, 2026-01-01 00:00 UTC, "
+        f"on a machine.\n\n{common.ROWS_MEASURED} of this bench at commit 123 and read back.\n\n| a |\n|---|\n| 1 |\n\nmore\n")
+    (tmp_path / "README.md").write_text("before\n<!-- results/real_faults -->\nold\n<!-- /results/real_faults -->\nafter\n")
+    monkeypatch.setattr(common, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(common, "REPO", tmp_path)
+    common.include_in_readme("real_faults")
+    readme = (tmp_path / "README.md").read_text()
+    assert "| 1 |\n\nWritten by `python -m scripts.bench real_faults --rows r.csv` at commit abc, 2026-01-01 00:00 UTC.\n" \
+           f"{common.ROWS_MEASURED} of this bench at commit 123 and read back.\n<!-- /results/real_faults -->" in readme
+    assert "old" not in readme and readme.startswith("before\n") and readme.endswith("after\n")

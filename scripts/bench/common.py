@@ -102,6 +102,10 @@ def publish(name: str, title: str, body: str, argv: Sequence[str] | None, bench:
     return path
 
 
+ROWS_MEASURED = "These rows were measured by an earlier run"
+"""How a page summarised from an earlier run's rows begins to say so."""
+
+
 def include_in_readme(name: str) -> None:
     """Copy the first table of ``docs/results/NAME.md``, with the line
     naming its command, commit and date, into ``README.md`` between the
@@ -110,7 +114,9 @@ def include_in_readme(name: str) -> None:
     written = next(line for line in page if line.startswith("Written by "))
     start = next(i for i, line in enumerate(page) if line.startswith("| "))
     end = next((i for i in range(start, len(page)) if not page[i].startswith("|")), len(page))
-    block = "\n".join([*page[start:end], "", written.split(", on ")[0] + "."])
+    # A page summarised from earlier rows says where they were measured.
+    measured = [line for line in page[:start] if line.startswith(ROWS_MEASURED)]
+    block = "\n".join([*page[start:end], "", written.split(", on ")[0] + ".", *measured])
     readme = REPO / "README.md"
     text = readme.read_text()
     begin, close = f"<!-- results/{name} -->", f"<!-- /results/{name} -->"

@@ -78,7 +78,9 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from scripts.bench.common import KERNELS, commit, csv_text, include_in_readme, publish, quiet_logging, table
+from scripts.bench.common import (
+    KERNELS, ROWS_MEASURED, commit, csv_text, include_in_readme, publish, quiet_logging, table,
+)
 from scripts.bench.husky_faults import judged_alarms
 from scripts.bench.judges import ate_vs_gps, gps_wanders
 from slam.commands.compare import load_variants
@@ -446,7 +448,7 @@ def main(argv: list[str] | None = None) -> int:
     text, _ = summarise(rows)
     if args.rows is not None:
         at = sorted({str(r["commit"]) for r in rows if r.get("commit")})
-        text = (f"The rows below were measured by an earlier run of this bench"
+        text = (f"{ROWS_MEASURED} of this bench"
                 + (f" at commit {', '.join(at)}" if at else "")
                 + f" and read back from its `{args.rows.name}`; this command summarised them.\n\n") + text
     page = "real_faults_tuning" if args.tuning else "real_faults"
