@@ -130,6 +130,27 @@ def test_an_injected_stretch_is_found_where_one_of_its_components_is_blamed():
     assert stretches_found(t, results, [], stretches) == 1
 
 
+def test_a_blame_is_right_within_an_injected_stretch_of_its_sensor_whether_or_not_that_step_was_harmed():
+    from types import SimpleNamespace
+
+    from validation.metrics import stretch_precision
+
+    stretches = injected_stretches(["laser_cut@10.0:20.0,range_m=3", "slip@30.0:40.0,scale=1.5"])
+    t = [5.0, 12.0, 15.0, 18.0, 25.0, 35.0, 36.0]
+
+    def result(*blamed):
+        return SimpleNamespace(consistent=True, diagnoses=(frozenset(blamed),))
+
+    # Right: the whole matcher within the cut, one of its modalities within
+    # it, the odometry within the slip. Wrong: the matcher before the cut
+    # and after it, the odometry within the cut with the matcher (a blame
+    # must lie wholly within what was injected). Not counted: no blame.
+    results = [result("SM"), result("SM"), result("SM_DIST"), result("SM", "ODO_DIST"), result("SM_YAW"),
+               result("ODO_DIST"), result()]
+    expand = {"SM": ["SM_DIST", "SM_LAT", "SM_YAW"]}
+    assert stretch_precision(t, results, [], stretches, expand) == (3, 6)
+
+
 def test_a_floor_is_met_from_above_and_the_rows_read_back_summarise_as_they_were(tmp_path):
     from scripts.bench.common import csv_text
     from scripts.bench.real_faults import read_rows

@@ -39,7 +39,11 @@ Definitions (validation steps at ``validation.rate_hz``):
 :func:`stretches_found` asks a coarser question of whole stretches (an
 injected fault's span, whatever its labels): was any of its components
 blamed (in the most probable diagnosis, the one the gating acts on) at any
-step within it.
+step within it. :func:`stretch_precision` asks the converse: of the steps
+with a blame, the share whose every blamed component was injected at that
+step. The labels above mark only the steps an injected fault harmed (a cut
+laser's scans that leave a direction free); a sensor blamed within its
+injected stretch but outside those labels is faulty all the same.
 """
 
 from __future__ import annotations
@@ -185,3 +189,28 @@ def stretches_found(
         steps = np.flatnonzero((t >= a) & (t <= b))
         found += any(set(comps) & top[k] for k in steps)
     return found
+
+
+def stretch_precision(
+    step_t: np.ndarray,
+    results: list[DiagnosisResult] | None,
+    actions: list[Actions],
+    stretches: Sequence[tuple[Sequence[str], float, float]],
+    expand: Mapping[str, Sequence[str]] | None = None,
+) -> tuple[int, int]:
+    """(right, blamed): the steps whose most probable diagnosis blames some
+    component (oracle: gated), and of those the ones where every blamed
+    component (a sensor counting as all its modalities, ``expand``) lies in
+    a stretch of ``stretches`` (components, start s, end s) holding that
+    step. A step without a consistent diagnosis is not counted."""
+    expand = expand or {}
+    top, _, _ = _blamed(results, actions, expand)
+    t = np.asarray(step_t, dtype=float)
+    injected: list[set[str]] = [set() for _ in range(len(t))]
+    for comps, a, b in stretches:
+        parts = {m for c in comps for m in (c, *expand.get(c, ()))}
+        for k in np.flatnonzero((t >= a) & (t <= b)):
+            injected[k] |= parts
+    blamed = [k for k, b in enumerate(top) if b]
+    right = sum(1 for k in blamed if top[k] <= injected[k])
+    return right, len(blamed)
