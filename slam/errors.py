@@ -14,8 +14,10 @@ input, bad config, missing data."""
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM or SIGHUP, raised where Ctrl-C raises KeyboardInterrupt so
-    that a terminated command cleans up as an interrupted one does."""
+    """A signal that ends a process (SIGTERM, SIGHUP, SIGQUIT, ...:
+    ``slam.processes.signals.STOPS``), raised where Ctrl-C raises
+    KeyboardInterrupt so that a terminated command cleans up as an
+    interrupted one does."""
 
     def __init__(self, signum: int):
         super().__init__(signum)

@@ -47,6 +47,7 @@ import pytest
 import yaml
 
 from slam.cli import main
+from slam.processes.signals import STOPS
 from tests.bagfactory import driving_bag
 from tests.conftest import CONFIGS, REPO, TELEMAX_CONFIG
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
@@ -1424,7 +1425,7 @@ def _gslam(argv: list, cwd: Path, limit_bytes: int | None = None) -> subprocess.
         # A user's gslam, not the test runner's: under nohup (SIGHUP ignored)
         # or as a background job of a script (SIGINT ignored), which gslam
         # keeps ignored, the signal cases would test nothing.
-        for s in (signal.SIGHUP, signal.SIGTERM, signal.SIGINT):
+        for s in STOPS:
             signal.signal(s, signal.SIG_DFL)
         if limit_bytes is not None:
             resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
@@ -1459,6 +1460,10 @@ SIGNALLED = {
     "simulate-SIGTERM": (["simulate", "{scen}"], signal.SIGTERM),
     "inject-SIGTERM": (["inject", "{run}", "--fault", "gyro_bias@2:4"], signal.SIGTERM),
     "compare-SIGINT": (["compare", "{run}", "--config", TELEMAX_CONFIG, "--only", "ungated"], signal.SIGINT),
+    # Ctrl-\ and the signals a job scheduler or a script may send.
+    "map-SIGQUIT": (["map", "{run}", "--config", TELEMAX_CONFIG], signal.SIGQUIT),
+    "inject-SIGUSR1": (["inject", "{run}", "--fault", "gyro_bias@2:4"], signal.SIGUSR1),
+    "simulate-SIGALRM": (["simulate", "{scen}"], signal.SIGALRM),
 }
 FULL_DISK = {
     "simulate": (["simulate", "{scen}", "--out", "{d}/o"], 1_000_000, "the simulate result's bag ("),

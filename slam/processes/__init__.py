@@ -1,1 +1,1 @@
-"""How gslam uses processes: work on the second core, and how Ctrl-C, SIGTERM and SIGHUP stop a command."""
+"""How gslam uses processes: work on the second core, and how Ctrl-C and the signals that end a process stop a command."""

@@ -1,6 +1,8 @@
-"""How gslam stops: Ctrl-C, SIGTERM and SIGHUP end a command the same way.
+"""How gslam stops: Ctrl-C and every signal whose default action ends a
+process (SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGUSR2, SIGALRM: ``STOPS``) end
+a command the same way.
 
-While a command runs (:func:`as_interrupt`), SIGTERM and SIGHUP raise
+While a command runs (:func:`as_interrupt`), those but SIGINT raise
 :class:`~slam.errors.Terminated`, a KeyboardInterrupt, so every ``finally``
 that removes a half-written result runs for them as for Ctrl-C. Two places
 must not be cut in the middle: putting a result in place (and making its
@@ -20,7 +22,11 @@ from contextlib import contextmanager
 
 from slam.errors import raise_terminated
 
-STOPS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+STOPS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT", "SIGUSR1", "SIGUSR2", "SIGALRM")
+              if hasattr(signal, n))
+"""The signals that end a command through its cleanup. SIGPIPE is left to
+Python (ignored: a closed pipe surfaces as BrokenPipeError); SIGKILL cannot
+be caught, and a killed run's folder is cleaned up by the next run into it."""
 
 
 def _main_thread() -> bool:
@@ -29,7 +35,7 @@ def _main_thread() -> bool:
 
 @contextmanager
 def as_interrupt(received: list[int]) -> Iterator[None]:
-    """SIGINT raises KeyboardInterrupt, SIGTERM and SIGHUP
+    """SIGINT raises KeyboardInterrupt, the other ``STOPS``
     :class:`~slam.errors.Terminated`; each signal that came is appended to
     ``received`` (one that lands inside a module's import surfaces as that
     import's error, and the caller can still tell). Signals ignored when the
@@ -54,7 +60,7 @@ def as_interrupt(received: list[int]) -> Iterator[None]:
 
 @contextmanager
 def held() -> Iterator[None]:
-    """Hold SIGINT, SIGTERM and SIGHUP back until the block is done, then
+    """Hold ``STOPS`` back until the block is done, then
     deliver the first that came (on the main thread; elsewhere no-op)."""
     if not _main_thread():
         yield
@@ -72,7 +78,7 @@ def held() -> Iterator[None]:
 
 @contextmanager
 def blocked() -> Iterator[None]:
-    """Block SIGINT, SIGTERM and SIGHUP in this thread (delivered after)."""
+    """Block ``STOPS`` in this thread (delivered after)."""
     if not hasattr(signal, "pthread_sigmask"):
         yield
         return
@@ -85,7 +91,7 @@ def blocked() -> Iterator[None]:
 
 def child_defaults() -> None:
     """In a forked child: Ctrl-C ignored (the parent handles it and ends the
-    child), SIGTERM and SIGHUP end it, and the signals blocked around the
+    child), the other ``STOPS`` end it, and the signals blocked around the
     fork unblocked."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     for s in STOPS:

@@ -26,7 +26,7 @@ replace nothing but what an earlier forced run of the same command wrote.
 
 The result is built in a temporary sibling and put in place at the end
 (:class:`ResultFolder`): renamed whole when nothing of the user's is in the
-way, else file by file with SIGINT, SIGTERM and SIGHUP held back until it
+way, else file by file with the stopping signals held back until it
 is done. A failure before that leaves nothing of the run; one that would
 come at that step (a file of the user's in the way) is checked before any
 file moves.

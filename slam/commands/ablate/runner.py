@@ -166,7 +166,7 @@ def _local(groups: list[list[Job]], out_dir: Path, workers: int) -> Iterator[Job
 
 def _interrupt_workers(pool: ProcessPoolExecutor) -> None:
     """Stop a pool whose sweep was interrupted without waiting for its
-    jobs: Ctrl-C reaches the workers from the terminal, SIGTERM and SIGHUP
+    jobs: Ctrl-C reaches the workers from the terminal, the other signals
     only this process. The caller then removes what their jobs left half
     written; the next run runs the unfinished jobs again."""
     workers = list(getattr(pool, "_processes", {}).values())
