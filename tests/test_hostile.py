@@ -144,6 +144,25 @@ def bag(change: Callable | None = None, name: str = "b") -> Callable[[Path, Worl
     return make
 
 
+def truncated_mcap(fraction: float, bare: bool = False) -> Callable[[Path, World], None]:
+    """The driving bag as a ROS 2 MCAP bag at ``{d}/m`` cut off after
+    ``fraction`` of its bytes (a copy that stopped, a recorder killed before
+    its index); ``bare``: the cut .mcap file alone at ``{d}/m.mcap``."""
+
+    def make(d: Path, world: World) -> None:
+        folder = driving_bag(ros=2, duration_s=4.0).write(d / "full", storage="mcap")
+        (file,) = folder.glob("*.mcap")
+        data = file.read_bytes()[: int(file.stat().st_size * fraction)]
+        if bare:
+            (d / "m.mcap").write_bytes(data)
+        else:
+            shutil.copytree(folder, d / "m")
+            (d / "m" / file.name).write_bytes(data)
+        shutil.rmtree(folder)
+
+    return make
+
+
 def each(topic: str, fn: Callable[[float, object], None]) -> Callable:
     """A bag change: ``fn(t, msg)`` on every message of ``topic``."""
 
@@ -1266,6 +1285,16 @@ ERRORS: list[Case] = [
            "metadata.yaml: while constructing a mapping"),
           ("python-tag", lambda m: m + "z: !!python/object/apply:os.system ['true']\n",
            "could not determine a constructor for the tag 'tag:yaml.org,2002:python/object/apply:os.system'"),
+      )),
+    # -- a recorder killed before it wrote the MCAP index, a copy cut short --
+    *(Case(f"mcap-truncated-{name}", (*argv, "{d}/" + ("m.mcap" if bare else "m"), *rest),
+           ("m.mcap" if bare else "m") + ": not a readable ROS bag (File end magic is invalid.)",
+           truncated_mcap(fraction, bare))
+      for name, argv, rest, fraction, bare in (
+          ("map-at-a-third", ("map",), ("--config", "{cfg}", "--out", "{d}/o"), 0.3, False),
+          ("map-at-the-end", ("map",), ("--config", "{cfg}", "--out", "{d}/o"), 0.98, False),
+          ("inspect-bare-file", ("inspect",), (), 0.5, True),
+          ("inject-bare-file", ("inject",), ("--fault", "gyro_bias@1:2", "--out", "{d}/o"), 0.5, True),
       )),
     Case("inject-fault-parameter-of-100-kb", ("inject", "{run}", "--fault", "gyro_bias@2:4," + "b" * 100_000 + "=1", "--out",
                                               "{d}/o"), "unknown parameter 'bbb"),
