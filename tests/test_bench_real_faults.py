@@ -182,3 +182,21 @@ def test_the_readme_table_of_a_page_summarised_from_earlier_rows_says_where_they
     assert "| 1 |\n\nWritten by `python -m scripts.bench real_faults --rows r.csv` at commit abc, 2026-01-01 00:00 UTC.\n" \
            f"{common.ROWS_MEASURED} of this bench at commit 123 and read back.\n<!-- /results/real_faults -->" in readme
     assert "old" not in readme and readme.startswith("before\n") and readme.endswith("after\n")
+
+
+def test_rows_read_back_say_at_which_commit_each_log_was_measured():
+    from scripts.bench.real_faults import measured_where
+
+    rows = [{"log": "intel", "commit": "aaa"}, {"log": "husky", "commit": "bbb"}, {"log": "intel", "commit": "aaa"},
+            {"log": "aces", "commit": "aaa"}]
+    assert measured_where(rows) == " at commits aaa (intel, aces); bbb (husky)"
+    assert measured_where(rows[:1]) == " at commit aaa"
+    assert measured_where([{"log": "intel"}]) == ""
+
+
+def test_a_blame_of_the_husky_bags_own_compass_fault_is_right_but_not_an_injected_stretch_found():
+    from scripts.bench.real_faults import own_faults
+
+    (comps, start, end), = own_faults(HUSKY)
+    assert comps == ["IMU_YAW"] and 180.0 < start < 230.0 and end == float("inf")
+    assert own_faults("intel") == []
