@@ -189,7 +189,7 @@ def test_rows_read_back_say_at_which_commit_each_log_was_measured():
 
     rows = [{"log": "intel", "commit": "aaa"}, {"log": "husky", "commit": "bbb"}, {"log": "intel", "commit": "aaa"},
             {"log": "aces", "commit": "aaa"}]
-    assert measured_where(rows) == " at commits aaa (intel, aces); bbb (husky)"
+    assert measured_where(rows) == " at commits aaa (intel, aces); bbb (husky), one run per commit, their rows put together,"
     assert measured_where(rows[:1]) == " at commit aaa"
     assert measured_where([{"log": "intel"}]) == ""
 

@@ -446,7 +446,8 @@ def measured_where(rows: list[dict]) -> str:
                 logs.append(r["log"])
     if len(at) <= 1:
         return "".join(f" at commit {c}" for c in at)
-    return " at commits " + "; ".join(f"{c} ({', '.join(logs)})" for c, logs in sorted(at.items()))
+    return (" at commits " + "; ".join(f"{c} ({', '.join(logs)})" for c, logs in sorted(at.items()))
+            + ", one run per commit, their rows put together,")
 
 
 def main(argv: list[str] | None = None) -> int:
