@@ -133,7 +133,9 @@ def main(argv: list[str] | None = None) -> int:
             log.info("%s", rows[-1])
     f = lambda x: "–" if x is None else f"{x:.3f}"  # noqa: E731
     out = io.StringIO()
-    out.write(f"Config: {args.config}\n\n| fault | labelled | recall | precision | intervals detected | delay s | "
+    config = args.config.resolve()
+    shown = config.relative_to(ROOT) if config.is_relative_to(ROOT) else config  # where the repository is, is no figure
+    out.write(f"Config: {shown}\n\n| fault | labelled | recall | precision | intervals detected | delay s | "
               "judged steps blaming a sensor | judged steps | ATE vs GPS gated m | ungated m | best kernel m |\n"
               "|---|---|---|---|---|---|---|---|---|---|---|\n")
     for r in rows:
