@@ -163,6 +163,18 @@ def truncated_mcap(fraction: float, bare: bool = False) -> Callable[[Path, World
     return make
 
 
+def truncated_ros1(fraction: float) -> Callable[[Path, World], None]:
+    """The driving bag as a ROS 1 bag at ``{d}/r.bag`` cut off after
+    ``fraction`` of its bytes: its index, written last, is gone."""
+
+    def make(d: Path, world: World) -> None:
+        bag = driving_bag(ros=1, duration_s=4.0).write(d / "full.bag")
+        (d / "r.bag").write_bytes(bag.read_bytes()[: int(bag.stat().st_size * fraction)])
+        bag.unlink()
+
+    return make
+
+
 def each(topic: str, fn: Callable[[float, object], None]) -> Callable:
     """A bag change: ``fn(t, msg)`` on every message of ``topic``."""
 
@@ -1288,13 +1300,22 @@ ERRORS: list[Case] = [
       )),
     # -- a recorder killed before it wrote the MCAP index, a copy cut short --
     *(Case(f"mcap-truncated-{name}", (*argv, "{d}/" + ("m.mcap" if bare else "m"), *rest),
-           ("m.mcap" if bare else "m") + ": not a readable ROS bag (File end magic is invalid.)",
+           ("m.mcap" if bare else "m") + ": not a readable ROS bag (the MCAP file ends early, a recording or a copy "
+           "cut short: File end magic is invalid.)",
            truncated_mcap(fraction, bare))
       for name, argv, rest, fraction, bare in (
           ("map-at-a-third", ("map",), ("--config", "{cfg}", "--out", "{d}/o"), 0.3, False),
           ("map-at-the-end", ("map",), ("--config", "{cfg}", "--out", "{d}/o"), 0.98, False),
           ("inspect-bare-file", ("inspect",), (), 0.5, True),
           ("inject-bare-file", ("inject",), ("--fault", "gyro_bias@1:2", "--out", "{d}/o"), 0.5, True),
+      )),
+    *(Case(f"ros1-bag-truncated-{name}", (*argv, "{d}/r.bag", *rest),
+           "r.bag: not a readable ROS bag (the bag's index is cut off or damaged, a recording or a copy cut short: "
+           "'rosbag reindex' it and read it again: Bag index looks damaged",
+           truncated_ros1(fraction))
+      for name, argv, rest, fraction in (
+          ("map-at-a-third", ("map",), ("--config", "{cfg}", "--out", "{d}/o"), 0.3),
+          ("inspect-at-the-end", ("inspect",), (), 0.98),
       )),
     Case("inject-fault-parameter-of-100-kb", ("inject", "{run}", "--fault", "gyro_bias@2:4," + "b" * 100_000 + "=1", "--out",
                                               "{d}/o"), "unknown parameter 'bbb"),

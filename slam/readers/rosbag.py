@@ -80,6 +80,23 @@ def _first_line(err: BaseException) -> str:
     return text[0] if text else type(err).__name__
 
 
+_CUT_SHORT = {
+    "File end magic is invalid.": "the MCAP file ends early, a recording or a copy cut short",
+    "Bag is not indexed": "the bag has no index, a recording cut short: 'rosbag reindex' it and read it again",
+    "Bag index looks damaged": "the bag's index is cut off or damaged, a recording or a copy cut short: "
+                               "'rosbag reindex' it and read it again",
+}
+"""How rosbags begins to say a bag was cut short, and what that means to its owner."""
+
+
+def _refusal(err: BaseException) -> str:
+    """Why rosbags could not open a bag, in one line: its own words, after
+    what they mean where they name a bag cut short."""
+    said = _first_line(err)
+    meaning = next((m for start, m in _CUT_SHORT.items() if said.startswith(start)), None)
+    return f"{meaning}: {said}" if meaning else said
+
+
 def is_rosbag(path: Path) -> bool:
     """True for a ROS 1 ``.bag``, a ``.db3``/``.mcap`` file or a rosbag2
     directory (one holding ``metadata.yaml``)."""
@@ -195,9 +212,9 @@ def _open_reader(path: Path) -> Any:
         reader.open()
     except Exception as err:  # rosbags raises many types for foreign or broken files
         files = rosbag_mcap.mcap_files(path)
-        mixed = rosbag_mcap.open_mixed_mcap(path, files, _first_line(err)) if files else None
+        mixed = rosbag_mcap.open_mixed_mcap(path, files, _refusal(err)) if files else None
         if mixed is None:
-            raise GslamError(f"{path}: not a readable ROS bag ({_first_line(err)})") from None
+            raise GslamError(f"{path}: not a readable ROS bag ({_refusal(err)})") from None
         return mixed
     return reader
 
