@@ -50,6 +50,7 @@ class Submap:
     finished: bool = False
     _pyramid: ScorePyramid | None = None
     _pmap: PointMap | None = None
+    _placed: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
 
     @property
     def anchor(self) -> int:
@@ -63,13 +64,15 @@ class Submap:
         self._pmap = None
 
     def gather(self, points: ScanPoints) -> tuple[np.ndarray, np.ndarray]:
-        """The submap's points (m, 2) and normals (m, 2) in its frame."""
-        pts, nrm = [], []
-        for k, pose in zip(self.scans, self.poses):
-            pts.append(transform_points(pose, points.points[k]))
+        """The submap's points (m, 2) and normals (m, 2) in its frame. A
+        scan's pose in the submap never changes once inserted, so each scan
+        is placed once and kept (the grid and point map are rebuilt after
+        every insertion)."""
+        for k, pose in zip(self.scans[len(self._placed):], self.poses[len(self._placed):]):
             c, s = np.cos(pose[2]), np.sin(pose[2])
-            nrm.append(points.normals[k] @ np.array([[c, s], [-s, c]]))
-        return np.concatenate(pts), np.concatenate(nrm)
+            self._placed.append((transform_points(pose, points.points[k]),
+                                 points.normals[k] @ np.array([[c, s], [-s, c]])))
+        return np.concatenate([p for p, _ in self._placed]), np.concatenate([n for _, n in self._placed])
 
     def points_about(self, points: ScanPoints, pose: np.ndarray, count: int | None = None) -> np.ndarray:
         """The points (m, 2) of its first ``count`` scans (all by default)
@@ -132,7 +135,7 @@ def match_scan(
     if len(points.search[scan]) == 0:
         return None
     search = CorrelativeSearch(submap.pyramid(points, cfg), points.search[scan], guess, linear_window_m,
-                               angular_window_rad)
+                               angular_window_rad, points.search_step(scan, cfg.resolution_m))
     found = search.best(min_score, cfg.tie_tolerance)
     if found is None:
         return None

@@ -6,6 +6,7 @@ import numpy as np
 
 from slam.matching.points import voxel_first
 from slam.matching.points import scan_normals
+from slam.matching.search import angular_step
 from slam.recording import Scans
 
 
@@ -37,12 +38,23 @@ class ScanPoints:
         self.points: list[np.ndarray] = []
         self.normals: list[np.ndarray] = []
         self.search: list[np.ndarray] = []
+        self._steps: dict[tuple[int, float], float] = {}
         for a, b in zip(bounds[:-1], bounds[1:]):
             keep = a + voxel_first(pts[a:b], voxel_m)
             self.points.append(pts[keep])
             self.normals.append(normals[keep])
             coarse = self.points[-1] if search_voxel_m is None else pts[a + voxel_first(pts[a:b], search_voxel_m)]
             self.search.append(coarse)
+
+    def search_step(self, scan: int, resolution_m: float) -> float:
+        """The correlative search's yaw step (rad) for ``scan``'s ``search``
+        points in cells of ``resolution_m``
+        (:func:`slam.matching.search.angular_step`): worked out once per
+        scan, which is searched for in several submaps."""
+        key = (scan, resolution_m)
+        if key not in self._steps:
+            self._steps[key] = angular_step(np.ascontiguousarray(self.search[scan], dtype=np.float64), resolution_m)
+        return self._steps[key]
 
     def leave_out(self, scans: np.ndarray) -> None:
         """Empty the points of ``scans`` (indices into this list): they are
@@ -51,6 +63,7 @@ class ScanPoints:
             self.points[i] = self.points[i][:0]
             self.normals[i] = self.normals[i][:0]
             self.search[i] = self.search[i][:0]
+        self._steps.clear()
 
     def __len__(self) -> int:
         return len(self.points)
