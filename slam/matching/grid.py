@@ -84,13 +84,23 @@ class ScorePyramid:
         return self.stack[level].ravel().take(flat)
 
 
-def hit_cells(points: np.ndarray, origin: np.ndarray, resolution_m: float, shape: tuple[int, int]) -> np.ndarray:
-    """Boolean grid (shape) of the cells holding at least one of ``points`` (n, 2)."""
+def _hits(points: np.ndarray, origin: np.ndarray, resolution_m: float,
+          shape: tuple[int, int]) -> tuple[np.ndarray, tuple[int, int, int, int] | None]:
+    """:func:`hit_cells`, and the first and last row and column holding a
+    hit (None for no hit)."""
     hits = np.zeros(shape, dtype=bool)
     c = np.floor((points - origin) / resolution_m).astype(np.int64)
     inside = (c[:, 0] >= 0) & (c[:, 0] < shape[0]) & (c[:, 1] >= 0) & (c[:, 1] < shape[1])
-    hits[c[inside, 0], c[inside, 1]] = True
-    return hits
+    cx, cy = c[inside, 0], c[inside, 1]
+    hits[cx, cy] = True
+    if len(cx) == 0:
+        return hits, None
+    return hits, (int(cx.min()), int(cx.max()), int(cy.min()), int(cy.max()))
+
+
+def hit_cells(points: np.ndarray, origin: np.ndarray, resolution_m: float, shape: tuple[int, int]) -> np.ndarray:
+    """Boolean grid (shape) of the cells holding at least one of ``points`` (n, 2)."""
+    return _hits(points, origin, resolution_m, shape)[0]
 
 
 def likelihood_field(hits: np.ndarray, resolution_m: float, sigma_m: float) -> np.ndarray:
@@ -104,16 +114,25 @@ def likelihood_field(hits: np.ndarray, resolution_m: float, sigma_m: float) -> n
     field = np.zeros(hits.shape, dtype=np.float32)
     if not hits.any():
         return field
-    reach = int(np.ceil(3.0 * sigma_m / resolution_m))
-    g = np.exp(-0.5 * (np.arange(-reach, reach + 1) * resolution_m / sigma_m) ** 2).astype(np.float32)
     rows = np.nonzero(hits.any(axis=1))[0]
     cols = np.nonzero(hits.any(axis=0))[0]
-    x0, x1 = max(rows[0] - reach, 0), min(rows[-1] + reach + 1, hits.shape[0])
-    y0, y1 = max(cols[0] - reach, 0), min(cols[-1] + reach + 1, hits.shape[1])
+    _spread(hits, (rows[0], rows[-1], cols[0], cols[-1]), resolution_m, sigma_m, field)
+    return field
+
+
+def _spread(hits: np.ndarray, hit_box: tuple[int, int, int, int], resolution_m: float, sigma_m: float,
+            field: np.ndarray) -> tuple[int, int, int, int]:
+    """Into ``field`` (zeros), the likelihood field of ``hits``, whose hits
+    lie in rows and columns ``hit_box`` (first and last of each); returns
+    the box (x0, x1, y0, y1, ends excluded) outside which it stays 0."""
+    reach = int(np.ceil(3.0 * sigma_m / resolution_m))
+    g = np.exp(-0.5 * (np.arange(-reach, reach + 1) * resolution_m / sigma_m) ** 2).astype(np.float32)
+    x0, x1 = max(hit_box[0] - reach, 0), min(hit_box[1] + reach + 1, hits.shape[0])
+    y0, y1 = max(hit_box[2] - reach, 0), min(hit_box[3] + reach + 1, hits.shape[1])
     from slam.matching import kernels
 
     kernels.spread_hits(np.ascontiguousarray(hits), g, x0, x1, y0, y1, field)
-    return field
+    return x0, x1, y0, y1
 
 
 def max_pool_stack(field: np.ndarray, depth: int) -> np.ndarray:
@@ -150,14 +169,23 @@ def score_pyramid(points: np.ndarray, resolution_m: float, sigma_m: float, depth
     shape = (int(inner[0]) + 2 * pad_low + 1, int(inner[1]) + 2 * pad_low + 1)
     if shape[0] * shape[1] >= 2**31:
         raise ValueError(f"a score grid of {shape[0]} x {shape[1]} cells of {resolution_m:g} m: too large")
-    hits = hit_cells(pts, origin, resolution_m, shape) if len(points) else np.zeros(shape, dtype=bool)
-    field = likelihood_field(hits, resolution_m, sigma_m)
+    stack = np.zeros((depth + 1,) + shape, dtype=np.uint8)
+    hits, hit_box = _hits(pts, origin, resolution_m, shape) if len(points) else (None, None)
+    if hit_box is None:
+        return ScorePyramid(stack, origin, resolution_m, pad_low)
+    field = np.zeros(shape, dtype=np.float32)
+    x0, x1, y0, y1 = _spread(hits, hit_box, resolution_m, sigma_m, field)
     # The padding stays empty: the field's tail reaches into it only as far
     # as margin_m allows, and the low pad must read 0 for clipped indices.
     field[:pad_low] = 0.0
     field[:, :pad_low] = 0.0
     field[-pad_low - 1 :] = 0.0
     field[:, -pad_low - 1 :] = 0.0
+    # Every level is 0 but over the field's box and the 2^depth - 1 cells
+    # below it (a level looks up from a cell, never down): pool that crop
+    # alone, whose high edge reads 0 as the grid's does beyond the box.
+    x0, y0 = max(x0 - (1 << depth) + 1, 0), max(y0 - (1 << depth) + 1, 0)
     # Rounding is monotone, so pooling the rounded field pools the field.
-    quantised = np.rint(field * LEVELS).astype(np.uint8)
-    return ScorePyramid(max_pool_stack(quantised, depth), origin, resolution_m, pad_low)
+    quantised = np.rint(field[x0:x1, y0:y1] * LEVELS).astype(np.uint8)
+    stack[:, x0:x1, y0:y1] = max_pool_stack(quantised, depth)
+    return ScorePyramid(stack, origin, resolution_m, pad_low)
