@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from slam.matching.grid import LEVELS, likelihood_field, max_pool_stack, score_pyramid
+from slam.matching.points import point_map
 from slam.matching.search import CorrelativeSearch
 
 
@@ -196,3 +197,41 @@ def test_the_search_scores_the_same_blocks_as_the_reference(seed):
                          strict=True):
         np.testing.assert_array_equal(got, want)
     assert search.evaluated == ref.evaluated
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_pyramid_pooled_over_its_crop_is_the_whole_grid_pooled(seed):
+    rng = np.random.default_rng(seed)
+    pts = room(rng, int(rng.integers(1, 4)))
+    res, depth, pad = float(rng.choice([0.05, 0.1])), int(rng.integers(0, 7)), int(rng.integers(0, 30))
+    pyr = score_pyramid(pts, res, res, depth, 3 * res, pad)
+    hits = np.zeros(pyr.field.shape, dtype=bool)
+    cells = pyr.cells(pts)
+    hits[cells[:, 0], cells[:, 1]] = True
+    field = reference_field(hits, res, res)
+    p = pyr.pad
+    field[:p], field[:, :p], field[-p - 1 :], field[:, -p - 1 :] = 0.0, 0.0, 0.0, 0.0
+    for got, want in zip(pyr.stack, reference_levels(np.rint(field * LEVELS).astype(np.uint8), depth), strict=True):
+        np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_nearest_points_are_the_k_d_trees(seed):
+    rng = np.random.default_rng(seed)
+    pts = room(rng)[:: int(rng.integers(1, 4))]
+    pmap = point_map(pts, np.zeros_like(pts))
+    for within in (0.3, 0.15, 0.1, 0.3, 5.0):
+        queries = pts[rng.choice(len(pts), 300)] + rng.normal(0.0, within, (300, 2))
+        dist, want = pmap.tree.query(queries, distance_upper_bound=within)
+        np.testing.assert_array_equal(pmap.nearest(queries, within), np.where(np.isfinite(dist), want, -1))
+
+
+def test_the_nearest_point_of_a_tie_or_at_the_reach_is_the_k_d_trees():
+    # Points on a lattice: queries halfway between two, or at the reach of one.
+    pts = np.array([[x, y] for x in np.arange(0.0, 1.0, 0.25) for y in np.arange(0.0, 1.0, 0.25)])
+    pmap = point_map(np.concatenate([pts, pts[:3]]), np.zeros((len(pts) + 3, 2)))
+    queries = np.concatenate([pts + [0.125, 0.0], pts + [0.0, 0.125], pts + [0.125, 0.125], pts[:3],
+                              pts + [0.1, 0.0], [[5.0, 5.0]]])
+    for within in (0.1, 0.125, 0.2):
+        dist, want = pmap.tree.query(queries, distance_upper_bound=within)
+        np.testing.assert_array_equal(pmap.nearest(queries, within), np.where(np.isfinite(dist), want, -1))

@@ -47,8 +47,8 @@ class Refinement:
 def _linearise(q: np.ndarray, pmap: PointMap, pose: np.ndarray, gate_m: float):
     rq = q @ rotation(pose[2]).T
     qw = rq + pose[:2]
-    dist, idx = pmap.tree.query(qw, distance_upper_bound=gate_m)
-    ok = np.isfinite(dist)
+    idx = pmap.nearest(qw, gate_m)
+    ok = idx >= 0
     idx = idx[ok]
     n = pmap.normals[idx]
     res = np.einsum("ij,ij->i", n, qw[ok] - pmap.points[idx])

@@ -185,6 +185,74 @@ def sweep(levels: np.ndarray, ny: int, base: np.ndarray, a: np.ndarray, ox: np.n
     return a, ox, oy, sc, evaluated
 
 
+# -- nearest map points -----------------------------------------------------------------
+
+
+@_jit
+def cell_index(points: np.ndarray, cell_m: float):
+    """Points (m, 2) sorted into square cells of ``cell_m``: the grid's
+    corner (2,), its size in cells (nx, ny), the point indices ``order``
+    (m,) by cell (x * ny + y) and where each cell's run starts in it
+    (nx * ny + 1,)."""
+    lo = np.empty(2)
+    lo[0], lo[1] = points[:, 0].min(), points[:, 1].min()
+    cx = np.floor((points[:, 0] - lo[0]) / cell_m).astype(np.int64)
+    cy = np.floor((points[:, 1] - lo[1]) / cell_m).astype(np.int64)
+    nx, ny = cx.max() + 1, cy.max() + 1
+    starts = np.zeros(nx * ny + 1, dtype=np.int64)
+    for j in range(len(points)):
+        starts[cx[j] * ny + cy[j] + 1] += 1
+    for k in range(nx * ny):
+        starts[k + 1] += starts[k]
+    fill = starts[:-1].copy()
+    order = np.empty(len(points), dtype=np.int64)
+    for j in range(len(points)):
+        key = cx[j] * ny + cy[j]
+        order[fill[key]] = j
+        fill[key] += 1
+    return lo, nx, ny, order, starts
+
+
+@_jit
+def nearest_within(queries: np.ndarray, points: np.ndarray, lo: np.ndarray, nx: int, ny: int, cell_m: float,
+                   order: np.ndarray, starts: np.ndarray, within_m: float, rtol: float):
+    """For each query (q, 2), the index of the nearest of ``points`` (m, 2)
+    closer than ``within_m`` (no more than ``cell_m``), -1 for none, from
+    the cells around the query's (:func:`cell_index`); and whether that
+    answer is unsure: a second point within ``rtol`` (relative) as near, or
+    the nearest within ``rtol`` of ``within_m``, where the last bit of a
+    distance decides."""
+    bound = within_m * within_m
+    idx = np.full(len(queries), -1, dtype=np.int64)
+    unsure = np.zeros(len(queries), dtype=np.bool_)
+    for i in range(len(queries)):
+        qx, qy = queries[i, 0], queries[i, 1]
+        fx = np.floor((qx - lo[0]) / cell_m)
+        fy = np.floor((qy - lo[1]) / cell_m)
+        if not (-2.0 < fx < nx + 1.0 and -2.0 < fy < ny + 1.0):
+            continue  # no cell within reach
+        x0, y0 = max(np.int64(fx) - 1, 0), max(np.int64(fy) - 1, 0)
+        x1, y1 = min(np.int64(fx) + 1, nx - 1), min(np.int64(fy) + 1, ny - 1)
+        best, second, k = np.inf, np.inf, -1
+        for x in range(x0, x1 + 1):
+            for y in range(y0, y1 + 1):
+                key = x * ny + y
+                for r in range(starts[key], starts[key + 1]):
+                    j = order[r]
+                    dx, dy = qx - points[j, 0], qy - points[j, 1]
+                    d = dx * dx + dy * dy
+                    if d < best:
+                        best, second, k = d, best, j
+                    elif d < second:
+                        second = d
+        if k < 0:
+            continue
+        unsure[i] = second <= best * (1.0 + rtol) or abs(best - bound) <= rtol * bound
+        if best < bound:
+            idx[i] = k
+    return idx, unsure
+
+
 def load() -> None:
     """Compile every kernel, or load it from the cache, for the types the
     matching calls it with: the first call of the first kernel sets up
@@ -200,3 +268,5 @@ def load() -> None:
     sc = block_scores(levels, 0, 4, base, blocks, blocks, blocks)
     dive(levels, 4, base, 0, 0, 0, 0.0, 0, 0)
     sweep(levels, 4, base, blocks, blocks, blocks, sc, 0.0, 0, 0, False, np.zeros(1, dtype=np.bool_), 0, 0, 0)
+    grid = cell_index(some, 1.0)
+    nearest_within(some, some, *grid[:3], 1.0, *grid[3:], 1.0, 1e-9)
