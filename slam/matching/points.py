@@ -7,6 +7,7 @@ Frames: the points, their normals and the queries are in one frame (m).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -65,15 +66,22 @@ def scan_normals(
 
 @dataclass(frozen=True)
 class PointMap:
-    """Map points (m, 2) with unit normals (m, 2) and a k-d tree over the points."""
+    """Map points (m, 2) with unit normals (m, 2), and a k-d tree over the points."""
 
     points: np.ndarray
     normals: np.ndarray
-    tree: object
     _cells: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __len__(self) -> int:
         return len(self.points)
+
+    @cached_property
+    def tree(self):
+        """The k-d tree (scipy's cKDTree) over the points, built when first
+        asked for: :meth:`nearest` seldom needs it."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.points)
 
     def nearest(self, queries: np.ndarray, within_m: float) -> np.ndarray:
         """Index (q,) of each query's (q, 2) nearest point closer than
@@ -106,7 +114,5 @@ class PointMap:
 
 def point_map(points: np.ndarray, normals: np.ndarray) -> PointMap:
     """The :class:`PointMap` of points (m, 2) and their normals (m, 2)."""
-    from scipy.spatial import cKDTree
-
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    return PointMap(pts, np.asarray(normals, dtype=np.float64).reshape(-1, 2), cKDTree(pts))
+    return PointMap(pts, np.asarray(normals, dtype=np.float64).reshape(-1, 2))
