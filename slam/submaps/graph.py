@@ -13,7 +13,10 @@ constraint join them (Hess et al. 2016, Sec. V):
 
 The global estimate is the local trajectory re-placed by the graph: the
 graph is optimised every ``optimise_every`` scans once new inter
-constraints have come, so the search windows stay small. Inter constraints
+constraints have come, so the search windows stay small; incrementally
+(iSAM2, Kaess et al. 2012), so that an update costs what changed rather
+than the whole graph so far, and in batch (Levenberg-Marquardt) after a
+recognised place and at the end. Inter constraints
 carry a robust kernel while the run is walked; at the end, graduated
 non-convexity over the whole graph (every factor but the inter constraints
 a known inlier) decides which of them are outliers, and the graph is
@@ -39,6 +42,9 @@ from slam.submaps.scans import ScanPoints
 
 log = logging.getLogger(__name__)
 
+ISAM2_EXTRA_UPDATES = 2
+"""iSAM2 updates without new factors after each walk update: a little more
+convergence towards the batch optimum the graph would give (see :meth:`GlobalSlam._incremental`)."""
 UNKNOWN_VARIANCE = 1e6
 """A chain step with this variance was not measured (slam.loops.chain)."""
 UNMATCHED_VARIANCE = (0.25, 0.25, 0.25)
@@ -121,6 +127,9 @@ class GlobalSlam:
         self._in_graph: list[Constraint] = []
         self._last_scan = -1
         self._factors: dict[tuple[int, bool], tuple[Constraint, object]] = {}
+        self._isam = None  # the walk's iSAM2 (see _incremental), started again after a batch optimisation
+        self._isam_n = 0
+        self._isam_constraints: list[Constraint] = []
 
     # -- the walk ---------------------------------------------------------------
 
@@ -217,7 +226,7 @@ class GlobalSlam:
                     last_opt, pending, last_loop, blind_at_loop = i, 0, self.path[i], self.blind_path[i]
                     optimised += 1
             if pending and i - last_opt >= cc.optimise_every:
-                est[: i + 1] = self._optimise(est[: i + 1], i + 1)
+                est[: i + 1] = self._incremental(est[: i + 1], i + 1)
                 last_opt, pending = i, 0
                 optimised += 1
         est = self._optimise(est, n)
@@ -474,12 +483,47 @@ class GlobalSlam:
     def _optimise(self, est: np.ndarray, n: int, plain: set[int] = frozenset()) -> np.ndarray:
         import gtsam
 
+        self._isam = None
         g, _ = self._graph(n, plain=plain)
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(50)
         result = gtsam.LevenbergMarquardtOptimizer(g, self._values(est, n), params).optimize()
         out = est.copy()
         out[:n] = gtsam.utilities.extractPose2(result)  # x, y, theta of x0..x(n-1), in key order
+        return out
+
+    def _incremental(self, est: np.ndarray, n: int) -> np.ndarray:
+        """The walk's estimate of the first ``n`` nodes, updated by iSAM2
+        with the chain and constraints added since the last update (the same
+        graph as :meth:`_optimise`'s); started again from ``est`` where
+        constraints were taken back or a batch optimisation moved it."""
+        import gtsam
+
+        from slam.graph.factors import pose_key
+
+        self._graph(n)  # the chain's factors up to n
+        kept = self._isam_constraints
+        if (self._isam is None or len(kept) > len(self.constraints)
+                or any(a is not b for a, b in zip(kept, self.constraints))):
+            params = gtsam.ISAM2Params()
+            params.setRelinearizeThreshold(0.01)
+            params.relinearizeSkip = 1
+            self._isam, self._isam_n, self._isam_constraints = gtsam.ISAM2(params), 0, []
+            kept = self._isam_constraints
+        g, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        for i in range(self._isam_n, n):
+            g.add(self._chain[i])
+            values.insert(pose_key(i), gtsam.Pose2(*est[i]))
+        for c in self.constraints[len(kept):]:
+            g.add(self._constraint_factor(c, c.kind != "intra"))
+            kept.append(c)
+        self._isam.update(g, values)
+        for _ in range(ISAM2_EXTRA_UPDATES):
+            self._isam.update()
+        self._isam_n = n
+        out = est.copy()
+        result = self._isam.calculateEstimate()
+        out[:n] = gtsam.utilities.extractPose2(result)
         return out
 
     def _values(self, est: np.ndarray, n: int):
