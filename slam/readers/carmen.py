@@ -167,6 +167,11 @@ def _count(parts: list[str], i: int, where: str, expected: str) -> int:
     return n
 
 
+def _more(parts: list[str], fields: int, counts: str) -> str:
+    """What a line with more fields than its counts say means."""
+    return f"; more values than {counts} says (is {counts} the count of values given?)" if len(parts) > fields else ""
+
+
 def _fov_rad(value: float) -> float:
     """PARAM ``laser_front_laser_fov`` in radians. CARMEN writes degrees
     (180, 100), but some logs write radians (csail: 3.14159 for its 180 deg
@@ -197,8 +202,8 @@ def _add_scan(d: _Log, where: str, ranges: np.ndarray, angles: np.ndarray, pose,
 
 def _parse_flaser(d: _Log, parts: list[str], where: str) -> None:
     n = _count(parts, 1, where, _FLASER)
-    if len(parts) < n + 11:
-        raise GslamError(f"{where}: expected {_FLASER} ({n + 11} fields, got {len(parts)})")
+    if len(parts) != n + 11:  # more: n is not the number of ranges, and every field after them would shift
+        raise GslamError(f"{where}: expected {_FLASER} ({n + 11} fields, got {len(parts)}){_more(parts, n + 11, 'n')}")
     values = _floats(parts[2 : n + 9], where, _FLASER,
                      _ranges_then(n, "x", "y", "theta", "odom_x", "odom_y", "odom_theta", "ts"))
     try:
@@ -219,8 +224,9 @@ def _parse_robotlaser(d: _Log, parts: list[str], where: str) -> None:
     except (IndexError, ValueError):
         raise GslamError(f"{where}: expected {_ROBOTLASER1}") from None
     tail = 10 + n + max(m, 0)  # laser pose, robot pose, tv rv fwd side turn_axis, ts
-    if m < 0 or len(parts) < tail + 14:
-        raise GslamError(f"{where}: expected {_ROBOTLASER1} ({tail + 14} fields, got {len(parts)})")
+    if m < 0 or len(parts) != tail + 14:
+        raise GslamError(f"{where}: expected {_ROBOTLASER1} ({tail + 14} fields, got {len(parts)})"
+                         + _more(parts, tail + 14, "n or m"))
     head = _floats(parts[2:7], where, _ROBOTLASER1, _named("start", "fov", "resolution", "max_range", "accuracy"))
     ranges = _floats(parts[9 : 9 + n], where, _ROBOTLASER1, _ranges_then(n))
     _floats(parts[10 + n : tail], where, _ROBOTLASER1, lambda k: f"rem_{k + 1}")
