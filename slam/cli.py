@@ -176,12 +176,15 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 
 
 def _cmd_map(args: argparse.Namespace) -> int:
-    from slam.config import config_files, load_config
+    from slam.config import check_given_once, config_files, load_config
     from slam.pipeline.folder import run_map
 
     overrides = list(args.set or [])
+    names = [f"--set {text}" for text in overrides]
     if args.gating is not None:
         overrides.append(f"validation.mode={args.gating}")
+        names.append(f"--gating {args.gating}")
+    check_given_once(overrides, names)
     config_path = _config_path(args.config)
     config = load_config(config_path, overrides)
     res = run_map(args.input, config, args.out, progress=not args.quiet, inputs=config_files(config_path),

@@ -44,7 +44,7 @@ from slam.commands.calibrate.select import (CheckChoice, Choice, FieldGyroChoice
                                    calibrate_relation)
 from slam.commands.calibrate.support import Support, judge, uses_fitted_gain
 from slam.commands.calibrate.write import calibrated_config
-from slam.config import PipelineConfig, config_files, load_config, validation_sections
+from slam.config import PipelineConfig, check_given_once, config_files, load_config, validation_sections
 from slam.errors import GslamError
 from slam.results.atomic import write_text
 from slam.results.outdir import check_new_file
@@ -111,6 +111,7 @@ def calibrate(
                          f"false alarm in a million steps; no run tells a smaller share from none) to "
                          f"{MAX_FALSE_ALARM:g} (half the steps alarmed validates nothing), e.g. 0.005")
     out = check_new_file(out, [*runs, *config_files(config_path)], force, command="calibrate")
+    check_given_once(overrides)
     runs = distinct_runs(runs)
     stretch = parse_clean(clean)
     config = load_config(config_path, list(overrides))
