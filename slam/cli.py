@@ -148,23 +148,23 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from slam.commands.inspect.inspection import inspect_recording
-    from slam.results.outdir import check_new_file
+    from slam.results.outdir import check_new_file, file_state, write_result_file
 
     base = _config_path(args.config) if args.config is not None else None
+    checked = None
     if args.config_out is not None:
         from slam.config import config_files
 
         check_new_file(args.config_out, [args.input, *config_files(base)], args.force, command="inspect",
                        flag="--config-out")
+        checked = file_state(args.config_out)
     found = inspect_recording(args.input, starter=args.config_out is not None, base=base)
     print(found.report())
     if args.config_out is None:
         print(f"a starter config, with the system model proposed for these streams: "
               f"gslam inspect {args.input} --config-out my_robot.yaml")
         return 0
-    from slam.results.atomic import write_text
-
-    write_text(args.config_out, found.starter)
+    write_result_file(args.config_out, found.starter, checked, flag="--config-out")
     if found.proposal is not None and found.proposal.nothing_to_validate() is None:
         _say(f"wrote {args.config_out}: learn its observers with gslam calibrate {args.input} --config "
               f"{args.config_out} --out learnt.yaml, then gslam map {args.input} --config learnt.yaml --out DIR "
