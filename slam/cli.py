@@ -19,6 +19,7 @@ from pathlib import Path
 
 from slam import __version__
 from slam.errors import Terminated, reader_left
+from slam.outputs.plot_home import plot_home
 from slam.processes.signals import STOPS, as_interrupt
 from validation.base.errors import InputError
 from validation.base.modes import GatingMode
@@ -507,7 +508,7 @@ def main(argv: list[str] | None = None) -> int:
     if sys.stdout is not None and not isinstance(sys.stdout, _WatchedStdout):
         sys.stdout = _WatchedStdout(sys.stdout)
     try:
-        with as_interrupt(received):
+        with as_interrupt(received), plot_home():
             code = args.func(args)
         # A signal whose exception was swallowed where Python cannot raise
         # (a destructor, a callback) stopped nothing: the command finished.
