@@ -202,10 +202,12 @@ def _add_scan(d: _Log, where: str, ranges: np.ndarray, angles: np.ndarray, pose,
 
 def _parse_flaser(d: _Log, parts: list[str], where: str) -> None:
     n = _count(parts, 1, where, _FLASER)
-    if len(parts) != n + 11:  # more: n is not the number of ranges, and every field after them would shift
-        raise GslamError(f"{where}: expected {_FLASER} ({n + 11} fields, got {len(parts)}){_more(parts, n + 11, 'n')}")
+    if len(parts) < n + 11:
+        raise GslamError(f"{where}: expected {_FLASER} ({n + 11} fields, got {len(parts)})")
     values = _floats(parts[2 : n + 9], where, _FLASER,
                      _ranges_then(n, "x", "y", "theta", "odom_x", "odom_y", "odom_theta", "ts"))
+    if len(parts) > n + 11:  # n is not the number of ranges: every field after them would be read shifted
+        raise GslamError(f"{where}: expected {_FLASER} ({n + 11} fields, got {len(parts)}){_more(parts, n + 11, 'n')}")
     try:
         fov = float(d.params.get("laser_front_laser_fov", DEFAULT_FOV_DEG))
     except ValueError:
@@ -224,15 +226,17 @@ def _parse_robotlaser(d: _Log, parts: list[str], where: str) -> None:
     except (IndexError, ValueError):
         raise GslamError(f"{where}: expected {_ROBOTLASER1}") from None
     tail = 10 + n + max(m, 0)  # laser pose, robot pose, tv rv fwd side turn_axis, ts
-    if m < 0 or len(parts) != tail + 14:
-        raise GslamError(f"{where}: expected {_ROBOTLASER1} ({tail + 14} fields, got {len(parts)})"
-                         + _more(parts, tail + 14, "n or m"))
+    if m < 0 or len(parts) < tail + 14:
+        raise GslamError(f"{where}: expected {_ROBOTLASER1} ({tail + 14} fields, got {len(parts)})")
     head = _floats(parts[2:7], where, _ROBOTLASER1, _named("start", "fov", "resolution", "max_range", "accuracy"))
     ranges = _floats(parts[9 : 9 + n], where, _ROBOTLASER1, _ranges_then(n))
     _floats(parts[10 + n : tail], where, _ROBOTLASER1, lambda k: f"rem_{k + 1}")
     rest = _floats(parts[tail : tail + 12], where, _ROBOTLASER1, _named(
         "laser_x", "laser_y", "laser_theta", "robot_x", "robot_y", "robot_theta", "tv", "rv", "fwd", "side",
         "turn_axis", "ts"))
+    if len(parts) > tail + 14:  # n or m is not the number of values: the poses after them would be read shifted
+        raise GslamError(f"{where}: expected {_ROBOTLASER1} ({tail + 14} fields, got {len(parts)})"
+                         + _more(parts, tail + 14, "n or m"))
     start, _fov, res, max_range, _accuracy = head
     angles = start + res * np.arange(n)
     _add_scan(d, where, ranges, angles, (rest[0], rest[1], rest[2]), rest[11], float(max_range))
