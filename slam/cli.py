@@ -19,6 +19,7 @@ from pathlib import Path
 
 from slam import __version__
 from slam.errors import Terminated, reader_left
+from slam.outputs.plot_home import plot_home
 from slam.processes.signals import STOPS, as_interrupt
 from validation.base.errors import InputError
 from validation.base.modes import GatingMode
@@ -148,23 +149,23 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from slam.commands.inspect.inspection import inspect_recording
-    from slam.results.outdir import check_new_file
+    from slam.results.outdir import check_new_file, file_state, write_result_file
 
     base = _config_path(args.config) if args.config is not None else None
+    checked = None
     if args.config_out is not None:
         from slam.config import config_files
 
         check_new_file(args.config_out, [args.input, *config_files(base)], args.force, command="inspect",
                        flag="--config-out")
+        checked = file_state(args.config_out)
     found = inspect_recording(args.input, starter=args.config_out is not None, base=base)
     print(found.report())
     if args.config_out is None:
         print(f"a starter config, with the system model proposed for these streams: "
               f"gslam inspect {args.input} --config-out my_robot.yaml")
         return 0
-    from slam.results.atomic import write_text
-
-    write_text(args.config_out, found.starter)
+    write_result_file(args.config_out, found.starter, checked, flag="--config-out")
     if found.proposal is not None and found.proposal.nothing_to_validate() is None:
         _say(f"wrote {args.config_out}: learn its observers with gslam calibrate {args.input} --config "
               f"{args.config_out} --out learnt.yaml, then gslam map {args.input} --config learnt.yaml --out DIR "
@@ -176,12 +177,15 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 
 
 def _cmd_map(args: argparse.Namespace) -> int:
-    from slam.config import config_files, load_config
+    from slam.config import check_given_once, config_files, load_config
     from slam.pipeline.folder import run_map
 
     overrides = list(args.set or [])
+    names = [f"--set {text}" for text in overrides]
     if args.gating is not None:
         overrides.append(f"validation.mode={args.gating}")
+        names.append(f"--gating {args.gating}")
+    check_given_once(overrides, names)
     config_path = _config_path(args.config)
     config = load_config(config_path, overrides)
     res = run_map(args.input, config, args.out, progress=not args.quiet, inputs=config_files(config_path),
@@ -504,7 +508,7 @@ def main(argv: list[str] | None = None) -> int:
     if sys.stdout is not None and not isinstance(sys.stdout, _WatchedStdout):
         sys.stdout = _WatchedStdout(sys.stdout)
     try:
-        with as_interrupt(received):
+        with as_interrupt(received), plot_home():
             code = args.func(args)
         # A signal whose exception was swallowed where Python cannot raise
         # (a destructor, a callback) stopped nothing: the command finished.

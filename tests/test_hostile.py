@@ -13,7 +13,10 @@ user finds after the first (tests/test_fuzz.py), built for the classes:
   into an obstacle; ablation specs of more jobs than can run, or whose
   seeds are wrong;
 * messages that must name the real culprit (a pause, a Latin-1 byte, the
-  stamps a repair moved).
+  stamps a repair moved);
+* lines with more values than their counts say, a key given twice on the
+  command line, faults that would change nothing, a result file written by
+  someone else meanwhile, a home matplotlib cannot use.
 
 Error cases run as tests/test_fuzz.py's do (exit 1 or 2, one error line
 saying what the case expects, nothing of the user's changed, no traceback,
@@ -379,6 +382,14 @@ def _covariance(variance: float) -> Callable[[float, object], None]:
         msg.position_covariance_type = 2
 
     return change
+
+
+def _second_scan_a_beam_short(log: str) -> bytes:
+    """The log with its second FLASER line (line 4) one range and one beam short."""
+    lines = log.split("\n")
+    parts = lines[3].split(" ")
+    lines[3] = " ".join(["FLASER", str(int(parts[1]) - 1), *parts[3:]])
+    return "\n".join(lines).encode()
 
 
 LIBRSF = ("map", "{d}/X_Input.txt", "--config", str(CONFIGS / "datasets" / "librsf_corridor.yaml"), *QUICK, "--out", "{d}/o")
@@ -1319,6 +1330,119 @@ ERRORS: list[Case] = [
       )),
     Case("inject-fault-parameter-of-100-kb", ("inject", "{run}", "--fault", "gyro_bias@2:4," + "b" * 100_000 + "=1", "--out",
                                               "{d}/o"), "unknown parameter 'bbb"),
+    # -- the seventh attack: lines with more values than their counts say, read shifted in silence before --
+    *(Case(f"carmen-{name}", CARMEN, f"c.log:1: expected {says}", make)
+      for name, make, says in (
+          ("flaser-beam-count-two-short", carmen(encoding=lambda s: s.replace("FLASER 181 ", "FLASER 179 ").encode()),
+           "FLASER n r_1..r_n x y theta odom_x odom_y odom_theta ts host logger_ts (190 fields, got 192); more values "
+           "than n says"),
+          ("flaser-a-field-after-logger-ts", carmen(encoding=lambda s: s.replace("\nODOM", " 7\nODOM").encode()),
+           "FLASER n r_1..r_n x y theta odom_x odom_y odom_theta ts host logger_ts (192 fields, got 193)"),
+          ("robotlaser-a-field-after-logger-ts", carmen(robotlaser=(-1.57, 3.14, 0.0174),
+                                                       encoding=lambda s: s.replace("\nODOM", " 7\nODOM").encode()),
+           "ROBOTLASER1 type start fov resolution max_range accuracy mode n r_1..r_n m rem_1..rem_m poses ... ts "
+           "(205 fields, got 206); more values than n or m says"),
+      )),
+    *(Case(f"librsf-{name}", LIBRSF, says, make)
+      for name, make, says in (
+          ("odom2-two-columns-more", text("X_Input.txt", "".join(f"odom2 {0.1 * k:.1f} 0.5 0 0 0.01 0.01 0.01 7 8\n"
+                                                                 for k in range(50))),
+           "X_Input.txt:1: expected odom2 t vx vy wz var_vx var_vy var_wz (7 values, got 9)"),
+          ("loop-a-column-more", librsf_with("loop 9.0 1.0 1 0.5"), "X_Input.txt:101: expected loop t t_other weight (3 "
+                                                                    "values, got 4)"),
+          ("ground-truth-a-column-more", librsf_with("loop 9.0 1.0 1", "".join(
+              f"point2 {0.1 * k:.1f} {0.05 * k} 0 0.1 0 0 0.1 9\n" for k in range(100))),
+           "X_GT.txt:1: expected point2 t x y c_xx c_xy c_yx c_yy (7 values, got 8)"),
+      )),
+    # -- one key given twice on the command line: the later won in silence --
+    *(Case(f"set-{name}", (*MAP, "--out", "{d}/o", *extra), says)
+      for name, extra, says in (
+          ("key-twice", ("--set", "keyframes.period_s=0.5", "--set", "keyframes.period_s=0.7"),
+           "--set keyframes.period_s=0.7: key 'keyframes.period_s' given twice (first set by --set keyframes.period_s=0.5)"),
+          ("section-after-a-key-inside-it", ("--set", "keyframes.distance_m=0.3", "--set", "keyframes={{period_s: 0.5}}"),
+           "--set keyframes={period_s: 0.5}: sets the whole section 'keyframes', replacing 'keyframes.distance_m' (first "
+           "set by --set keyframes.distance_m=0.3)"),
+          ("key-inside-a-section-given-before", ("--set", "keyframes={{period_s: 0.5}}", "--set", "keyframes.period_s=0.7"),
+           "--set keyframes.period_s=0.7: key 'keyframes.period_s' given twice (first set by --set keyframes={period_s: 0.5})"),
+          ("mode-and-gating", ("--set", "validation.mode=off", "--gating", "on"),
+           "--gating on: key 'validation.mode' given twice (first set by --set validation.mode=off)"),
+      )),
+    Case("calibrate-set-key-twice", (*CAL, "--set", "keyframes.period_s=0.5", "--set", "keyframes.period_s=0.7", "--out",
+                                     "{d}/c.yaml"), "--set keyframes.period_s=0.7: key 'keyframes.period_s' given twice"),
+    Case("compare-variant-and-set-one-key", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--set",
+                                             "validation.mode=on", "--out", "{d}/o"),
+         "v.yaml: variant 'a': validation.mode=off: key 'validation.mode' given twice (first set by --set validation.mode=on)",
+         text("v.yaml", "a: {validation.mode: 'off'}\n")),
+    Case("compare-variant-key-and-its-section", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out",
+                                                 "{d}/o"),
+         "v.yaml: variant 'a': keyframes.period_s=0.7: key 'keyframes.period_s' given twice (first set by keyframes={period_s: "
+         "0.5})", text("v.yaml", "a: {keyframes: {period_s: 0.5}, keyframes.period_s: 0.7}\n")),
+    # -- a fault whose interval holds no sample of its stream: 'the input with the faults added', unchanged --
+    Case("inject-multipath-into-a-run-without-a-fix", ("inject", "{run}", "--fault", "multipath@2:4", "--out", "{d}/o"),
+         "no GPS fix with a position between 2 and 4 s, so the fault would change nothing"),
+    Case("inject-laser-cut-between-two-scans", ("inject", "{d}/c.log", "--fault", "laser_cut@2.1:2.3", "--out", "{d}/o"),
+         "no laser scan between 2.1 and 2.3 s, so the fault would change nothing", carmen()),
+    Case("inject-gyro-bias-between-two-samples", ("inject", "{d}/t.mat", "--fault", "gyro_bias@0.101:0.105", "--out", "{d}/o"),
+         "no gyro sample between 0.101 and 0.105 s", broad_mat()),
+    # -- a NaN in a BROAD trial's IMU arrays: named by field, sample and axis, as stored --
+    *(Case(f"broad-{name}", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"), f"t.mat: {says}", broad_mat(**fields))
+      for name, fields, says in (
+          ("one-gyro-sample-nan", {"imu_gyr": np.where(np.arange(150).reshape(50, 3) == 32, np.nan, 0.0)},
+           "imu_gyr/imu_acc/imu_mag: expected finite samples; imu_gyr at sample 10 (t = 0.100 s) is nan on axis z (1 of "
+           "50 samples not finite)"),
+          ("magnetometer-nan-from-sample-5", {"imu_mag": np.where(np.arange(50)[:, None] >= 5, np.nan, [[0.0, 20.0, -40.0]])},
+           "imu_gyr/imu_acc/imu_mag: expected finite samples; imu_mag at sample 5 (t = 0.050 s) is nan on axis x (45 of "
+           "50 samples not finite)"),
+      )),
+    # -- kinds each reader and command already answers in one line, kept so that none turns into a traceback --
+    *(Case(f"config-yaml-{name}", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), f"c.yaml: {says}", text("c.yaml", content))
+      for name, content, says in (
+          ("custom-tag", "keyframes: {period_s: !custom 0.5}\n", "line 1: invalid YAML (could not determine a constructor "
+                                                                  "for the tag '!custom')"),
+          ("set-for-a-section", "keyframes: !!set {period_s}\n", "keyframes: Input should be a valid dictionary"),
+          ("binary-for-a-number", "keyframes: {period_s: !!binary aGVsbG8=}\n", "keyframes.period_s: Input should be a "
+                                                                                "valid number"),
+          ("null-key", "~: 1\n", "None: Keys should be strings"),
+          ("list-key", "? [a, b]\n: 1\n", "line 1: invalid YAML (found unhashable key)"),
+          ("sexagesimal-period", "keyframes: {period_s: 0:30}\n", "keyframes.period_s: Input should be a valid number"),
+      )),
+    *(Case(f"set-{name}", (*MAP, "--out", "{d}/o", "--set", expr), f"--set {expr}: {says}")
+      for name, expr, says in (
+          ("empty-value-for-a-choice", "backend.optimizer=", "backend.optimizer: Input should be 'batch'"),
+          ("list-for-a-number", "keyframes.period_s=[1,2]", "keyframes.period_s: Input should be a valid number"),
+          ("alias-for-a-number", "keyframes.period_s=*a", "keyframes.period_s: Input should be a valid number"),
+          ("through-a-list", "validation.observers.relations.0.k_sigma=3", "'validation.observers.relations' is a value"),
+      )),
+    *(Case(f"inject-{name}", ("inject", "{run}", "--fault", fault, "--out", "{d}/o"), f"--fault {fault}: {says}")
+      for name, fault, says in (
+          ("before-the-start", "gyro_bias@-5:2", "start_s: Input should be greater than or equal to 0"),
+          ("of-no-length", "gyro_bias@2:2", "the interval 2:2 must end after it starts"),
+          ("param-without-value", "gyro_bias@2:4,bias_deg_s", "expected param=value, got 'bias_deg_s'"),
+          ("without-a-kind", "@1:2", "unknown fault kind ''"),
+          ("infinite", "gyro_bias@inf:inf", "start_s: Input should be a finite number"),
+          ("three-times", "gyro_bias@2:4:6", "end_s: Input should be a valid number"),
+          ("dipole-side-up", "dipole@2:4,side=up", "side: Input should be 'left' or 'right'"),
+      )),
+    Case("carmen-beam-count-changes", CARMEN, "c.log:4: expected 181 beams at the same angles as the first scan",
+         carmen(encoding=_second_scan_a_beam_short)),
+    *(Case(f"librsf-{name}", LIBRSF, says, text("X_Input.txt", content))
+      for name, content, says in (
+          ("stamp-twice", "".join(f"odom2 {0.1 * (k - (k == 11)):.1f} 0.5 0 0 0.01 0.01 0.01\n" for k in range(50)),
+           "odom2 line #12: expected increasing times, got 1.0 after 1.0"),
+          ("loop-without-weight", "".join(f"odom2 {0.1 * k:.1f} 0.5 0 0 0.01 0.01 0.01\n" for k in range(50))
+           + "loop 4.0 1.0\n", "X_Input.txt:51: expected loop t t_other weight"),
+      )),
+    *(Case(f"broad-{name}", ("map", "{d}/t.mat", "--config", "{cfg}", "--out", "{d}/o"), f"t.mat: {says}", make)
+      for name, make, says in (
+          ("one-sample", broad_mat(**{k: v[:1] for k, v in {
+              "imu_gyr": np.zeros((50, 3)), "imu_acc": np.tile([0, 0, 9.81], (50, 1)), "imu_mag": np.tile([0, 20, -40], (50, 1)),
+              "opt_quat": np.tile([1, 0, 0, 0], (50, 1)), "opt_pos": np.zeros((50, 3)),
+              "movement": np.ones((50, 1), dtype=np.uint8)}.items()}), "no samples"),
+          ("acceleration-transposed", broad_mat(imu_acc=np.tile([0, 0, 9.81], (50, 1)).T),
+           "imu_acc: expected shape (50, 3), got (3, 50)"),
+      )),
+    Case("compare-variants-file-empty", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+         "v.yaml: no variants", text("v.yaml", "")),
 ]
 
 
@@ -1405,6 +1529,18 @@ WARNINGS: list[Warned] = [
                (r / "bag" / "metadata.yaml").read_bytes().replace(b"\n", b"\r\n")))),
     Warned("carmen-log-named-with-a-newline", ("map", "{d}/a\nb.log", "--config", str(CONFIGS / "datasets" / "carmen.yaml"),
                                               *QUICK, "--out", "{d}/o"), "", carmen(name="a\nb.log")),
+    # -- the seventh attack's usable oddities, kept as they are --
+    *(Warned(f"config-{name}", (*MAP[:2], "--config", "{d}/c.yaml", *QUICK, "--out", "{d}/o"),
+             "c.yaml is empty: every key takes its built-in default", text("c.yaml", content))
+      for name, content in (("only-document-markers", "---\n...\n"), ("a-null-document", "~\n"))),
+    Warned("set-one-key-twice-to-one-value", (*MAP, *QUICK, "--set", "keyframes.period_s=0.5", "--set",
+                                              "keyframes.period_s=0.5", "--out", "{d}/o"), ""),
+    Warned("set-a-key-beside-a-section-given-before", (*MAP, *QUICK, "--set", "keyframes={{period_s: 0.5}}", "--set",
+                                                       "keyframes.distance_m=0.3", "--out", "{d}/o"), ""),
+    Warned("carmen-every-stamp-the-same", CARMEN, "39 of 39 scan stamps do not increase", carmen(stamp=lambda k: 1000.0)),
+    Warned("carmen-one-beam-per-scan", CARMEN, "1 beam per scan, too few to match scans",
+           carmen(encoding=lambda s: "\n".join(" ".join(["FLASER", "1", *line.split(" ")[182:]]) if line.startswith("FLASER")
+                                               else line for line in s.split("\n")).encode())),
 ]
 
 
@@ -1522,7 +1658,8 @@ FULL_DISK = {
     "calibrate": (["calibrate", "{run}", "--config", TELEMAX_CONFIG, "--clean", "0:10", "--out", "{d}/c.yaml"], 2_000,
                   "c.yaml: File too large"),
 }
-PROCESS = [*SIGNALLED, *(f"full-{k}" for k in FULL_DISK), "killed-compare-left-for-the-next-run", "space-estimated"]
+PROCESS = [*SIGNALLED, *(f"full-{k}" for k in FULL_DISK), "killed-compare-left-for-the-next-run", "space-estimated",
+           "two-calibrates-into-one-file", "home-missing", "home-a-file"]
 
 
 def _argv(argv: list, d: Path, world: World) -> list[str]:
@@ -1568,6 +1705,41 @@ def test_two_maps_into_one_new_out_at_once_leave_one_result_and_one_line(world: 
     assert lost.count("\n") == 1 and "--out was filled by someone else while this command ran" in lost, lost
     assert json.loads((tmp_path / "o" / ".gslam-result.json").read_text())["command"] == "map"
     assert not _temps(tmp_path) and [p.name for p in tmp_path.iterdir()] == ["o"]
+
+
+def test_two_calibrates_into_one_new_file_at_once_leave_one_result_and_one_line(world: World, tmp_path: Path):
+    """Two gslam calibrate runs started together into the same new --out
+    file both said 'wrote', the later replacing the earlier's file in
+    silence: one writes it, the other says so in one line."""
+    argv = ["calibrate", world.run, "--config", TELEMAX_CONFIG, "--clean", "0:10", "--out", tmp_path / "c.yaml"]
+    procs = [_gslam(argv, tmp_path), _gslam([*argv[:-2], "--false-alarm", "0.01", *argv[-2:]], tmp_path)]
+    errs = [_said(p.communicate(timeout=120)[1]) for p in procs]
+    assert sorted(p.returncode for p in procs) == [0, 1], errs
+    lost = errs[[p.returncode for p in procs].index(1)]
+    assert lost == f"gslam: error: {tmp_path / 'c.yaml'}: --out was written by someone else while this command ran; " \
+                   "nothing was written (give a new file name)\n", lost
+    assert (tmp_path / "c.yaml").read_text().startswith("# gslam calibrate result")
+    assert not _temps(tmp_path) and [p.name for p in tmp_path.iterdir()] == ["c.yaml"]
+
+
+@pytest.mark.parametrize("home", ["missing", "a-file"])
+def test_a_home_matplotlib_cannot_use_is_left_as_it_is(home: str, world: World, tmp_path: Path):
+    """HOME naming a folder that does not exist: gslam map made it (its
+    .config/matplotlib and .cache/matplotlib); HOME a file: matplotlib's
+    two warning lines, and a matplotlib-* folder left in the temporary
+    folder. Now nothing is made outside --out, nothing is left and nothing
+    but gslam's own lines is said."""
+    (tmp_path / "tmp").mkdir()
+    (tmp_path / "a-file").write_text("mine\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("XDG_", "MPL"))}
+    env.update(HOME=str(tmp_path / home / "me"), TMPDIR=str(tmp_path / "tmp"), PYTHONPATH=str(REPO))
+    done = subprocess.run([sys.executable, "-m", "slam.cli", "-q", "map", str(world.run), "--config", str(TELEMAX_CONFIG),
+                           "--out", str(tmp_path / "o")], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=TIME_LIMIT_S, env=env)
+    assert done.returncode == 0, done.stderr[-800:]
+    assert "matplotlib" not in done.stderr, done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file", "o", "tmp"]
+    assert list((tmp_path / "tmp").iterdir()) == [] and (tmp_path / "a-file").read_text() == "mine\n"
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])

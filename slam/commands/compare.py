@@ -27,7 +27,7 @@ from typing import Any
 
 import yaml
 
-from slam.config import PipelineConfig, config_files, dump_config, load_config
+from slam.config import PipelineConfig, check_given_once, config_files, dump_config, load_config
 from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
 from validation.base.errors import InputError
@@ -188,6 +188,7 @@ def run_compare(
     out_dir = Path(out_dir)
     variants_path = Path(variants_path) if variants_path is not None else shipped_config("variants.yaml")
     variants = load_variants(variants_path, only)
+    check_given_once(overrides or [])
     base = load_config(config_path, overrides or [])  # errors of the config and --set first
     configs = {name: _variant_config(config_path, overrides or [], variants_path, name, ov) for name, ov in variants.items()}
     names = [*COMPARE_FILES, *(f"{v}/{f}" for v in variants for f in RESULT_FILES)]
@@ -212,6 +213,8 @@ def run_compare(
 
 def _variant_config(config_path, overrides: list[str], variants_path: Path, name: str, ov: list[str]) -> PipelineConfig:
     try:
+        # A key of the variant's that --set also gives: the variant's would win, --set's "for every variant" not.
+        check_given_once([*overrides, *ov], [*(f"--set {text}" for text in overrides), *ov])
         return load_config(config_path, [*overrides, *ov])
     except InputError as e:
         message = str(e)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import re
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -34,8 +35,8 @@ from validation.base.modes import GatingMode
 from validation.base.yamlio import Strict
 
 __all__ = [  # the YAML helpers are used through this module too
-    "PipelineConfig", "check_finite", "config_files", "describe_validation_error", "dump_config", "load_config",
-    "non_finite", "parse_override", "validation_sections", "yaml_number",
+    "PipelineConfig", "check_finite", "check_given_once", "config_files", "describe_validation_error", "dump_config",
+    "load_config", "non_finite", "parse_override", "validation_sections", "yaml_number",
 ]
 
 log = logging.getLogger(__name__)
@@ -509,6 +510,53 @@ def parse_override(text: str) -> tuple[str, Any]:
     except yaml.YAMLError:
         value = raw
     return key, value
+
+
+def _inside(value: Any, dotted: str) -> tuple[bool, Any]:
+    """``(True, value['a']['b'])`` for ``dotted = 'a.b'`` if ``value`` holds it, else ``(False, None)``."""
+    for k in dotted.split("."):
+        if not isinstance(value, dict) or k not in value:
+            return False, None
+        value = value[k]
+    return True, value
+
+
+def _replaces(earlier: tuple[str, Any], later: tuple[str, Any]) -> bool:
+    """Whether override ``later`` (key, value) would change what ``earlier``
+    set: the same key to another value, a section whose value drops or
+    changes the earlier key, or a key inside an earlier section's value that
+    it changes. A key beside one a section set, or the same value again,
+    replaces nothing."""
+    (ekey, evalue), (key, value) = earlier, later
+    if key == ekey:
+        return value != evalue
+    if ekey.startswith(key + "."):
+        held, inner = _inside(value, ekey[len(key) + 1:])
+        return not held or inner != evalue
+    if key.startswith(ekey + "."):
+        held, inner = _inside(evalue, key[len(ekey) + 1:])
+        return held and inner != value
+    return False
+
+
+def check_given_once(overrides: Sequence[str], names: Sequence[str] | None = None) -> None:
+    """Refuse overrides of which a later one would replace what an earlier
+    one set (``--set a.b=1 --set a.b=2``; ``--set a.b=1 --set a={c: 2}``,
+    which drops ``a.b``): the later would win in silence, as a key given
+    twice in a YAML file would. ``names[i]`` names override ``i`` in the
+    error (default ``--set TEXT``). Callers that layer overrides on purpose
+    (a sweep's point over its variant) do not call it."""
+    names = list(names) if names is not None else [f"--set {text}" for text in overrides]
+    seen: list[tuple[str, tuple[str, Any]]] = []
+    for name, text in zip(names, overrides):
+        pair = parse_override(text)
+        for earlier_name, earlier in seen:
+            if _replaces(earlier, pair):
+                what = (f"sets the whole section '{pair[0]}', replacing '{earlier[0]}'"
+                        if earlier[0].startswith(pair[0] + ".") else f"key '{pair[0]}' given twice")
+                raise GslamError(f"{name}: {what} (first set by {earlier_name}); the second would silently "
+                                 "replace the first")
+        seen.append((name, pair))
 
 
 def _blame(source: str, overrides: list[tuple[str, str]], key: str) -> str:

@@ -305,11 +305,17 @@ def read_broad(
         raise GslamError(f"{path}: sampling_rate: expected an IMU's rate in Hz (1 to 100000; BROAD's is 285.7), got {got}")
     gyr, acc, mag, quat = d["imu_gyr"], d["imu_acc"], d["imu_mag"], d["opt_quat"]
     n = len(gyr)
+    for name, values in (("imu_gyr", gyr), ("imu_acc", acc), ("imu_mag", mag)):  # as stored, before any lag
+        bad = ~np.isfinite(values)
+        if bad.any():
+            k, axis = np.argwhere(bad)[0]
+            count = int(bad.any(axis=1).sum())
+            raise GslamError(f"{path}: imu_gyr/imu_acc/imu_mag: expected finite samples; {name} at sample {k} "
+                             f"(t = {k / fs:.3f} s) is {values[k, axis]} on axis {'xyz'[axis]} ({count:,} of "
+                             f"{len(values):,} samples not finite)")
     # 0: the magnetometer's sample stamped t + mag_lag_s was measured at t.
     if mag_lag_s:
         mag = np.column_stack([np.interp(np.arange(n) / fs + mag_lag_s, np.arange(n) / fs, m) for m in mag.T])
-    if not (np.isfinite(gyr).all() and np.isfinite(acc).all() and np.isfinite(mag).all()):
-        raise GslamError(f"{path}: imu_gyr/imu_acc/imu_mag: expected finite samples")
     check_imu_physics(path, gyr, acc, mag)
     t = np.arange(n) / fs
     tracked = np.isfinite(quat).all(axis=1)

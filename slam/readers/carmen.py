@@ -167,6 +167,11 @@ def _count(parts: list[str], i: int, where: str, expected: str) -> int:
     return n
 
 
+def _more(parts: list[str], fields: int, counts: str) -> str:
+    """What a line with more fields than its counts say means."""
+    return f"; more values than {counts} says (is {counts} the count of values given?)" if len(parts) > fields else ""
+
+
 def _fov_rad(value: float) -> float:
     """PARAM ``laser_front_laser_fov`` in radians. CARMEN writes degrees
     (180, 100), but some logs write radians (csail: 3.14159 for its 180 deg
@@ -201,6 +206,8 @@ def _parse_flaser(d: _Log, parts: list[str], where: str) -> None:
         raise GslamError(f"{where}: expected {_FLASER} ({n + 11} fields, got {len(parts)})")
     values = _floats(parts[2 : n + 9], where, _FLASER,
                      _ranges_then(n, "x", "y", "theta", "odom_x", "odom_y", "odom_theta", "ts"))
+    if len(parts) > n + 11:  # n is not the number of ranges: every field after them would be read shifted
+        raise GslamError(f"{where}: expected {_FLASER} ({n + 11} fields, got {len(parts)}){_more(parts, n + 11, 'n')}")
     try:
         fov = float(d.params.get("laser_front_laser_fov", DEFAULT_FOV_DEG))
     except ValueError:
@@ -227,6 +234,9 @@ def _parse_robotlaser(d: _Log, parts: list[str], where: str) -> None:
     rest = _floats(parts[tail : tail + 12], where, _ROBOTLASER1, _named(
         "laser_x", "laser_y", "laser_theta", "robot_x", "robot_y", "robot_theta", "tv", "rv", "fwd", "side",
         "turn_axis", "ts"))
+    if len(parts) > tail + 14:  # n or m is not the number of values: the poses after them would be read shifted
+        raise GslamError(f"{where}: expected {_ROBOTLASER1} ({tail + 14} fields, got {len(parts)})"
+                         + _more(parts, tail + 14, "n or m"))
     start, _fov, res, max_range, _accuracy = head
     angles = start + res * np.arange(n)
     _add_scan(d, where, ranges, angles, (rest[0], rest[1], rest[2]), rest[11], float(max_range))

@@ -111,6 +111,9 @@ def _read_rows(path: Path, wanted: dict[str, tuple[int, str]]) -> dict[str, np.n
             raise GslamError(f"{path}:{lineno}: expected {expected}") from None
         if len(values) < count or not all(np.isfinite(values)):
             raise GslamError(f"{path}:{lineno}: expected {expected}")
+        given, known = len(parts) - 1, len(expected.split()) - 1
+        if given > known:  # a column more: appended, or inserted, shifting the ones read; which, no one can tell
+            raise GslamError(f"{path}:{lineno}: expected {expected} ({known} values, got {given})")
         rows[parts[0]].append(values)
     return {kind: np.asarray(r, dtype=np.float64).reshape(-1, wanted[kind][0]) for kind, r in rows.items()}
 

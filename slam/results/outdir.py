@@ -49,6 +49,7 @@ Everything is created with the permissions the umask allows (0644 files,
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import shutil
@@ -68,13 +69,15 @@ from slam.results.records import (
     ADDED_MARKER, MARKERS, RESULT_MARKER, Record, inside, list_files, only_gslams, read_record, result_command,
     write_added_record, write_result_marker,
 )
-from slam.results.tempfiles import TEMP_MARKER, TEMP_TAG, host_tag, make_temp_dir, remove_stale_temps, temp_name
+from slam.results.tempfiles import (
+    TEMP_MARKER, TEMP_TAG, host_tag, make_temp_dir, new_temp_file, remove_stale_temps, temp_name,
+)
 from slam.processes.signals import held
 
 __all__ = [
     "ADDED_MARKER", "RESULT_MARKER", "TEMP_MARKER", "TEMP_TAG", "Existing", "ResultFolder", "check_new_file",
     "check_out_path", "classify", "host_tag", "open_container", "remove_stale_temps", "result_command",
-    "result_file_mark", "result_folder", "disk_full",
+    "result_file_mark", "result_folder", "disk_full", "file_state", "write_result_file",
 ]
 
 log = logging.getLogger(__name__)
@@ -308,6 +311,51 @@ def file_mark(path: Path) -> str | None:
         return None
     command = first[len(prefix):].split(" ", 1)[0]
     return command if first.startswith(result_file_mark(command)) else None
+
+
+def file_state(path: str | Path) -> tuple[int, int, int, int] | None:
+    """What :func:`write_result_file` compares: ``path``'s device, inode,
+    size and time of change, or None if there is no file."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
+
+
+def write_result_file(path: str | Path, text: str, checked: tuple[int, int, int, int] | None,
+                      flag: str = "--out") -> None:
+    """Write ``text`` to ``path``, checked by :func:`check_new_file` when
+    its :func:`file_state` was ``checked``, atomically, but never over a
+    file that came there, or changed, while the command ran: another
+    command writing the same file at once, or a file the user saved there.
+    A new file is linked to its name, which fails if one came meanwhile."""
+    path = Path(path)
+    gone = refuse(path, "was written by someone else while this command ran; nothing was written (give a new "
+                        "file name)", flag)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = new_temp_file(path)
+    try:
+        tmp.write_text(text)
+        if checked is None:
+            try:
+                os.link(tmp, path)
+                return
+            except FileExistsError:
+                raise gone from None
+            except OSError as e:
+                if e.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EMLINK):
+                    raise
+            if file_state(path) is not None:  # a file system without hard links: the check, then the rename
+                raise gone
+        elif file_state(path) != checked:
+            raise gone
+        os.replace(tmp, path)
+    except OSError as e:  # named as the file being written, not its temporary name
+        raise OSError(e.errno, e.strerror, str(path)) from None
+    finally:
+        if tmp.exists():
+            tmp.unlink()
 
 
 def check_new_file(path: str | Path, inputs: Iterable[str | Path] = (), force: bool = False,

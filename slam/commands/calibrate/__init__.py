@@ -44,10 +44,9 @@ from slam.commands.calibrate.select import (CheckChoice, Choice, FieldGyroChoice
                                    calibrate_relation)
 from slam.commands.calibrate.support import Support, judge, uses_fitted_gain
 from slam.commands.calibrate.write import calibrated_config
-from slam.config import PipelineConfig, config_files, load_config, validation_sections
+from slam.config import PipelineConfig, check_given_once, config_files, load_config, validation_sections
 from slam.errors import GslamError
-from slam.results.atomic import write_text
-from slam.results.outdir import check_new_file
+from slam.results.outdir import check_new_file, file_state, write_result_file
 
 __all__ = ["CalibrationResult", "calibrate", "learn", "load_run", "parse_clean"]
 
@@ -111,6 +110,8 @@ def calibrate(
                          f"false alarm in a million steps; no run tells a smaller share from none) to "
                          f"{MAX_FALSE_ALARM:g} (half the steps alarmed validates nothing), e.g. 0.005")
     out = check_new_file(out, [*runs, *config_files(config_path)], force, command="calibrate")
+    checked = file_state(out)
+    check_given_once(overrides)
     runs = distinct_runs(runs)
     stretch = parse_clean(clean)
     config = load_config(config_path, list(overrides))
@@ -144,7 +145,7 @@ def calibrate(
         res = learn(loaded, config, false_alarm, header, lag_reference, drop_unsupported)
         res.applied = [lag for lag in first if lag.proposed]
         res.applied_heading = heading
-    write_text(out, res.text)
+    write_result_file(out, res.text, checked)
     res.out = Path(out)
     return res
 

@@ -25,7 +25,8 @@ from slam.commands.inject.broad import inject_broad
 from slam.commands.inject.carmen import inject_carmen
 from slam.commands.inject.labels import Labels
 from slam.commands.inject.rosbag import inject_rosbag
-from slam.commands.inject.spec import KINDS, Fault, parse_fault
+from slam.commands.inject.physics import inside
+from slam.commands.inject.spec import KINDS, Fault, no_sample, parse_fault
 from slam.results.outdir import result_folder
 from slam.readers.read import RUN_BAG, SIDECAR, guess_format, is_run_folder, read_recording, run_recording
 from slam.recording import Interval, Recording
@@ -53,6 +54,12 @@ class InjectResult:
     duration_s: float
 
 
+CHANGED_STREAM = {"dipole": ("compass", "compass sample"), "laser_cut": ("scans", "laser scan"),
+                  "gyro_bias": ("gyro", "gyro sample"), "slip": ("odometry", "odometry pose"),
+                  "multipath": ("gps", "GPS fix with a position")}
+"""The stream of the recording each kind of fault changes, and what one of its samples is called."""
+
+
 def _check_intervals(faults: Sequence[Fault], rec: Recording) -> None:
     for fault in faults:
         if fault.start_s >= rec.duration:
@@ -60,6 +67,11 @@ def _check_intervals(faults: Sequence[Fault], rec: Recording) -> None:
         if fault.end_s > rec.duration:
             raise GslamError(f"--fault {fault.text()}: ends at {fault.end_s:g} s, after the recording ends "
                              f"({rec.duration:.1f} s); its true interval would say the fault lasted past the data")
+        # A stream the recording lacks is refused by each format's injector, saying why.
+        attr, sample = CHANGED_STREAM[fault.kind]
+        stream = getattr(rec, attr)
+        if stream is not None and not inside(stream.t, fault.start_s, fault.end_s).any():
+            raise GslamError(no_sample(fault, sample))
 
 
 def _sidecar(rec: Recording, source: Path, faults: Sequence[Fault], truth: dict[str, list[Interval]],

@@ -23,7 +23,9 @@ from slam.errors import GslamError
 from validation.base.geometry import enu_from_geodetic, geodetic_from_enu, wrap_angle, yaw_from_quaternion
 from slam.commands.inject import physics
 from slam.commands.inject.labels import Labels
-from slam.commands.inject.spec import DipoleFault, Fault, GyroBiasFault, LaserCutFault, MultipathFault, SlipFault
+from slam.commands.inject.spec import (
+    DipoleFault, Fault, GyroBiasFault, LaserCutFault, MultipathFault, SlipFault, no_sample,
+)
 from slam.readers import frames
 from slam.readers.rosbag import open_bag, resolve_bag_path
 from slam.readers.rosbag_mcap import foreign_channels
@@ -139,7 +141,9 @@ def _slip(e: _Edits, fault: SlipFault, labels: Labels) -> None:
 
 
 def _multipath(e: _Edits, fault: MultipathFault, datum: tuple[float, float], labels: Labels) -> None:
-    fixed = np.array([m.status.status >= 0 and np.isfinite(m.latitude) for m in e.msgs])
+    fixed = np.array([m.status.status >= 0 and np.isfinite(m.latitude) for m in e.msgs], dtype=bool)
+    if not (fixed & physics.inside(e.t, fault.start_s, fault.end_s)).any():  # a bag whose GPS topic has no fix
+        raise GslamError(no_sample(fault, "GPS fix with a position"))
     bias = physics.multipath_bias(e.t, fault)
     sigma = np.array([np.sqrt(0.5 * (m.position_covariance[0] + m.position_covariance[4]))
                       if m.position_covariance_type != 0 else 1.0 for m in e.msgs])

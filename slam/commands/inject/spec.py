@@ -145,6 +145,12 @@ KINDS: dict[str, type[Fault]] = {
 }
 
 
+def no_sample(fault: Fault, sample: str) -> str:
+    """The error of a fault whose interval holds no sample it could change."""
+    return (f"--fault {fault.text()}: no {sample} between {fault.start_s:g} and {fault.end_s:g} s, so the fault "
+            "would change nothing; give an interval the recording has data in")
+
+
 def parse_fault(text: str) -> Fault:
     """``KIND@T0:T1[,param=value ...]`` -> a typed fault; one-line
     :class:`GslamError` naming the ``--fault`` and what is wrong."""

@@ -1,0 +1,66 @@
+"""Where matplotlib keeps its settings and font cache while gslam runs.
+
+matplotlib keeps them in the user's ``~/.config/matplotlib`` and
+``~/.cache/matplotlib`` (``$XDG_CONFIG_HOME``, ``$XDG_CACHE_HOME``),
+creating every missing folder on the way. Where those cannot be made in
+the user's home (``HOME`` naming a folder that does not exist, a file, a
+folder that cannot be written), it created the missing folders wherever
+``HOME`` pointed, or said so in two warning lines and left a folder of its
+own in the temporary folder (gslam ends without the exit handler that
+removes it). gslam then gives it a temporary folder of its own, removed
+when the command ends; a home that holds or can hold them is used as every
+matplotlib program uses it, and ``MPLCONFIGDIR`` set by the user is kept.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+__all__ = ["plot_home"]
+
+
+def _can_make(folder: Path, levels: int = 2) -> bool:
+    """``folder`` is a folder that can be written, or can be made by making
+    at most ``levels`` folders (``.config/matplotlib`` in a home) in one
+    that can: never a home made from nothing, never beneath a file."""
+    place = folder
+    for _ in range(levels):
+        if place.exists():
+            break
+        place = place.parent
+    return place.is_dir() and os.access(place, os.W_OK | os.X_OK)
+
+
+def _defaults_usable() -> bool:
+    try:
+        home = Path.home()
+    except (KeyError, RuntimeError):  # no HOME and no password entry
+        return False
+    if not sys.platform.startswith(("linux", "freebsd")):
+        return _can_make(home / ".matplotlib", levels=1)
+    config = Path(os.environ.get("XDG_CONFIG_HOME") or home / ".config")
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or home / ".cache")
+    return _can_make(config / "matplotlib") and _can_make(cache / "matplotlib")
+
+
+@contextmanager
+def plot_home() -> Iterator[None]:
+    """While the command runs (and its worker processes, which inherit the
+    environment), matplotlib's folders are the user's if they can be, else
+    a temporary folder removed at the end."""
+    if os.environ.get("MPLCONFIGDIR") or _defaults_usable():
+        yield
+        return
+    folder = tempfile.mkdtemp(prefix="gslam-matplotlib-")
+    os.environ["MPLCONFIGDIR"] = folder
+    try:
+        yield
+    finally:
+        del os.environ["MPLCONFIGDIR"]
+        shutil.rmtree(folder, ignore_errors=True)
