@@ -517,13 +517,18 @@ class GlobalSlam:
         for c in self.constraints[len(kept):]:
             g.add(self._constraint_factor(c, c.kind != "intra"))
             kept.append(c)
-        self._isam.update(g, values)
-        for _ in range(ISAM2_EXTRA_UPDATES):
-            self._isam.update()
+        try:
+            self._isam.update(g, values)
+            for _ in range(ISAM2_EXTRA_UPDATES):
+                self._isam.update()
+        except RuntimeError:
+            # An indeterminate system: a node its factors barely pin (a chain
+            # step the kernel has all but given up). Levenberg-Marquardt's
+            # damping still moves it; iSAM2 starts again after it.
+            return self._optimise(est, n)
         self._isam_n = n
         out = est.copy()
-        result = self._isam.calculateEstimate()
-        out[:n] = gtsam.utilities.extractPose2(result)
+        out[:n] = gtsam.utilities.extractPose2(self._isam.calculateEstimate())
         return out
 
     def _values(self, est: np.ndarray, n: int):
