@@ -390,13 +390,7 @@ class GlobalSlam:
         kernel when ``robust_inter``, except those indexed in ``plain``."""
         import gtsam
 
-        from slam.graph.factors import pose_key
-
-        if not self._chain:
-            self._chain.append(gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(*self.local.poses[0]),
-                                                      _noise([1e-3, 1e-3, 1e-4])))
-        for i in range(len(self._chain), n):
-            self._chain.append(self._chain_factor(i))
+        self._extend_chain(n)
         if robust_inter and not plain:
             g = self._walk_graph(n)
             if g is not None:
@@ -413,6 +407,18 @@ class GlobalSlam:
             index.append((g.size(), k))
             g.add(self._constraint_factor(c, robust))
         return g, index
+
+    def _extend_chain(self, n: int) -> None:
+        """The prior and the chain's factors of the first ``n`` nodes, made once each."""
+        import gtsam
+
+        from slam.graph.factors import pose_key
+
+        if not self._chain:
+            self._chain.append(gtsam.PriorFactorPose2(pose_key(0), gtsam.Pose2(*self.local.poses[0]),
+                                                      _noise([1e-3, 1e-3, 1e-4])))
+        for i in range(len(self._chain), n):
+            self._chain.append(self._chain_factor(i))
 
     def _walk_graph(self, n: int):
         """The graph :meth:`_graph` makes with every inter constraint under
@@ -501,7 +507,7 @@ class GlobalSlam:
 
         from slam.graph.factors import pose_key
 
-        self._graph(n)  # the chain's factors up to n
+        self._extend_chain(n)
         kept = self._isam_constraints
         if (self._isam is None or len(kept) > len(self.constraints)
                 or any(a is not b for a, b in zip(kept, self.constraints))):
