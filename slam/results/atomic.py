@@ -9,6 +9,7 @@ ordinary file would be.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -17,16 +18,16 @@ from slam.results.tempfiles import new_temp_file
 
 
 @contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it over ``path`` on
-    success, delete it on failure. Use for writers that want a file name
-    (open3d, matplotlib)."""
+def atomic_path(path: str | Path, place: Callable[[Path, Path], None] = os.replace) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; on success ``place`` it at
+    ``path`` (renamed over it by default), delete it on failure. Use for
+    writers that want a file name (open3d, matplotlib)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp_path = new_temp_file(path)
     try:
         yield tmp_path
-        os.replace(tmp_path, path)
+        place(tmp_path, path)
     except OSError as e:  # named as the file being written, not its temporary name
         if e.filename is not None and str(tmp_path) not in str(e.filename):
             raise

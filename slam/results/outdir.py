@@ -69,9 +69,8 @@ from slam.results.records import (
     ADDED_MARKER, MARKERS, RESULT_MARKER, Record, inside, list_files, only_gslams, read_record, result_command,
     write_added_record, write_result_marker,
 )
-from slam.results.tempfiles import (
-    TEMP_MARKER, TEMP_TAG, host_tag, make_temp_dir, new_temp_file, remove_stale_temps, temp_name,
-)
+from slam.results.atomic import atomic_path
+from slam.results.tempfiles import TEMP_MARKER, TEMP_TAG, host_tag, make_temp_dir, remove_stale_temps, temp_name
 from slam.processes.signals import held
 
 __all__ = [
@@ -333,10 +332,8 @@ def write_result_file(path: str | Path, text: str, checked: tuple[int, int, int,
     path = Path(path)
     gone = refuse(path, "was written by someone else while this command ran; nothing was written (give a new "
                         "file name)", flag)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = new_temp_file(path)
-    try:
-        tmp.write_text(text)
+
+    def place(tmp: Path, path: Path) -> None:
         if checked is None:
             try:
                 os.link(tmp, path)
@@ -351,11 +348,9 @@ def write_result_file(path: str | Path, text: str, checked: tuple[int, int, int,
         elif file_state(path) != checked:
             raise gone
         os.replace(tmp, path)
-    except OSError as e:  # named as the file being written, not its temporary name
-        raise OSError(e.errno, e.strerror, str(path)) from None
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+
+    with atomic_path(path, place) as tmp:
+        tmp.write_text(text)
 
 
 def check_new_file(path: str | Path, inputs: Iterable[str | Path] = (), force: bool = False,
