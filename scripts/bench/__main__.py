@@ -26,6 +26,7 @@ RESULTS = {  # name: what it measures (each writes docs/results/NAME.md)
     "husky_dipole": "the Husky bag with injected compass dipoles: found, and quiet elsewhere?",
     "husky_faults": "the Husky bag with one injected fault of each kind: found and blamed right?",
     "proposal": "the system model gslam inspect proposes, calibrated, against the shipped ones, held out",
+    "self_check": "the map's self-check on the CARMEN logs, the Husky bag and the demo, beside each map's ATE",
     "walkthrough": "inspect, calibrate and map --gating on the Husky bag: docs/three_commands.md (not a results page)",
 }
 TUNING = {
@@ -45,6 +46,7 @@ QUICK = {  # the arguments of each bench under `all --quick`: every page in unde
     "husky_dipole": ["--sets", "trend", "shipped", "--passes", "offline", "--no-folds"],
     "husky_faults": [],
     "proposal": ["--seeds", "11-12", "--carmen-logs", "intel", "aces"],
+    "self_check": ["--logs", "intel", "aces", "orebro", "husky", "demo"],
     "walkthrough": [],
 }
 

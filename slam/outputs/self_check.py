@@ -6,8 +6,10 @@ their optimised poses, the kept loops, the odometry) and held against a
 bound (:class:`SelfCheckBounds`); the verdict fails when any figure is
 outside its bound, and a figure that does not apply (no laser, no kept
 loop, no odometry) passes. The check only reads: the map is the same with
-or without it. Definitions, bounds and the values measured on the CARMEN
-logs are in ``docs/cli.md`` (The self-check).
+or without it. Definitions and bounds are in ``docs/cli.md`` (The
+self-check); the values measured on the CARMEN logs, the Husky bag and the
+demo in ``docs/results/self_check.md`` (``python -m scripts.bench
+self_check``).
 
 Judged figures:
 
