@@ -3,6 +3,8 @@ reading and the speed section's ratios."""
 
 import gzip
 
+import pytest
+
 import numpy as np
 
 from scripts.bench.kiss_only import carmen_scans, is_carmen
@@ -41,3 +43,14 @@ def test_speed_report_says_the_ratio_to_kiss_slam_and_the_real_time_factor():
                  ["kiss 1 thread", "gslam", "kiss-slam"], {}, "note", {"lab": "simulated"})
     assert "- lab, gslam against kiss 1 thread: 2.50 (above the target 1.5)" in lab
     assert "- lab, gslam real-time factor 20x (below the target 80x)" in lab
+
+
+def test_carmen_inputs_come_from_the_data_folder(tmp_path, monkeypatch):
+    """The speed section's CARMEN logs are read where GSLAM_DATA says; a
+    folder without any is refused by name, not skipped in silence."""
+    from scripts.bench.perf.speed import carmen_inputs
+    from slam.errors import GslamError
+
+    monkeypatch.setenv("GSLAM_DATA", str(tmp_path))
+    with pytest.raises(GslamError, match=str(tmp_path / "carmen")):
+        carmen_inputs()

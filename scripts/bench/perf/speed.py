@@ -4,9 +4,10 @@ bench.
 
 Inputs: ``lab`` is telemax_lab (simulated once, seed 5; 220.6 s, 2,207
 scans); ``loop`` is telemax_loop with ``--laps`` laps; ``carmen`` is every
-CARMEN log in ``../shared/data/carmen`` whose stamps are real (not
-synthesised by the reader), mapped with ``configs/datasets/carmen.yaml``
-as the ``carmen`` bench maps them. Programs, each a fresh interpreter,
+CARMEN log in the data folder's ``carmen`` (``$GSLAM_DATA``, else
+``../shared/data``) whose stamps are real (not synthesised by the reader),
+mapped with ``configs/datasets/carmen.yaml`` as the ``carmen`` bench maps
+them. Programs, each a fresh interpreter,
 compared like with like:
 
 * ``gslam`` (``frontend.threads: 1``, the default: the same poses on every
@@ -65,7 +66,6 @@ from slam.results.atomic import write_text
 
 ROOT = Path(__file__).resolve().parents[3]
 SEED = 5
-CARMEN = ROOT.parent / "shared" / "data" / "carmen"
 CARMEN_CONFIG = ROOT / "configs" / "datasets" / "carmen.yaml"
 PEERS = {"gslam": "kiss 1 thread", "gslam all cores": "kiss", "gslam no loops": "kiss 1 thread", "before": "kiss 1 thread"}
 """The program each gslam program is compared with."""
@@ -138,9 +138,15 @@ def carmen_inputs() -> list[tuple[str, Path]]:
     from slam.config import load_config
     from slam.readers.read import read_recording
 
+    from slam.readers.datasets import data_root
+
+    folder = data_root() / "carmen"
+    logs = sorted(folder.glob("*.log.gz"))
+    if not logs:
+        raise GslamError(f"--inputs carmen: no CARMEN log (*.log.gz) in {folder} (set GSLAM_DATA to the data folder)")
     cfg = load_config(CARMEN_CONFIG)
     out = []
-    for path in sorted(CARMEN.glob("*.log.gz")):
+    for path in logs:
         if not read_recording(path, cfg.input).stamps_synthesised:
             out.append((path.name.split("-corrected")[0], path))
     return out
