@@ -469,6 +469,13 @@ ERRORS: list[Case] = [
                                           "--out", "{d}/o"), "variant '../up'", text("v.yaml", "../up: {}\n")),
     Case("compare-variant-hidden", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
          "variant '.gslam-result.json'", text("v.yaml", ".gslam-result.json: {}\n")),
+    # -- names whose folders are one where the file system ignores case --
+    Case("compare-variants-differ-in-case", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml",
+                                             "--out", "{d}/o"), "variants 'Gated' and 'gated' differ only in case",
+         text("v.yaml", "Gated: {validation.mode: 'on'}\ngated: {validation.mode: 'off'}\n")),
+    Case("compare-variant-named-report-in-capitals", ("compare", "{run}", "--config", "{cfg}", "--variants",
+                                                      "{d}/v.yaml", "--out", "{d}/o"), "variant 'REPORT.html'",
+         text("v.yaml", "REPORT.html: {validation.mode: 'off'}\n")),
     # -- inputs that are not regular files: refused, never read (no hang) --
     Case("config-is-a-named-pipe", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "it is a named pipe", fifo("c.yaml")),
     Case("config-is-dev-zero", (*MAP[:2], "--config", "/dev/zero", "--out", "{d}/o"), "it is a device"),

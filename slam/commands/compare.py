@@ -108,11 +108,17 @@ def load_variants(path: str | Path, only: list[str] | None = None) -> dict[str, 
     """Variants from YAML: name -> mapping of dotted overrides."""
     data = load_yaml(path, "config")
     variants: dict[str, list[str]] = {}
+    folded: dict[str, str] = {}
+    reserved = {f.casefold() for f in COMPARE_FILES}
     for key, overrides in data.items():
         name = str(key)
-        if not PLAIN_NAME.fullmatch(name) or name in COMPARE_FILES:
+        if not PLAIN_NAME.fullmatch(name) or name.casefold() in reserved:
             raise GslamError(f"{path}: variant {name!r}: a variant's name names its result folder: {PLAIN_NAME_RULE}, "
-                             f"other than {', '.join(COMPARE_FILES)}")
+                             f"other than {', '.join(COMPARE_FILES)} in any case")
+        other = folded.setdefault(name.casefold(), name)
+        if other != name:
+            raise GslamError(f"{path}: variants {other!r} and {name!r} differ only in case: on a file system that "
+                             "ignores case (macOS, Windows) their result folders would be one; rename one")
         if not isinstance(overrides, dict):
             raise GslamError(f"{path}: variant '{name}': expected a mapping of dotted.key: value")
         variants[name] = [f"{k}={_yaml_scalar(v)}" for k, v in overrides.items()]

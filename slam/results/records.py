@@ -34,7 +34,7 @@ RESULT_MARKER = ".gslam-result.json"
 # A name read from a file that becomes a file or folder name (a scenario's,
 # a variant's): one plain path part, never a way out of its folder.
 PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,99}")
-PLAIN_NAME_RULE = "letters, digits and _.+- (not starting with . or -), at most 100 characters"
+PLAIN_NAME_RULE = "ASCII letters and digits and _.+- (not starting with . or -), at most 100 characters"
 ADDED_MARKER = ".gslam-added.json"
 MARKERS = (RESULT_MARKER, ADDED_MARKER)
 
