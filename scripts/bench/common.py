@@ -26,6 +26,15 @@ RESULTS = REPO / "docs" / "results"
 CONFIGS = REPO / "configs"
 KERNELS = ("huber", "cauchy", "dcs", "gnc_tls", "gnc_gm")
 """The robust-kernel variants of ``configs/variants.yaml`` (all ungated)."""
+HUSKY_BAG = Path("rosbag") / "test1_husky_2015.bag"
+"""The Husky bag, under the data folder."""
+
+
+def carmen_log(data: Path, name: str) -> Path:
+    """CARMEN log ``name`` (``intel``, ``freiburg-079`` ...) under the data folder ``data``."""
+    return data / "carmen" / f"{name}-corrected.log.gz"
+
+
 PACKAGES = ("numpy", "gtsam", "kiss-icp", "rosbags", "python-sat")
 
 

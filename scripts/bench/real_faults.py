@@ -85,7 +85,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from scripts.bench.common import (
-    KERNELS, ROWS_MEASURED, commit, csv_text, include_in_readme, publish, quiet_logging, table,
+    HUSKY_BAG, KERNELS, ROWS_MEASURED, carmen_log, commit, csv_text, include_in_readme, publish, quiet_logging, table,
 )
 from scripts.bench.husky_faults import judged_alarms
 from scripts.bench.judges import REAL_FAULT_FROM_S, ate_vs_gps, gps_wanders
@@ -112,7 +112,6 @@ FAULTS = {  # kind: the gslam inject spec after "KIND@T0:T1,"
     "yaw_slip": "slip@{a:.1f}:{b:.1f},scale=1.0,yaw_scale=1.5",
 }
 HUSKY = "husky"
-HUSKY_BAG = "rosbag/test1_husky_2015.bag"
 HUSKY_CONFIG = ROOT / "configs/datasets/husky.yaml"
 HUSKY_FAULTS = {
     "slip": FAULTS["slip"],
@@ -213,7 +212,7 @@ def log_source(name: str, data: Path) -> Path:
     if is_broad(name):
         found = sorted((data / "broad").glob(f"{name.removeprefix('broad-')}_*.mat"))
         return found[0] if found else data / "broad" / f"{name.removeprefix('broad-')}_*.mat"
-    return data / "carmen" / f"{name}-corrected.log.gz"
+    return carmen_log(data, name)
 
 
 def error(row: dict) -> float:

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import yaml
 
-from scripts.bench.common import CONFIGS, REPO, publish, quiet_logging, table
+from scripts.bench.common import CONFIGS, HUSKY_BAG, REPO, carmen_log, publish, quiet_logging, table
 from slam.readers.datasets import data_root
 
 log = logging.getLogger(__name__)
@@ -50,7 +50,6 @@ HUSKY = "husky"
 DEMO = "demo"
 DEMO_VARIANTS = ("ungated", "gated", "oracle")
 UNITS = (*CARMEN_LOGS, HUSKY, DEMO)
-HUSKY_BAG = Path("rosbag") / "test1_husky_2015.bag"
 FIGURES = ("scan_agreement", "loop_residual_m", "odometry_disagreement")
 GOOD_ATE_M = 0.2
 """A CARMEN log mapped within this ATE of its corrected reference counts as mapped well in the page's summary."""
@@ -106,7 +105,7 @@ def units_of(names: list[str], data: Path, work: Path) -> tuple[list[Unit], list
         if name == HUSKY:
             source, config = data / HUSKY_BAG, CONFIGS / "datasets" / "husky.yaml"
         else:
-            source, config = data / "carmen" / f"{name}-corrected.log.gz", CONFIGS / "datasets" / "carmen.yaml"
+            source, config = carmen_log(data, name), CONFIGS / "datasets" / "carmen.yaml"
         if not source.is_file():
             skipped.append(f"{name}: {source} not found (set GSLAM_DATA or --data to the data folder)")
             continue

@@ -7,8 +7,7 @@ scans); ``loop`` is telemax_loop with ``--laps`` laps; ``carmen`` is every
 CARMEN log in the data folder's ``carmen`` (``$GSLAM_DATA``, else
 ``../shared/data``) whose stamps are real (not synthesised by the reader),
 mapped with ``configs/datasets/carmen.yaml`` as the ``carmen`` bench maps
-them. Programs, each a fresh interpreter,
-compared like with like:
+them. Programs, each a fresh interpreter, compared like with like:
 
 * ``gslam`` (``frontend.threads: 1``, the default: the same poses on every
   run) against ``kiss 1 thread`` (``python -m scripts.bench.kiss_only RUN
@@ -136,9 +135,8 @@ class Input:
 def carmen_inputs() -> list[tuple[str, Path]]:
     """The CARMEN logs whose stamps are real (the reader synthesised none)."""
     from slam.config import load_config
-    from slam.readers.read import read_recording
-
     from slam.readers.datasets import data_root
+    from slam.readers.read import read_recording
 
     folder = data_root() / "carmen"
     logs = sorted(folder.glob("*.log.gz"))
