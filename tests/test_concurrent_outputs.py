@@ -167,6 +167,15 @@ def test_an_error_in_background_work_is_raised_in_the_caller(concurrent):
         job.result()
 
 
+@pytest.mark.parametrize("concurrent", [True, False])
+def test_an_error_in_background_work_fed_as_it_goes_is_raised_in_the_caller(concurrent):
+    job = start("failing", _fail, concurrent=concurrent)
+    with pytest.raises(GslamError, match="bad scan 3"):
+        for k in range(100_000):  # the child ends while it is still fed
+            job.send(np.zeros(16) + k)
+        job.result()
+
+
 @needs_fork
 def test_a_background_process_that_dies_is_a_one_line_error():
     job = start("scan matching", _die)

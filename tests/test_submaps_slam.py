@@ -286,7 +286,8 @@ def test_the_path_on_dead_reckoning_alone_may_drift_as_the_odometry_does():
     from types import SimpleNamespace
 
     from slam.config.submaps import RecognitionConfig
-    from slam.submaps.graph import GlobalSlam, drift_allowance
+    from slam.submaps.graph import LocalFeed, drift_allowance
+    from slam.submaps.local import LocalStep
 
     laser = RecognitionConfig()
     assert drift_allowance(laser, 50.0, 20.0) == (laser.max_drift_per_m * 50.0, laser.max_turn_per_m_deg * 50.0)
@@ -300,7 +301,37 @@ def test_the_path_on_dead_reckoning_alone_may_drift_as_the_odometry_does():
     poses = np.column_stack([np.arange(6.0), np.zeros(6), np.zeros(6)])
     sizes = [100, 100, 0, 3, 100, 0]
     points = SimpleNamespace(points=[np.zeros((k, 2)) for k in sizes])
-    walk = GlobalSlam(points, SimpleNamespace(poses=poses), SubmapsConfig(enabled=True), np.zeros((6, 3)),
-                      np.zeros((6, 3, 3)))
-    assert walk.path.tolist() == [0, 1, 2, 3, 4, 5]
-    assert walk.blind_path.tolist() == [0, 0, 1, 2, 2, 3]
+    steps = iter([LocalStep(i, poses[i], None, ((0, poses[i], float(i > 0)),), ()) for i in range(6)] + [None])
+    feed = LocalFeed(points, 6, SubmapsConfig(enabled=True).min_points, steps.__next__)
+    feed.advance(5)
+    assert feed.path.tolist() == [0, 1, 2, 3, 4, 5]
+    assert feed.blind_path.tolist() == [0, 0, 1, 2, 2, 3]
+    feed.end()
+    assert feed.finishing == [0] and feed.submaps[0].scans == list(range(6))
+
+
+@pytest.mark.parametrize("constraints", [{}, {"max_distance_m": 1e-3}], ids=["near", "recognised"])
+def test_the_walk_beside_local_slam_gives_the_same_result_to_the_bit(constraints):
+    """The walk following local SLAM in a second process reads only what
+    local SLAM had done by each scan: the result is the plain order's."""
+    from slam.processes.background import can_fork
+
+    if not can_fork():
+        pytest.skip("no fork here: the walk runs after local SLAM in this process")
+    rng = np.random.default_rng(11)
+    truth = ring_path(0.7, 2.0)
+    scans = simulate(building(), truth, rng)
+    steps, cov = drifting_odometry(truth, rng)
+    fe = FrontendConfig(max_range_m=50.0)
+    cfg = SubmapsConfig.model_validate({"enabled": True, "constraints": constraints,
+                                        "recognition": {"min_path_m": 10.0}})
+    plain, beside = (build_submap_constraints(scans, np.arange(len(truth)), steps, cov, fe, cfg, concurrent=c)
+                     for c in (False, True))
+    assert plain.of_kind("near", "loop")  # the walk found something to agree on
+    assert plain.estimate.tobytes() == beside.estimate.tobytes()
+    assert plain.searches == beside.searches
+    for found in ("constraints", "dropped"):
+        a, b = getattr(plain, found), getattr(beside, found)
+        assert [(c.submap, c.anchor, c.scan, c.kind, c.score) for c in a] == [(c.submap, c.anchor, c.scan, c.kind, c.score) for c in b]
+        assert all(x.delta.tobytes() == y.delta.tobytes() and x.information.tobytes() == y.information.tobytes()
+                   for x, y in zip(a, b))

@@ -58,13 +58,16 @@ class Mapping:
     """Map ``recording`` with ``config``; see :meth:`run`. ``frontend``: the
     scan matching of another variant of the same run, reused; ``source``
     names the input in error messages; ``progress``: progress bars on the
-    terminal. After :meth:`run` the estimate is in
-    :attr:`backend` and the metrics in :attr:`metrics`."""
+    terminal; ``concurrent``: the submaps' two halves on two cores (see
+    :func:`slam.submaps.build.build_submap_constraints`; the same result
+    either way). After :meth:`run` the estimate is in :attr:`backend` and
+    the metrics in :attr:`metrics`."""
 
     def __init__(self, recording: Recording, config: PipelineConfig, frontend: FrontendResult | None = None,
-                 source: str | Path | None = None, progress: bool = False):
+                 source: str | Path | None = None, progress: bool = False, concurrent: bool = False):
         self.recording = recording
         self.progress = progress
+        self.concurrent = concurrent
         self.config = config
         self.frontend = frontend
         self.source = Path(source) if source is not None else Path(recording.name)
@@ -203,7 +206,7 @@ class Mapping:
         blamed = blamed_scans(self.weights, len(meas)) if cfg.blamed_scans == "leave_out" else None
         self.submaps = build_submap_constraints(
             self.recording.scans, meas.scan_index, steps, step_cov, self.config.frontend, cfg, before_judging, blamed,
-            self.progress,
+            self.progress, self.concurrent,
         )
         self.constraints = [*self.constraints, *submap_factors(self.submaps, self.weights, len(meas), blamed)]
         self.timings.submaps_s = time.perf_counter() - t

@@ -6,13 +6,14 @@ busy. The folder follows :mod:`slam.results.outdir`: ``--out`` is checked
 before any work, the result is built in a temporary sibling and renamed
 into place at the end, so a killed run leaves a complete folder or none.
 
-Two steps run beside the others on the second core (``concurrent``, the
+Three steps run beside the others on the second core (``concurrent``, the
 default): KISS-ICP registers the scans while the other topics are read and
-the next steps prepared (:mod:`slam.frontend.worker`), and the figures, the
-occupancy grid and ``run.mcap`` are made while the numeric results are
-written (:mod:`slam.outputs.result_writer`). Both are the same code on the
-same data as in the plain order (``concurrent=False``), so the results are
-the same bytes. gtsam and validation are imported while the scans are
+the next steps prepared (:mod:`slam.frontend.worker`); the submaps' walk
+follows their local SLAM scan by scan (:mod:`slam.submaps.build`); and the
+figures, the occupancy grid and ``run.mcap`` are made while the numeric
+results are written (:mod:`slam.outputs.result_writer`). Each is the same
+code on the same data as in the plain order (``concurrent=False``), so the
+results are the same bytes. gtsam and validation are imported while the scans are
 matched, not before.
 """
 
@@ -162,7 +163,7 @@ class MappingPipeline:
         if had_scans and rec.scans is None and self.scan_matching is not None:
             self.scan_matching.close()
             self.scan_matching = None
-        self.core = Mapping(rec, self.config, self.frontend, self.input_path, self.progress)
+        self.core = Mapping(rec, self.config, self.frontend, self.input_path, self.progress, self.concurrent)
         self.core.timings.read_s = read_s
 
     def prepare(self, folder: Path) -> None:

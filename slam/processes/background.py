@@ -27,6 +27,7 @@ import multiprocessing
 import os
 import pickle
 import signal
+from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -55,13 +56,13 @@ class Inline:
 
     def __init__(self, what: str, fn: Callable[..., Any], *args: Any):
         self.what, self.fn, self.args = what, fn, args
-        self.sent: list[Any] = []
+        self.sent: deque[Any] = deque()
 
     def send(self, obj: Any) -> None:
         self.sent.append(obj)
 
     def result(self) -> Any:
-        return self.fn(lambda: self.sent.pop(0), *self.args)
+        return self.fn(self.sent.popleft, *self.args)
 
     def close(self) -> None:
         self.sent.clear()
@@ -131,7 +132,9 @@ class Forked:
     def send(self, obj: Any) -> None:
         try:
             self.conn.send(obj)
-        except (BrokenPipeError, EOFError):
+        except (BrokenPipeError, ConnectionResetError, EOFError):
+            # The child has ended: its error, if it sent one, says why.
+            self.result()
             self._died()
 
     def result(self) -> Any:

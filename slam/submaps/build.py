@@ -11,7 +11,9 @@ import numpy as np
 from slam.config import FrontendConfig
 from slam.recording import Scans
 from slam.config.submaps import SubmapsConfig
-from slam.submaps.graph import Constraint, GlobalResult, GlobalSlam
+from slam.processes import background
+from slam.processes.background import Inbox
+from slam.submaps.graph import Constraint, GlobalResult, GlobalSlam, LocalFeed
 from slam.submaps.local import LocalResult, run_local_slam
 from slam.submaps.scans import ScanPoints
 from validation.loops.chain import integrate
@@ -57,6 +59,13 @@ def select_nodes(steps: np.ndarray, spacing_m: float, turn_rad: float) -> np.nda
     return np.asarray(nodes)
 
 
+def _walk(inbox: Inbox, points: ScanPoints, config: SubmapsConfig, steps: np.ndarray, step_cov: np.ndarray,
+          before_judging: Callable[[list[Constraint]], list[Constraint]] | None) -> GlobalResult:
+    """The global walk over local SLAM's steps as ``inbox`` gives them."""
+    feed = LocalFeed(points, len(points), config.min_points, inbox)
+    return GlobalSlam(points, feed, config, steps, step_cov, before_judging).run()
+
+
 def build_submap_constraints(
     scans: Scans,
     scan_index: np.ndarray,
@@ -67,6 +76,7 @@ def build_submap_constraints(
     before_judging: Callable[[list[Constraint]], list[Constraint]] | None = None,
     blamed: np.ndarray | None = None,
     progress: bool = False,
+    concurrent: bool = False,
 ) -> SubmapResult:
     """Scan-to-submap constraints over the keyframes whose scans are
     ``scans[scan_index]`` (K,); ``steps`` (K, 3) and ``step_cov`` (K, 3, 3):
@@ -76,7 +86,10 @@ def build_submap_constraints(
     ``blamed`` (K,) bool: keyframes whose scan the gating excluded; such a
     scan leaves no trace here: it is neither matched nor inserted into a
     submap (its node keeps the chain's pose), so no constraint, submap or
-    loop rests on it. ``progress``: a bar on a terminal."""
+    loop rests on it. ``progress``: a bar on a terminal. ``concurrent``:
+    the walk follows local SLAM scan by scan in a second process (else it
+    runs after it here); the same code on the same data either way, so the
+    same result to the last bit."""
     start = time.perf_counter()
     nodes = select_nodes(steps, config.node_spacing_m, np.radians(config.node_turn_deg))
     chain = integrate(np.zeros(3), steps)
@@ -89,8 +102,13 @@ def build_submap_constraints(
                         search_voxel_m=config.resolution_m)
     if blamed is not None:
         points.leave_out(np.flatnonzero(np.asarray(blamed)[nodes]))
-    local = run_local_slam(points, node_steps, node_cov, config, progress)
-    found: GlobalResult = GlobalSlam(points, local, config, node_steps, node_cov, before_judging).run()
+    walk = background.start("the submaps' walk", _walk, points, config, node_steps, node_cov, before_judging,
+                 concurrent=concurrent)
+    try:
+        local = run_local_slam(points, node_steps, node_cov, config, progress, tell=walk.send)
+        found: GlobalResult = walk.result()
+    finally:
+        walk.close()
     # Back to keyframes: every keyframe hangs off the node before it by the chain.
     owner = np.searchsorted(nodes, np.arange(len(steps)), side="right") - 1
     estimate = compose(found.poses[owner], between(chain[nodes[owner]], chain))

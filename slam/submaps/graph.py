@@ -25,6 +25,7 @@ optimised again without those.
 
 from __future__ import annotations
 
+import bisect
 import logging
 import time
 from collections.abc import Callable
@@ -36,7 +37,7 @@ from validation.base.geometry import between, compose, wrap_angle
 from slam.matching.descriptor import context_distance, ring_key, scan_context
 from slam.graph.loop_factors import loop_noise
 from slam.config.submaps import RecognitionConfig, SubmapsConfig
-from slam.submaps.local import LocalResult, Match, match_scan, refine_near
+from slam.submaps.local import LocalStep, Match, Submap, match_scan, refine_near
 from slam.submaps.near import NearSubmaps
 from slam.submaps.scans import ScanPoints
 
@@ -99,25 +100,101 @@ def drift_allowance(rc: RecognitionConfig, path_m: float, blind_m: float) -> tup
     return drift_m, turn_deg
 
 
-class GlobalSlam:
-    """See the module docstring. ``steps`` (n, 3) and ``step_cov`` (n, 3, 3):
-    the dead-reckoning chain between the scans, which the graph keeps
-    beside the scan-to-submap constraints. ``before_judging``: given the
-    constraints found, before GNC judges them, returns more to judge (a
-    bench's wrong loops)."""
+class LocalFeed:
+    """Local SLAM's result as the walk needs it, scan by scan: ``next_step``
+    gives the :class:`LocalStep` of each of the ``n`` scans in order, then
+    None; :meth:`advance` takes them up to a scan. The walk at scan ``i``
+    reads only what local SLAM had done by then, so it can follow local
+    SLAM in another process (:func:`slam.submaps.build.build_submap_constraints`).
 
-    def __init__(self, points: ScanPoints, local: LocalResult, cfg: SubmapsConfig,
+    Its submaps mirror local SLAM's (the same scans at the same poses); a
+    submap is listed as finished once complete, in the order they complete
+    (``finishing``, with their last scans ``finish_scans``). ``path`` (n,):
+    the local path to each scan; ``blind_path`` (n,): the part of it into
+    scans with fewer than ``min_points`` points, walked on dead reckoning
+    alone (the laser blind, or its scan left out by the gating)."""
+
+    def __init__(self, points: ScanPoints, n: int, min_points: int, next_step: Callable[[], LocalStep | None]):
+        self.points, self.min_points, self.next_step = points, min_points, next_step
+        self.poses = np.zeros((n, 3))
+        self.matches: list[Match | None] = [None] * n
+        self.submaps: list[Submap] = []
+        self.member: dict[int, set[int]] = {}  # scan -> the submaps it went into
+        self.last_scans: list[int | None] = []  # by submap, once complete
+        self.centres: list[np.ndarray | None] = []  # by submap once complete: the mean pose (x, y) in its frame
+        self.finishing: list[int] = []
+        self.finish_scans: list[int] = []
+        self.path = np.zeros(n)
+        self.blind_path = np.zeros(n)
+        self.done = -1  # the last scan taken
+        self.ended = False
+
+    def advance(self, scan: int) -> None:
+        """Take the steps up to ``scan``."""
+        while self.done < scan:
+            self._take(self.next_step())
+
+    def end(self) -> None:
+        """Take every step left, and the end."""
+        while not self.ended:
+            self._take(self.next_step())
+
+    def _take(self, step: LocalStep | None) -> None:
+        if step is None:
+            self.ended = True
+            self.done = len(self.poses) - 1
+            self._finish([sid for sid, last in enumerate(self.last_scans) if last is None])
+            return
+        i = self.done = step.scan
+        self.poses[i] = step.pose
+        self.matches[i] = step.match
+        if i > 0:
+            moved = np.hypot(*(self.poses[i, :2] - self.poses[i - 1, :2]))
+            self.path[i] = self.path[i - 1] + moved
+            blind = len(self.points.points[i]) < self.min_points
+            self.blind_path[i] = self.blind_path[i - 1] + (moved if blind else 0.0)
+        for sid, pose, step_m in step.inserted:
+            if sid == len(self.submaps):
+                self.submaps.append(Submap())
+                self.last_scans.append(None)
+                self.centres.append(None)
+            self.submaps[sid].insert(i, pose, step_m)
+            self.member.setdefault(i, set()).add(sid)
+        self._finish(step.finished)
+
+    def _finish(self, sids) -> None:
+        for sid in sids:
+            sm = self.submaps[sid]
+            sm.finished = True
+            self.last_scans[sid] = sm.scans[-1]
+            self.centres[sid] = np.mean(sm.poses, axis=0)[:2]
+            self.finishing.append(sid)
+            self.finish_scans.append(sm.scans[-1])
+
+    def finished_before(self, scan: int) -> int:
+        """How many submaps (the first of :attr:`finishing`) were complete before ``scan``."""
+        return bisect.bisect_left(self.finish_scans, scan)
+
+    def last_scan_array(self) -> np.ndarray:
+        """The last scan of each submap (by id), past the run's end for one still open."""
+        return np.array([len(self.poses) if last is None else last for last in self.last_scans], dtype=int)
+
+
+class GlobalSlam:
+    """See the module docstring. ``local``: local SLAM's result, scan by
+    scan. ``steps`` (n, 3) and ``step_cov`` (n, 3, 3): the dead-reckoning
+    chain between the scans, which the graph keeps beside the
+    scan-to-submap constraints. ``before_judging``: given the constraints
+    found, before GNC judges them, returns more to judge (a bench's wrong
+    loops)."""
+
+    def __init__(self, points: ScanPoints, local: LocalFeed, cfg: SubmapsConfig,
                  steps: np.ndarray, step_cov: np.ndarray,
                  before_judging: Callable[[list[Constraint]], list[Constraint]] | None = None):
         self.points, self.local, self.cfg = points, local, cfg
         self.before_judging = before_judging
         self.steps, self.step_cov = steps, step_cov
-        steps = np.hypot(*np.diff(local.poses[:, :2], axis=0).T)
-        self.path = np.concatenate([[0.0], np.cumsum(steps)])
-        # The path walked on dead reckoning alone: into a node whose scan has
-        # too few points to match (the laser blind, or left out by the gating).
-        blind = np.array([len(points.points[i]) < cfg.min_points for i in range(1, len(local.poses))], dtype=bool)
-        self.blind_path = np.concatenate([[0.0], np.cumsum(np.where(blind, steps, 0.0))])
+        self.path, self.blind_path = local.path, local.blind_path
         self.constraints: list[Constraint] = []
         self._contexts: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._chain: list = []  # the prior and the chain's factors, by node
@@ -140,30 +217,22 @@ class GlobalSlam:
         cc = cfg.constraints
         start = time.perf_counter()
         n = len(local.poses)
-        est = local.poses.copy()
-        member: dict[int, set[int]] = {}
-        for sid, sm in enumerate(local.submaps):
-            for k in sm.scans:
-                member.setdefault(k, set()).add(sid)
-        last_scan = np.array([sm.scans[-1] for sm in local.submaps])
-        centres = np.array([np.mean(sm.poses, axis=0)[:2] for sm in local.submaps])  # in the anchor's frame
-        anchor_of = np.array([sm.anchor for sm in local.submaps])
-        finishing = np.argsort(last_scan, kind="stable")  # submaps in the order they finish
+        est = np.zeros((n, 3))  # each node's row filled in as the walk reaches it
         near = NearSubmaps(cc.max_distance_m)
         placed_at = 0  # estimate updates so far; the index is placed again after each
 
-        def world(sids: np.ndarray) -> np.ndarray:
-            """The centres of submaps ``sids`` in the world, as the estimate places their anchors."""
-            anchors = est[anchor_of[sids]]
+        def world(sids: list[int]) -> np.ndarray:
+            """The centres of finished submaps ``sids`` in the world, as the estimate places their anchors."""
+            anchors = est[[local.submaps[sid].anchor for sid in sids]].reshape(-1, 3)
             c, s_ = np.cos(anchors[:, 2]), np.sin(anchors[:, 2])
-            cxy = centres[sids]
+            cxy = np.array([local.centres[sid] for sid in sids]).reshape(-1, 2)  # in the anchor's frame
             return anchors[:, :2] + np.column_stack([c * cxy[:, 0] - s_ * cxy[:, 1], s_ * cxy[:, 0] + c * cxy[:, 1]])
 
         done_count, optimised = 0, 0
         searches = 0
         pending = 0
         last_opt = 0
-        last_tied = np.full(len(local.submaps), -np.inf)  # path at the last inter constraint of each submap
+        last_tied: dict[int, float] = {}  # path at the last inter constraint of each submap
         self.robust = gtsam.noiseModel.mEstimator.Cauchy.Create(cc.robust_scale)
         self.chain_robust = gtsam.noiseModel.mEstimator.Cauchy.Create(cc.robust_scale)
         rc = cfg.recognition
@@ -171,19 +240,19 @@ class GlobalSlam:
         blind_at_loop = 0.0  # dead-reckoned path at the last loop
         recognitions: list[tuple[int, Match, int, np.ndarray]] = []  # (node, match, submap, its global pose)
         for i in range(n):
-            if i > 0:
-                est[i] = compose(est[i - 1], between(local.poses[i - 1], local.poses[i]))
+            local.advance(i)
+            est[i] = compose(est[i - 1], between(local.poses[i - 1], local.poses[i])) if i > 0 else local.poses[0]
             self._add_intra(i)
             if len(self.points.points[i]) < cfg.min_points:
                 continue
             # Finished submaps (which the scan did not help build), nearest
             # first; their places move only when the estimate is optimised.
-            finished = int(np.searchsorted(last_scan[finishing], i))
+            finished = local.finished_before(i)
             if optimised != placed_at:
-                near.place(finishing[:finished], world(finishing[:finished]))
+                near.place(local.finishing[:finished], world(local.finishing[:finished]))
                 placed_at = optimised
             elif finished > done_count:
-                for sid, xy in zip(finishing[done_count:finished], world(finishing[done_count:finished])):
+                for sid, xy in zip(local.finishing[done_count:finished], world(local.finishing[done_count:finished])):
                     near.add(sid, xy)
             done_count = finished
             if not finished:
@@ -192,7 +261,7 @@ class GlobalSlam:
             for sid, _ in zip(*near.within(est[i, :2], cc.max_distance_m)):
                 if tried >= cc.max_per_scan:
                     break
-                if self.path[i] - last_tied[sid] < cc.spacing_m:
+                if self.path[i] - last_tied.get(sid, -np.inf) < cc.spacing_m:
                     continue
                 sm = local.submaps[sid]
                 sep = self.path[i] - self.path[sm.scans[-1]]
@@ -216,7 +285,7 @@ class GlobalSlam:
             if rc.enabled and self.path[i] - last_loop >= rc.min_path_m and self.path[i] - last_try >= rc.spacing_m:
                 # Drift may have carried the estimate beyond the windows: recognise the place.
                 last_try = self.path[i]
-                found, tried = self._recognise(i, est, member, last_scan, recognitions, self.path[i] - last_loop,
+                found, tried = self._recognise(i, est, recognitions, self.path[i] - last_loop,
                                                self.blind_path[i] - blind_at_loop)
                 searches += tried
                 if found:
@@ -229,6 +298,7 @@ class GlobalSlam:
                 est[: i + 1] = self._incremental(est[: i + 1], i + 1)
                 last_opt, pending = i, 0
                 optimised += 1
+        local.end()
         est = self._optimise(est, n)
         if self.before_judging is not None:
             self.constraints.extend(self.before_judging(list(self.constraints)))
@@ -252,8 +322,8 @@ class GlobalSlam:
 
     # -- place recognition -----------------------------------------------------------
 
-    def _recognise(self, i: int, est: np.ndarray, member: dict[int, set[int]], last_scan: np.ndarray,
-                   recognitions: list, unpinned_m: float, blind_m: float) -> tuple[set[int], int]:
+    def _recognise(self, i: int, est: np.ndarray, recognitions: list, unpinned_m: float,
+                   blind_m: float) -> tuple[set[int], int]:
         """Look for node ``i``'s surroundings among the finished submaps far
         back along the path (see :class:`RecognitionConfig`), ``unpinned_m``
         of path after the last loop, ``blind_m`` of it on dead reckoning
@@ -261,7 +331,8 @@ class GlobalSlam:
         (none if none), and how many searches ran."""
         cfg, rc = self.cfg, self.cfg.recognition
         drift_m, turn_deg = drift_allowance(rc, unpinned_m, blind_m)
-        query = self._context_of_node(i, member)
+        query = self._context_of_node(i)
+        last_scan = self.local.last_scan_array()
         far = [sid for sid in np.nonzero(last_scan < i)[0]
                if self.path[i] - self.path[last_scan[sid]] >= cfg.constraints.loop_separation_m]
         if query is None or not far:
@@ -305,10 +376,10 @@ class GlobalSlam:
             del recognitions[: -4 * rc.candidates]
         return set(), tried
 
-    def _context_of_node(self, i: int, member: dict[int, set[int]]):
+    def _context_of_node(self, i: int):
         """The Scan Context of node ``i``'s submap so far, in ``i``'s frame."""
         rc = self.cfg.recognition
-        sm = self.local.submaps[min(member.get(i, {0}))]
+        sm = self.local.submaps[min(self.local.member.get(i, {0}))]
         if i not in sm.scans:
             return None
         upto = sm.scans.index(i) + 1

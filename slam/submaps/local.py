@@ -15,13 +15,15 @@ is anchored at its first scan: its points are in that scan's frame.
 
 Poses here are *local*: in the frame of the first scan, chained from match
 to match, so they drift; the graph (:mod:`slam.submaps.graph`) places the
-submaps globally.
+submaps globally. It can follow local SLAM scan by scan: what local SLAM
+did with each scan is told as a :class:`LocalStep`.
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -231,6 +233,21 @@ def refine_near(
     return Match(submap_id, scan, guess + d, score, ref.rms_m, ref.inliers, covariance, weak, True)
 
 
+@dataclass(frozen=True)
+class LocalStep:
+    """What local SLAM did with scan ``scan``: its local ``pose``, the
+    ``match`` that placed it (None where the guess did), the submaps it
+    went into with its pose in each and the path it added to each
+    (``inserted``: (submap, pose, step_m); a submap it starts is among
+    them), and the submaps it completed (``finished``)."""
+
+    scan: int
+    pose: np.ndarray
+    match: Match | None
+    inserted: tuple[tuple[int, np.ndarray, float], ...]
+    finished: tuple[int, ...]
+
+
 @dataclass
 class LocalResult:
     """Local poses (n, 3) of every scan, the submaps, and per scan the match
@@ -254,11 +271,12 @@ def search_windows(step_cov: np.ndarray, cfg: SubmapsConfig) -> tuple[np.ndarray
 
 
 def run_local_slam(points: ScanPoints, steps: np.ndarray, step_cov: np.ndarray, cfg: SubmapsConfig,
-                   progress: bool = False) -> LocalResult:
+                   progress: bool = False, tell: Callable[[LocalStep | None], None] | None = None) -> LocalResult:
     """Local SLAM over all scans; ``steps`` (n, 3): each scan's motion since
     the previous in the previous one's frame (the dead-reckoning chain),
     ``step_cov`` (n, 3, 3) its covariance (row 0 unused); ``progress``: a
-    bar on a terminal."""
+    bar on a terminal. ``tell``: given each scan's :class:`LocalStep` as
+    it is done, then None (the submaps still open are complete)."""
     start = time.perf_counter()
     n = len(points)
     poses = np.zeros((n, 3))
@@ -266,6 +284,8 @@ def run_local_slam(points: ScanPoints, steps: np.ndarray, step_cov: np.ndarray, 
     submaps[0].insert(0, np.zeros(3), 0.0)
     active = [0]
     matches: list[Match | None] = [None]
+    if tell is not None:
+        tell(LocalStep(0, poses[0].copy(), None, ((0, np.zeros(3), 0.0),), ()))
     lin, ang = search_windows(step_cov, cfg)
     half = 0.5 * cfg.length_m
     bar = progress_bar(n - 1, progress, "submaps")
@@ -283,20 +303,28 @@ def run_local_slam(points: ScanPoints, steps: np.ndarray, step_cov: np.ndarray, 
         poses[i] = compose(anchor, m.pose) if m is not None else predicted
         matches.append(m)
         step_m = float(np.hypot(*between(poses[i - 1], poses[i])[:2]))
+        inserted = []
         for k in active:
             s = submaps[k]
             s.insert(i, between(poses[s.anchor], poses[i]), step_m)
+            inserted.append((k, s.poses[-1], step_m))
         # A submap is full after length_m of path; a new one starts every half of it.
         newest = submaps[active[-1]]
         if newest.path_m >= half or len(newest.scans) >= cfg.max_scans // 2:
             submaps.append(Submap())
             submaps[-1].insert(i, np.zeros(3), 0.0)
             active.append(len(submaps) - 1)
+            inserted.append((active[-1], submaps[-1].poses[-1], 0.0))
+        finished = []
         while submaps[active[0]].path_m >= cfg.length_m or len(submaps[active[0]].scans) >= cfg.max_scans:
             submaps[active[0]].finished = True
-            active.pop(0)
+            finished.append(active.pop(0))
+        if tell is not None:
+            tell(LocalStep(i, poses[i].copy(), m, tuple(inserted), tuple(finished)))
     if bar is not None:
         bar.close()
     for k in active:
         submaps[k].finished = True
+    if tell is not None:
+        tell(None)
     return LocalResult(poses, submaps, matches, time.perf_counter() - start)
