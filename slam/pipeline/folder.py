@@ -178,7 +178,7 @@ class MappingPipeline:
 
             write_tum(folder / "groundtruth.tum", rec.groundtruth, rec.t0)
         if self.scan_matching is not None:
-            import_next_steps()
+            import_next_steps(self.config.submaps.enabled)
         self.core.timings.prepare_s = time.perf_counter() - t
 
     def start_figures(self, folder: Path) -> None:
@@ -275,10 +275,15 @@ def realtime_factor(rec: Recording, runtime_s: float) -> dict[str, Any]:
     return {"realtime_factor": round(rec.duration / runtime_s, 2)} if runtime_s else {}
 
 
-def import_next_steps() -> None:
+def import_next_steps(submaps: bool) -> None:
     """Import what the steps after scan matching need while it runs in the
-    second process (gtsam and the validator take a second to load)."""
+    second process (gtsam and the validator take a second to load; numba,
+    for the ``submaps``' search, half a second, and once here rather than
+    in each of the submaps' two processes)."""
     import numpy.ma  # noqa: F401 - numpy's median loads it on first use
+
+    if submaps:
+        import slam.matching.kernels  # noqa: F401
 
     import slam.gating.odometry_scale  # noqa: F401
     import slam.gating.recheck  # noqa: F401

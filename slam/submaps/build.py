@@ -1,8 +1,9 @@
-"""The submaps step of the pipeline: local SLAM, then the constraint search (see the package docstring)."""
+"""The submaps step of the pipeline: local SLAM, and the constraint search following it (see the package docstring)."""
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -14,7 +15,7 @@ from slam.config.submaps import SubmapsConfig
 from slam.processes import background
 from slam.processes.background import Inbox
 from slam.submaps.graph import Constraint, GlobalResult, GlobalSlam, LocalFeed
-from slam.submaps.local import LocalResult, run_local_slam
+from slam.submaps.local import LocalResult, LocalStep, run_local_slam
 from slam.submaps.scans import ScanPoints
 from validation.loops.chain import integrate
 from validation.base.geometry import between, compose
@@ -61,9 +62,48 @@ def select_nodes(steps: np.ndarray, spacing_m: float, turn_rad: float) -> np.nda
 
 def _walk(inbox: Inbox, points: ScanPoints, config: SubmapsConfig, steps: np.ndarray, step_cov: np.ndarray,
           before_judging: Callable[[list[Constraint]], list[Constraint]] | None) -> GlobalResult:
-    """The global walk over local SLAM's steps as ``inbox`` gives them."""
-    feed = LocalFeed(points, len(points), config.min_points, inbox)
+    """The global walk over local SLAM's steps as ``inbox`` gives them, a batch at a time."""
+    batch: deque[LocalStep | None] = deque()
+
+    def next_step() -> LocalStep | None:
+        while not batch:
+            batch.extend(inbox())
+        return batch.popleft()
+
+    feed = LocalFeed(points, len(points), config.min_points, next_step)
     return GlobalSlam(points, feed, config, steps, step_cov, before_judging).run()
+
+
+class _WalkBeside:
+    """Local SLAM's steps, told as they come, to the walk (:func:`_walk`):
+    in a second process when ``concurrent``, else in this one when its
+    result is asked for. The second process starts once local SLAM has
+    completed its first submap: before that the walk has nothing to
+    search, and by then this process has loaded the search's compiled
+    kernels, which the second one inherits instead of loading them again.
+    The steps go over ``BATCH`` at a time."""
+
+    BATCH = 16
+
+    def __init__(self, concurrent: bool, *args):
+        self.concurrent, self.args = concurrent, args
+        self.walk = None
+        self.waiting: list[LocalStep | None] = []
+
+    def tell(self, step: LocalStep | None) -> None:
+        self.waiting.append(step)
+        if self.walk is None and (step is None or step.finished):
+            self.walk = background.start("the submaps' walk", _walk, *self.args, concurrent=self.concurrent)
+        if self.walk is not None and (step is None or len(self.waiting) >= self.BATCH):
+            self.walk.send(self.waiting)
+            self.waiting = []
+
+    def result(self) -> GlobalResult:
+        return self.walk.result()
+
+    def close(self) -> None:
+        if self.walk is not None:
+            self.walk.close()
 
 
 def build_submap_constraints(
@@ -102,10 +142,9 @@ def build_submap_constraints(
                         search_voxel_m=config.resolution_m)
     if blamed is not None:
         points.leave_out(np.flatnonzero(np.asarray(blamed)[nodes]))
-    walk = background.start("the submaps' walk", _walk, points, config, node_steps, node_cov, before_judging,
-                 concurrent=concurrent)
+    walk = _WalkBeside(concurrent, points, config, node_steps, node_cov, before_judging)
     try:
-        local = run_local_slam(points, node_steps, node_cov, config, progress, tell=walk.send)
+        local = run_local_slam(points, node_steps, node_cov, config, progress, tell=walk.tell)
         found: GlobalResult = walk.result()
     finally:
         walk.close()
