@@ -1450,6 +1450,24 @@ ERRORS: list[Case] = [
       )),
     Case("compare-variants-file-empty", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
          "v.yaml: no variants", text("v.yaml", "")),
+    # -- the eighth attack: a YAML truth value inside a list of numbers, read as 1 or 0 in silence before --
+    *(Case(f"scenario-{name}", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), f"s.yaml: {says}", scenario(change))
+      for name, change, says in (
+          ("waypoint-coordinate-true", lambda t: t["robot"]["waypoints"].__setitem__(1, [1.0, True]),
+           "robot: waypoints.1.1: expected a number, not true"),
+          ("waypoint-pause-true", lambda t: t["robot"]["waypoints"].__setitem__(1, [1.0, 1.2, True]),
+           "robot: waypoints.1.2: expected a number, not true"),
+          ("wall-corner-true", lambda t: t["world"]["walls"].append([[0.0, True], [1.0, 1.0]]),
+           "world: walls.7.0.1: expected a number, not true"),
+          ("steel-position-false", lambda t: t["world"]["disturbers"][0].update(position=[False, 1.0, 0.0]),
+           "world.disturbers.0: position.0: expected a number, not false"),
+      )),
+    Case("ablate-seed-true", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "spec.yaml: inputs.scenarios.0: seeds.0: expected a number, not true",
+         lambda d, w: spec_in(d, w, inputs={"scenarios": [{"path": str(w.scenario), "seeds": [True]}]})),
+    Case("ablate-integer-distribution-true", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "sweep.random.params.submaps.search_depth: integer.0: expected a number, not true",
+         spec(sweep={"random": {"samples": 1, "params": {"submaps.search_depth": {"integer": [True, 5]}}}})),
 ]
 
 
