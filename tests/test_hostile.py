@@ -203,6 +203,20 @@ def restamp(topic: str, shift: Callable[[int], float]) -> Callable:
     return change
 
 
+def from_message(topic: str, first: int, fn: Callable[[object], None]) -> Callable:
+    """A bag change: ``fn(msg)`` on message ``first`` of ``topic`` and every one after it."""
+
+    def change(b) -> None:
+        k = 0
+        for i, (log_ns, order, t, msgtype, msg) in enumerate(b._messages):
+            if t == topic:
+                if k >= first:
+                    fn(msg)
+                k += 1
+
+    return change
+
+
 BAG = ("map", "{d}/b", "--config", "{cfg}", *QUICK, "--out", "{d}/o")
 
 
@@ -1468,6 +1482,11 @@ ERRORS: list[Case] = [
     Case("ablate-integer-distribution-true", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
          "sweep.random.params.submaps.search_depth: integer.0: expected a number, not true",
          spec(sweep={"random": {"samples": 1, "params": {"submaps.search_depth": {"integer": [True, 5]}}}})),
+    # -- a NaN beam angle: 'beam angles change at message 1' before, of a bag whose every angle is NaN --
+    Case("bag-angle-increment-nan", BAG, "scan topic '/scan': non-finite angle_min/angle_increment at message 0",
+         bag(each("/scan", lambda t, m: setattr(m, "angle_increment", math.nan)))),
+    Case("bag-angle-min-nan-from-message-5", BAG, "scan topic '/scan': non-finite angle_min/angle_increment at message 5",
+         bag(from_message("/scan", 5, lambda m: setattr(m, "angle_min", math.nan)))),
 ]
 
 
