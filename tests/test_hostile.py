@@ -1487,6 +1487,23 @@ ERRORS: list[Case] = [
          bag(each("/scan", lambda t, m: setattr(m, "angle_increment", math.nan)))),
     Case("bag-angle-min-nan-from-message-5", BAG, "scan topic '/scan': non-finite angle_min/angle_increment at message 5",
          bag(from_message("/scan", 5, lambda m: setattr(m, "angle_min", math.nan)))),
+    # -- keys holding characters that look like others or like none: shown as the key they seemed to be --
+    *(Case(f"config-key-{name}", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), f"c.yaml: unknown config key {says}",
+           text("c.yaml", content))
+      for name, content, says in (
+          ("with-a-zero-width-space", "keyframes: {period_s\u200b: 0.5}\n", "'keyframes.period_s\\u200b'; did you mean "
+           "'period_s'? (its '\\u200b' is U+200B ZERO WIDTH SPACE; keys are ASCII)"),
+          ("with-a-right-to-left-override", "keyframes: {\u202eperiod_s: 0.5}\n",
+           "'keyframes.\\u202eperiod_s'; did you mean 'period_s'? (its '\\u202e' is U+202E RIGHT-TO-LEFT OVERRIDE"),
+          ("indented-with-a-no-break-space", "keyframes:\n\u00a0 period_s: 0.5\n",
+           "'\\xa0 period_s' (its '\\xa0' is U+00A0 NO-BREAK SPACE; keys are ASCII)"),
+          ("with-a-cyrillic-letter", "keyframes: {period_\u0455: 0.5}\n",
+           "'keyframes.period_\u0455'; did you mean 'period_s'? (its '\u0455' is U+0455 CYRILLIC SMALL LETTER DZE"),
+      )),
+    Case("set-key-with-a-zero-width-space", (*MAP, "--out", "{d}/o", "--set", "keyframes.period_s\u200b=0.5"),
+         "unknown config key 'keyframes.period_s\\u200b'; did you mean 'period_s'? (its '\\u200b' is U+200B"),
+    Case("scenario-key-with-a-no-break-space", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "'robot.max_speed\\xa0m_s'", scenario(lambda t: t["robot"].update({"max_speed\u00a0m_s": 0.4}))),
 ]
 
 
