@@ -296,6 +296,16 @@ def spec_in(d: Path, world: World, **changes) -> None:
     spec(**changes)(d, world)
 
 
+def spec_text(body: str) -> Callable[[Path, World], None]:
+    """``{d}/spec.yaml``: the one-job spec's name, config and scenario input, then ``body``."""
+
+    def make(d: Path, world: World) -> None:
+        (d / "spec.yaml").write_text(f"name: x\nconfig: {TELEMAX_CONFIG}\n"
+                                     f"inputs: {{scenarios: [{{path: {world.scenario}, seeds: [1]}}]}}\n{body}")
+
+    return make
+
+
 def scenario_waypoints(points) -> Callable[[Path, World], None]:
     return scenario(set_in("robot", "waypoints", points))
 
@@ -1504,6 +1514,22 @@ ERRORS: list[Case] = [
          "unknown config key 'keyframes.period_s\\u200b'; did you mean 'period_s'? (its '\\u200b' is U+200B"),
     Case("scenario-key-with-a-no-break-space", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
          "'robot.max_speed\\xa0m_s'", scenario(lambda t: t["robot"].update({"max_speed\u00a0m_s": 0.4}))),
+    # -- names YAML reads as no text: compare wrote folders True, None and 1 --
+    *(Case(f"compare-variant-named-{name}", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out",
+                                             "{d}/o"), f"v.yaml: variant name {says}", text("v.yaml", f"{key}: {{}}\n"))
+      for name, key, says in (
+          ("yes", "yes", "true: YAML reads it as a truth value (as it reads yes, no, on, off, true and false unquoted)"),
+          ("a-tilde", "~", "null: YAML reads it as null (as it reads ~, null and an empty key), not as a name; quote it"),
+          ("a-number", "1", "1: YAML reads it as a number, not as a name; quote it"),
+      )),
+    # -- an ablation's variant names: a newline split summary.md's table row in two, a NUL was written into it --
+    *(Case(f"ablate-variant-named-{name}", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), f"spec.yaml: variants: name {says}",
+           spec_text(f"variants: {{{key}: {{validation.mode: 'off'}}}}\n"))
+      for name, key, says in (
+          ("no", "no", "false: YAML reads it as a truth value"),
+          ("with-a-newline", '"a\\nb"', "'a\\nb': a variant's name names its jobs: ASCII letters and digits"),
+          ("with-a-nul", '"a\\0b"', "'a\\x00b': a variant's name names its jobs"),
+      )),
 ]
 
 

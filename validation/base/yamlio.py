@@ -227,6 +227,17 @@ def load_yaml(path: str | Path, what: str = "YAML file") -> dict[str, Any]:
     return data
 
 
+def yaml_kind(value: Any) -> str:
+    """What YAML made of an unquoted key that is no text (``yes`` a truth value)."""
+    if isinstance(value, bool):
+        return "a truth value (as it reads yes, no, on, off, true and false unquoted)"
+    if value is None:
+        return "null (as it reads ~, null and an empty key)"
+    if isinstance(value, (int, float)):
+        return "a number"
+    return f"a {type(value).__name__}"
+
+
 class Strict(BaseModel):
     """The base of every config model of the project: an unknown key is an
     error (a typo in an ablation must not silently run the default), NaN
