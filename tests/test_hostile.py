@@ -1680,6 +1680,44 @@ def test_odd_but_usable_input_is_used_with_one_warning(case: Warned, world: Worl
     assert not [p for p in d.rglob("*") if ".gslam-tmp-" in p.name]
 
 
+DATA_ROOTS = {  # GSLAM_DATA as set by mistake, and what {data}/ in a spec then says
+    "missing": ("{d}/none", "recorded input {{data}}/carmen/c.log: GSLAM_DATA='{d}/none' is not a folder; expected the "
+                "folder holding the data sets"),
+    "a-file": ("{d}/f.txt", "GSLAM_DATA='{d}/f.txt' is not a folder"),
+    "blank": ("   ", "GSLAM_DATA='   ' is not a folder"),
+    "home-of-no-user": ("~gslam-no-such-user/data", "GSLAM_DATA='~gslam-no-such-user/data': cannot expand '~' (no such "
+                        "user or no home folder)"),
+}
+
+
+@pytest.mark.parametrize("name", DATA_ROOTS)
+def test_a_data_root_that_names_no_folder_is_one_line(name: str, world: World, tmp_path: Path, capsys, monkeypatch):
+    """A spec's {data}/ under a GSLAM_DATA that names no folder: the error
+    named the path joined below it (or, for ~ of no user, was a traceback)."""
+    value, says = (v.format(d=tmp_path) for v in DATA_ROOTS[name])
+    (tmp_path / "f.txt").write_text("mine\n")
+    (tmp_path / "spec.yaml").write_text(f"name: x\nconfig: {TELEMAX_CONFIG}\ninputs: {{recorded: [{{path: '{{data}}/carmen/c.log'}}]}}\n")
+    monkeypatch.setenv("GSLAM_DATA", value)
+    code, err, leaked = _run(["ablate", str(tmp_path / "spec.yaml"), "--out", str(tmp_path / "o")], capsys)
+    assert code == 1 and err.count("\n") == 1 and says in err and "Traceback" not in err, err
+    assert not leaked and sorted(p.name for p in tmp_path.iterdir()) == ["f.txt", "spec.yaml"]
+
+
+def test_a_relative_data_root_is_from_the_working_folder(world: World, tmp_path: Path, capsys, monkeypatch):
+    """GSLAM_DATA=data read from the working folder, as a shell user means
+    it; it was taken from the spec's folder, where nothing was found."""
+    (tmp_path / "data" / "carmen").mkdir(parents=True)
+    carmen()(tmp_path / "data" / "carmen", world)
+    (tmp_path / "specs").mkdir()
+    (tmp_path / "specs" / "spec.yaml").write_text(
+        f"name: x\nconfig: {CONFIGS / 'datasets' / 'carmen.yaml'}\ninputs: {{recorded: [{{path: '{{data}}/carmen/c.log'}}]}}\n")
+    monkeypatch.setenv("GSLAM_DATA", "data")
+    monkeypatch.chdir(tmp_path)
+    code, err, leaked = _run(["ablate", "specs/spec.yaml", "--out", "o"], capsys)
+    assert code == 0 and not leaked, err[-800:]
+    assert len(list((tmp_path / "o" / "jobs").iterdir())) == 1
+
+
 def test_corpus_counts():
     """At least 60 new cases; tests/test_fuzz.py's stay beside them."""
     from tests.test_fuzz import CASES

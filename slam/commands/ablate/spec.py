@@ -246,14 +246,19 @@ DATA_PLACEHOLDER = "{data}"
 
 def _expand_recorded(spec: AblationSpec, source: Path) -> AblationSpec:
     """Resolve ``{data}`` and expand globs in the recorded inputs' paths."""
-    from slam.readers.datasets import data_root
+    from slam.readers.datasets import DATA_ENV, data_root
 
     base_dir = resolve_path(source).parent
     recorded: list[RecordedInput] = []
     for rec in spec.inputs.recorded:
         text = str(rec.path)
         if text.startswith(DATA_PLACEHOLDER):
-            text = str(data_root()) + text[len(DATA_PLACEHOLDER):]
+            root = data_root()
+            if not root.is_dir():
+                given = f"{DATA_ENV}={os.environ[DATA_ENV]!r}" if os.environ.get(DATA_ENV) else f"the data root {root}"
+                raise GslamError(f"{source}: recorded input {rec.path}: {given} is not a folder; expected the folder "
+                                 "holding the data sets (carmen/, broad/, librsf/, rosbag/)")
+            text = str(root) + text[len(DATA_PLACEHOLDER):]
         p = Path(text) if Path(text).is_absolute() else base_dir / text
         if not any(c in p.name for c in "*?["):
             recorded.append(rec.model_copy(update={"path": p}))
