@@ -16,7 +16,15 @@ user finds after the first (tests/test_fuzz.py), built for the classes:
   stamps a repair moved);
 * lines with more values than their counts say, a key given twice on the
   command line, faults that would change nothing, a result file written by
-  someone else meanwhile, a home matplotlib cannot use.
+  someone else meanwhile, a home matplotlib cannot use;
+* a YAML truth value inside a list of numbers (a waypoint, seeds), names
+  YAML reads as no text (a variant named ``yes`` or ``~``), variant names
+  that break a table, keys holding characters that show as others or as
+  nothing (a zero-width or no-break space, a right-to-left override, a
+  Cyrillic letter), NaN beam angles, a data root (GSLAM_DATA) that names
+  no folder; and kinds already answered, kept so that none regresses: alias
+  bombs and deep nesting in every YAML input, NaN on keys of every type,
+  NUL bytes and lines of millions of values in text logs, ``-`` as a path.
 
 Error cases run as tests/test_fuzz.py's do (exit 1 or 2, one error line
 saying what the case expects, nothing of the user's changed, no traceback,
@@ -54,9 +62,8 @@ from slam.processes.signals import STOPS
 from tests.bagfactory import driving_bag
 from tests.conftest import CONFIGS, REPO, TELEMAX_CONFIG
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
-    Case, World, both, broad_mat, check_error_output, copy_run, data, expand, prepare, scenario, set_in, spec, text,
-    time_limit,
-    world,
+    YAML_BOMB, Case, World, both, broad_mat, check_error_output, copy_run, data, expand, prepare, scenario, set_in, spec,
+    text, time_limit, world,
 )
 
 pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
@@ -1530,6 +1537,80 @@ ERRORS: list[Case] = [
           ("with-a-newline", '"a\\nb"', "'a\\nb': a variant's name names its jobs: ASCII letters and digits"),
           ("with-a-nul", '"a\\0b"', "'a\\x00b': a variant's name names its jobs"),
       )),
+    # -- kinds every command already answers in one line, kept so that none turns into a traceback or a hang --
+    *(Case(f"{name}-alias-bomb", argv, "expands to more than 1,000,000 values (YAML aliases)", make)
+      for name, argv, make in (
+          ("scenario", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), text("s.yaml", YAML_BOMB)),
+          ("spec", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), text("spec.yaml", YAML_BOMB)),
+          ("variants", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+           text("v.yaml", YAML_BOMB)),
+          ("model", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+           both(text("m.yaml", YAML_BOMB), text("c.yaml", "validation: {model: m.yaml}\n"))),
+      )),
+    *(Case(f"{name}-nested-5000-deep", argv, "line 1: invalid YAML (exceeded maximum nesting depth)", make)
+      for name, argv, make in (
+          ("scenario", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), text("s.yaml", "[" * 5000 + "]" * 5000)),
+          ("spec", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), text("spec.yaml", "{a: " * 5000 + "1" + "}" * 5000)),
+          ("variants", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+           text("v.yaml", "[" * 5000 + "]" * 5000)),
+      )),
+    Case("set-section-alias-bomb", (*MAP, "--out", "{d}/o", "--set", "keyframes={{" + YAML_BOMB.strip().replace("\n", ", ")
+                                    .replace("{", "{{").replace("}", "}}") + "}}"), "unknown config key 'keyframes.a'"),
+    *(Case(f"set-{name}-nan", (*MAP, "--out", "{d}/o", "--set", f"{key}={value}"), f"--set {key}={value}: {key}: expected a "
+           f"finite number, got {value.lower()}")
+      for name, key, value in (
+          ("integer", "backend.max_iterations", ".nan"),
+          ("switch", "output.plots", ".NaN"),
+          ("choice", "backend.optimizer", "-.inf"),
+      )),
+    Case("variants-value-nan", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+         "v.yaml: variant 'a': keyframes.period_s=.nan: keyframes.period_s: expected a finite number, got .nan",
+         text("v.yaml", "a: {keyframes.period_s: .nan}\n")),
+    Case("ablate-set-nan", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "--set keyframes.period_s=.nan: keyframes.period_s: "
+         "expected a finite number", spec_text("set: {keyframes.period_s: .nan}\n")),
+    Case("ablate-uniform-to-infinity", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "sweep.random.params.gating.inflation.uniform.1: Input should be a finite number",
+         spec_text("sweep: {random: {samples: 2, params: {gating.inflation: {uniform: [1, .inf]}}}}\n")),
+    Case("config-decimal-comma-in-a-flow-mapping", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: backend.5: Keys should be strings", text("c.yaml", "backend: {robust_param: 1,5}\n")),
+    Case("config-fullwidth-digits", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "keyframes.period_s: Input should be a valid number", text("c.yaml", "keyframes: {period_s: \uff10.\uff15}\n")),
+    *(Case(f"bag-{name}", BAG, says, bag(change))
+      for name, change, says in (
+          ("scans-without-beams", each("/scan", lambda t, m: setattr(m, "ranges", m.ranges[:0].copy())),
+           "laser scans have no beams"),
+          ("scans-lose-their-beams-at-message-10", from_message("/scan", 10, lambda m: setattr(m, "ranges", m.ranges[:0].copy())),
+           "scan topic '/scan': message 10 has 0 beams, the first had"),
+          ("odometry-stamps-all-zero", each("/odom", lambda t, m: setattr(m.header, "stamp", type(m.header.stamp)(sec=0, nanosec=0))),
+           "odometry topic '/odom': duplicate header stamp at message 1 (t = 0.000000000 s"),
+      )),
+    Case("carmen-nul-bytes-mid-file", CARMEN, "c.log: cannot read: not a CARMEN text log (binary content)",
+         both(carmen(), _rewritten("c.log", lambda b: b.replace(b"\nODOM", b"\n\0\0ODOM", 1)))),
+    Case("librsf-nul-bytes-mid-file", LIBRSF, "X_Input.txt: cannot read: not a libRSF text file (binary content)",
+         both(librsf_with("loop 9.0 1.0 1"), _rewritten("X_Input.txt", lambda b: b.replace(b"\nodom2", b"\n\0odom2", 1)))),
+    Case("carmen-unicode-minus", CARMEN, "c.log:3: expected ODOM x y theta tv rv accel ts host logger_ts",
+         carmen(encoding=lambda s: s.replace("ODOM 0.100 0", "ODOM \u22120.100 0", 1).encode())),
+    Case("carmen-a-line-of-30-million-values", CARMEN, "c.log:121: expected FLASER n r_1..r_n x y theta odom_x odom_y "
+         "odom_theta ts host logger_ts (14 fields, got 30000002)",
+         both(carmen(), _rewritten("c.log", lambda b: b + b"FLASER 3 " + b"1 " * 30_000_000 + b"\n"))),
+    Case("librsf-a-line-of-30-million-values", LIBRSF, "X_Input.txt:102: expected odom2 t vx vy wz var_vx var_vy var_wz "
+         "(7 values, got 30000000)",
+         both(librsf_with("loop 9.0 1.0 1"), _rewritten("X_Input.txt", lambda b: b + b"odom2 " + b"1 " * 30_000_000 + b"\n"))),
+    Case("map-input-a-dash", ("map", "-", "--config", "{cfg}", "--out", "{d}/o"), "-: no such file or directory"),
+    Case("map-config-a-dash", ("map", "{run}", "--config", "-", "--out", "{d}/o"), "-: cannot read config (No such file"),
+    Case("ablate-spec-config-a-folder", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "cannot read config (a folder; expected "
+         "a file)", both(text("cfg/keep", ""), lambda d, w: spec_in(d, w, config=str(d / "cfg")))),
+    Case("ablate-spec-scenario-a-folder", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "cannot read scenario (a folder; "
+         "expected a file)", lambda d, w: spec_in(d, w, inputs={"scenarios": [{"path": str(d), "seeds": [1]}]})),
+    *(Case(f"inject-{name}", ("inject", "{run}", "--fault", fault, "--out", "{d}/o"), f"--fault {fault}: {says}")
+      for name, fault, says in (
+          ("param-of-no-value", "gyro_bias@2:4,bias_deg_s=", "bias_deg_s: Input should be a valid number"),
+          ("kind-in-capitals", "GYRO_BIAS@2:4", "unknown fault kind 'GYRO_BIAS'; expected one of"),
+          ("param-value-true", "gyro_bias@2:4,bias_deg_s=true", "bias_deg_s: Input should be a valid number"),
+      )),
+    Case("calibrate-clean-three-times", (*CAL[:-1], "0:5:10", "--out", "{d}/c.yaml"), "--clean 0:5:10: expected START:END"),
+    Case("calibrate-false-alarm-inf", ("calibrate", "{run}", "--config", "{cfg}", "--false-alarm", "inf", "--out",
+                                       "{d}/c.yaml"), "--false-alarm inf: expected a share of steps"),
 ]
 
 
@@ -1628,6 +1709,14 @@ WARNINGS: list[Warned] = [
     Warned("carmen-one-beam-per-scan", CARMEN, "1 beam per scan, too few to match scans",
            carmen(encoding=lambda s: "\n".join(" ".join(["FLASER", "1", *line.split(" ")[182:]]) if line.startswith("FLASER")
                                                else line for line in s.split("\n")).encode())),
+    # -- the eighth attack: old Mac line ends, tabs between values, a laser mounted upside down: read as they are --
+    Warned("carmen-cr-line-ends", CARMEN, "", carmen(encoding=lambda s: s.replace("\n", "\r").encode())),
+    Warned("carmen-tab-separated", CARMEN, "", carmen(encoding=lambda s: s.replace(" ", "\t").encode())),
+    Warned("librsf-tab-separated", LIBRSF, "", both(librsf_with("loop 9.0 1.0 1"), _rewritten(
+        "X_Input.txt", lambda b: b.replace(b" ", b"\t")))),
+    Warned("bag-laser-upside-down", BAG, "", bag(each("/scan", lambda t, m: (
+        setattr(m, "angle_min", m.angle_max), setattr(m, "angle_increment", -m.angle_increment),
+        setattr(m, "ranges", m.ranges[::-1].copy()))))),
 ]
 
 
