@@ -590,14 +590,26 @@ class _WatchedStdout:
         return getattr(self.stream, name)
 
 
+INVISIBLE = ("Cc", "Cf", "Zl", "Zp", "Zs")
+"""Unicode categories written as escapes in a line gslam says: control
+characters, format characters (a zero-width space, a right-to-left
+override that reorders what follows) and separators other than the ASCII
+space (a no-break space)."""
+
+
 def _one_line(text: str) -> str:
-    """``text`` on one line, its control characters written as escapes: a
-    key or a file name holding ESC sequences would otherwise clear or
-    retitle the user's terminal."""
+    """``text`` on one line, its control and invisible characters written as
+    escapes: a key or a file name holding ESC sequences would otherwise clear
+    or retitle the user's terminal, and a key with a zero-width space or a
+    no-break space in it would show as the key it is not."""
     text = " ".join(text.split("\n"))
     if text.isprintable():
         return text
-    return "".join(f"\\x{ord(c):02x}" if unicodedata.category(c) == "Cc" and c != "\t" else c for c in text)
+    return "".join(_escaped(c) if unicodedata.category(c) in INVISIBLE and c not in " \t" else c for c in text)
+
+
+def _escaped(c: str) -> str:
+    return f"\\x{ord(c):02x}" if ord(c) <= 0xFF else f"\\u{ord(c):04x}" if ord(c) <= 0xFFFF else f"\\U{ord(c):08x}"
 
 
 LONGEST_WORD = 400

@@ -16,7 +16,15 @@ user finds after the first (tests/test_fuzz.py), built for the classes:
   stamps a repair moved);
 * lines with more values than their counts say, a key given twice on the
   command line, faults that would change nothing, a result file written by
-  someone else meanwhile, a home matplotlib cannot use.
+  someone else meanwhile, a home matplotlib cannot use;
+* a YAML truth value inside a list of numbers (a waypoint, seeds), names
+  YAML reads as no text (a variant named ``yes`` or ``~``), variant names
+  that break a table, keys holding characters that show as others or as
+  nothing (a zero-width or no-break space, a right-to-left override, a
+  Cyrillic letter), NaN beam angles, a data root (GSLAM_DATA) that names
+  no folder; and kinds already answered, kept so that none regresses: alias
+  bombs and deep nesting in every YAML input, NaN on keys of every type,
+  NUL bytes and lines of millions of values in text logs, ``-`` as a path.
 
 Error cases run as tests/test_fuzz.py's do (exit 1 or 2, one error line
 saying what the case expects, nothing of the user's changed, no traceback,
@@ -54,9 +62,8 @@ from slam.processes.signals import STOPS
 from tests.bagfactory import driving_bag
 from tests.conftest import CONFIGS, REPO, TELEMAX_CONFIG
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
-    Case, World, both, broad_mat, check_error_output, copy_run, data, expand, prepare, scenario, set_in, spec, text,
-    time_limit,
-    world,
+    YAML_BOMB, Case, World, both, broad_mat, check_error_output, copy_run, data, expand, prepare, scenario, set_in, spec,
+    text, time_limit, world,
 )
 
 pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
@@ -203,6 +210,20 @@ def restamp(topic: str, shift: Callable[[int], float]) -> Callable:
     return change
 
 
+def from_message(topic: str, first: int, fn: Callable[[object], None]) -> Callable:
+    """A bag change: ``fn(msg)`` on message ``first`` of ``topic`` and every one after it."""
+
+    def change(b) -> None:
+        k = 0
+        for i, (log_ns, order, t, msgtype, msg) in enumerate(b._messages):
+            if t == topic:
+                if k >= first:
+                    fn(msg)
+                k += 1
+
+    return change
+
+
 BAG = ("map", "{d}/b", "--config", "{cfg}", *QUICK, "--out", "{d}/o")
 
 
@@ -280,6 +301,16 @@ def raw(name: str, content: bytes) -> Callable[[Path, World], None]:
 
 def spec_in(d: Path, world: World, **changes) -> None:
     spec(**changes)(d, world)
+
+
+def spec_text(body: str) -> Callable[[Path, World], None]:
+    """``{d}/spec.yaml``: the one-job spec's name, config and scenario input, then ``body``."""
+
+    def make(d: Path, world: World) -> None:
+        (d / "spec.yaml").write_text(f"name: x\nconfig: {TELEMAX_CONFIG}\n"
+                                     f"inputs: {{scenarios: [{{path: {world.scenario}, seeds: [1]}}]}}\n{body}")
+
+    return make
 
 
 def scenario_waypoints(points) -> Callable[[Path, World], None]:
@@ -1450,6 +1481,136 @@ ERRORS: list[Case] = [
       )),
     Case("compare-variants-file-empty", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
          "v.yaml: no variants", text("v.yaml", "")),
+    # -- the eighth attack: a YAML truth value inside a list of numbers, read as 1 or 0 in silence before --
+    *(Case(f"scenario-{name}", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), f"s.yaml: {says}", scenario(change))
+      for name, change, says in (
+          ("waypoint-coordinate-true", lambda t: t["robot"]["waypoints"].__setitem__(1, [1.0, True]),
+           "robot: waypoints.1.1: expected a number, not true"),
+          ("waypoint-pause-true", lambda t: t["robot"]["waypoints"].__setitem__(1, [1.0, 1.2, True]),
+           "robot: waypoints.1.2: expected a number, not true"),
+          ("wall-corner-true", lambda t: t["world"]["walls"].append([[0.0, True], [1.0, 1.0]]),
+           "world: walls.7.0.1: expected a number, not true"),
+          ("steel-position-false", lambda t: t["world"]["disturbers"][0].update(position=[False, 1.0, 0.0]),
+           "world.disturbers.0: position.0: expected a number, not false"),
+      )),
+    Case("ablate-seed-true", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "spec.yaml: inputs.scenarios.0: seeds.0: expected a number, not true",
+         lambda d, w: spec_in(d, w, inputs={"scenarios": [{"path": str(w.scenario), "seeds": [True]}]})),
+    Case("ablate-integer-distribution-true", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "sweep.random.params.submaps.search_depth: integer.0: expected a number, not true",
+         spec(sweep={"random": {"samples": 1, "params": {"submaps.search_depth": {"integer": [True, 5]}}}})),
+    # -- a NaN beam angle: 'beam angles change at message 1' before, of a bag whose every angle is NaN --
+    Case("bag-angle-increment-nan", BAG, "scan topic '/scan': non-finite angle_min/angle_increment at message 0",
+         bag(each("/scan", lambda t, m: setattr(m, "angle_increment", math.nan)))),
+    Case("bag-angle-min-nan-from-message-5", BAG, "scan topic '/scan': non-finite angle_min/angle_increment at message 5",
+         bag(from_message("/scan", 5, lambda m: setattr(m, "angle_min", math.nan)))),
+    # -- keys holding characters that look like others or like none: shown as the key they seemed to be --
+    *(Case(f"config-key-{name}", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), f"c.yaml: unknown config key {says}",
+           text("c.yaml", content))
+      for name, content, says in (
+          ("with-a-zero-width-space", "keyframes: {period_s\u200b: 0.5}\n", "'keyframes.period_s\\u200b'; did you mean "
+           "'period_s'? (its '\\u200b' is U+200B ZERO WIDTH SPACE; keys are ASCII)"),
+          ("with-a-right-to-left-override", "keyframes: {\u202eperiod_s: 0.5}\n",
+           "'keyframes.\\u202eperiod_s'; did you mean 'period_s'? (its '\\u202e' is U+202E RIGHT-TO-LEFT OVERRIDE"),
+          ("indented-with-a-no-break-space", "keyframes:\n\u00a0 period_s: 0.5\n",
+           "'\\xa0 period_s' (its '\\xa0' is U+00A0 NO-BREAK SPACE; keys are ASCII)"),
+          ("with-a-cyrillic-letter", "keyframes: {period_\u0455: 0.5}\n",
+           "'keyframes.period_\u0455'; did you mean 'period_s'? (its '\u0455' is U+0455 CYRILLIC SMALL LETTER DZE"),
+      )),
+    Case("set-key-with-a-zero-width-space", (*MAP, "--out", "{d}/o", "--set", "keyframes.period_s\u200b=0.5"),
+         "unknown config key 'keyframes.period_s\\u200b'; did you mean 'period_s'? (its '\\u200b' is U+200B"),
+    Case("scenario-key-with-a-no-break-space", ("simulate", "{d}/s.yaml", "--out", "{d}/o"),
+         "'robot.max_speed\\xa0m_s'", scenario(lambda t: t["robot"].update({"max_speed\u00a0m_s": 0.4}))),
+    # -- names YAML reads as no text: compare wrote folders True, None and 1 --
+    *(Case(f"compare-variant-named-{name}", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out",
+                                             "{d}/o"), f"v.yaml: variant name {says}", text("v.yaml", f"{key}: {{}}\n"))
+      for name, key, says in (
+          ("yes", "yes", "true: YAML reads it as a truth value (as it reads yes, no, on, off, true and false unquoted)"),
+          ("a-tilde", "~", "null: YAML reads it as null (as it reads ~, null and an empty key), not as a name; quote it"),
+          ("a-number", "1", "1: YAML reads it as a number, not as a name; quote it"),
+      )),
+    # -- an ablation's variant names: a newline split summary.md's table row in two, a NUL was written into it --
+    *(Case(f"ablate-variant-named-{name}", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), f"spec.yaml: variants: name {says}",
+           spec_text(f"variants: {{{key}: {{validation.mode: 'off'}}}}\n"))
+      for name, key, says in (
+          ("no", "no", "false: YAML reads it as a truth value"),
+          ("with-a-newline", '"a\\nb"', "'a\\nb': a variant's name names its jobs: ASCII letters and digits"),
+          ("with-a-nul", '"a\\0b"', "'a\\x00b': a variant's name names its jobs"),
+      )),
+    # -- kinds every command already answers in one line, kept so that none turns into a traceback or a hang --
+    *(Case(f"{name}-alias-bomb", argv, "expands to more than 1,000,000 values (YAML aliases)", make)
+      for name, argv, make in (
+          ("scenario", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), text("s.yaml", YAML_BOMB)),
+          ("spec", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), text("spec.yaml", YAML_BOMB)),
+          ("variants", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+           text("v.yaml", YAML_BOMB)),
+          ("model", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+           both(text("m.yaml", YAML_BOMB), text("c.yaml", "validation: {model: m.yaml}\n"))),
+      )),
+    *(Case(f"{name}-nested-5000-deep", argv, "line 1: invalid YAML (exceeded maximum nesting depth)", make)
+      for name, argv, make in (
+          ("scenario", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), text("s.yaml", "[" * 5000 + "]" * 5000)),
+          ("spec", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), text("spec.yaml", "{a: " * 5000 + "1" + "}" * 5000)),
+          ("variants", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+           text("v.yaml", "[" * 5000 + "]" * 5000)),
+      )),
+    Case("set-section-alias-bomb", (*MAP, "--out", "{d}/o", "--set", "keyframes={{" + YAML_BOMB.strip().replace("\n", ", ")
+                                    .replace("{", "{{").replace("}", "}}") + "}}"), "unknown config key 'keyframes.a'"),
+    *(Case(f"set-{name}-nan", (*MAP, "--out", "{d}/o", "--set", f"{key}={value}"), f"--set {key}={value}: {key}: expected a "
+           f"finite number, got {value.lower()}")
+      for name, key, value in (
+          ("integer", "backend.max_iterations", ".nan"),
+          ("switch", "output.plots", ".NaN"),
+          ("choice", "backend.optimizer", "-.inf"),
+      )),
+    Case("variants-value-nan", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"),
+         "v.yaml: variant 'a': keyframes.period_s=.nan: keyframes.period_s: expected a finite number, got .nan",
+         text("v.yaml", "a: {keyframes.period_s: .nan}\n")),
+    Case("ablate-set-nan", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "--set keyframes.period_s=.nan: keyframes.period_s: "
+         "expected a finite number", spec_text("set: {keyframes.period_s: .nan}\n")),
+    Case("ablate-uniform-to-infinity", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "sweep.random.params.gating.inflation.uniform.1: Input should be a finite number",
+         spec_text("sweep: {random: {samples: 2, params: {gating.inflation: {uniform: [1, .inf]}}}}\n")),
+    Case("config-decimal-comma-in-a-flow-mapping", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "c.yaml: backend.5: Keys should be strings", text("c.yaml", "backend: {robust_param: 1,5}\n")),
+    Case("config-fullwidth-digits", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"),
+         "keyframes.period_s: Input should be a valid number", text("c.yaml", "keyframes: {period_s: \uff10.\uff15}\n")),
+    *(Case(f"bag-{name}", BAG, says, bag(change))
+      for name, change, says in (
+          ("scans-without-beams", each("/scan", lambda t, m: setattr(m, "ranges", m.ranges[:0].copy())),
+           "laser scans have no beams"),
+          ("scans-lose-their-beams-at-message-10", from_message("/scan", 10, lambda m: setattr(m, "ranges", m.ranges[:0].copy())),
+           "scan topic '/scan': message 10 has 0 beams, the first had"),
+          ("odometry-stamps-all-zero", each("/odom", lambda t, m: setattr(m.header, "stamp", type(m.header.stamp)(sec=0, nanosec=0))),
+           "odometry topic '/odom': duplicate header stamp at message 1 (t = 0.000000000 s"),
+      )),
+    Case("carmen-nul-bytes-mid-file", CARMEN, "c.log: cannot read: not a CARMEN text log (binary content)",
+         both(carmen(), _rewritten("c.log", lambda b: b.replace(b"\nODOM", b"\n\0\0ODOM", 1)))),
+    Case("librsf-nul-bytes-mid-file", LIBRSF, "X_Input.txt: cannot read: not a libRSF text file (binary content)",
+         both(librsf_with("loop 9.0 1.0 1"), _rewritten("X_Input.txt", lambda b: b.replace(b"\nodom2", b"\n\0odom2", 1)))),
+    Case("carmen-unicode-minus", CARMEN, "c.log:3: expected ODOM x y theta tv rv accel ts host logger_ts",
+         carmen(encoding=lambda s: s.replace("ODOM 0.100 0", "ODOM \u22120.100 0", 1).encode())),
+    Case("carmen-a-line-of-30-million-values", CARMEN, "c.log:121: expected FLASER n r_1..r_n x y theta odom_x odom_y "
+         "odom_theta ts host logger_ts (14 fields, got 30000002)",
+         both(carmen(), _rewritten("c.log", lambda b: b + b"FLASER 3 " + b"1 " * 30_000_000 + b"\n"))),
+    Case("librsf-a-line-of-30-million-values", LIBRSF, "X_Input.txt:102: expected odom2 t vx vy wz var_vx var_vy var_wz "
+         "(7 values, got 30000000)",
+         both(librsf_with("loop 9.0 1.0 1"), _rewritten("X_Input.txt", lambda b: b + b"odom2 " + b"1 " * 30_000_000 + b"\n"))),
+    Case("map-input-a-dash", ("map", "-", "--config", "{cfg}", "--out", "{d}/o"), "-: no such file or directory"),
+    Case("map-config-a-dash", ("map", "{run}", "--config", "-", "--out", "{d}/o"), "-: cannot read config (No such file"),
+    Case("ablate-spec-config-a-folder", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "cannot read config (a folder; expected "
+         "a file)", both(text("cfg/keep", ""), lambda d, w: spec_in(d, w, config=str(d / "cfg")))),
+    Case("ablate-spec-scenario-a-folder", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "cannot read scenario (a folder; "
+         "expected a file)", lambda d, w: spec_in(d, w, inputs={"scenarios": [{"path": str(d), "seeds": [1]}]})),
+    *(Case(f"inject-{name}", ("inject", "{run}", "--fault", fault, "--out", "{d}/o"), f"--fault {fault}: {says}")
+      for name, fault, says in (
+          ("param-of-no-value", "gyro_bias@2:4,bias_deg_s=", "bias_deg_s: Input should be a valid number"),
+          ("kind-in-capitals", "GYRO_BIAS@2:4", "unknown fault kind 'GYRO_BIAS'; expected one of"),
+          ("param-value-true", "gyro_bias@2:4,bias_deg_s=true", "bias_deg_s: Input should be a valid number"),
+      )),
+    Case("calibrate-clean-three-times", (*CAL[:-1], "0:5:10", "--out", "{d}/c.yaml"), "--clean 0:5:10: expected START:END"),
+    Case("calibrate-false-alarm-inf", ("calibrate", "{run}", "--config", "{cfg}", "--false-alarm", "inf", "--out",
+                                       "{d}/c.yaml"), "--false-alarm inf: expected a share of steps"),
 ]
 
 
@@ -1548,6 +1709,14 @@ WARNINGS: list[Warned] = [
     Warned("carmen-one-beam-per-scan", CARMEN, "1 beam per scan, too few to match scans",
            carmen(encoding=lambda s: "\n".join(" ".join(["FLASER", "1", *line.split(" ")[182:]]) if line.startswith("FLASER")
                                                else line for line in s.split("\n")).encode())),
+    # -- the eighth attack: old Mac line ends, tabs between values, a laser mounted upside down: read as they are --
+    Warned("carmen-cr-line-ends", CARMEN, "", carmen(encoding=lambda s: s.replace("\n", "\r").encode())),
+    Warned("carmen-tab-separated", CARMEN, "", carmen(encoding=lambda s: s.replace(" ", "\t").encode())),
+    Warned("librsf-tab-separated", LIBRSF, "", both(librsf_with("loop 9.0 1.0 1"), _rewritten(
+        "X_Input.txt", lambda b: b.replace(b" ", b"\t")))),
+    Warned("bag-laser-upside-down", BAG, "", bag(each("/scan", lambda t, m: (
+        setattr(m, "angle_min", m.angle_max), setattr(m, "angle_increment", -m.angle_increment),
+        setattr(m, "ranges", m.ranges[::-1].copy()))))),
 ]
 
 
@@ -1598,6 +1767,44 @@ def test_odd_but_usable_input_is_used_with_one_warning(case: Warned, world: Worl
     after = checksums(d, world.run, world.scenario.parent, CONFIGS)
     assert {k: v for k, v in after.items() if not k.startswith(str(out))} == before
     assert not [p for p in d.rglob("*") if ".gslam-tmp-" in p.name]
+
+
+DATA_ROOTS = {  # GSLAM_DATA as set by mistake, and what {data}/ in a spec then says
+    "missing": ("{d}/none", "recorded input {{data}}/carmen/c.log: GSLAM_DATA='{d}/none' is not a folder; expected the "
+                "folder holding the data sets"),
+    "a-file": ("{d}/f.txt", "GSLAM_DATA='{d}/f.txt' is not a folder"),
+    "blank": ("   ", "GSLAM_DATA='   ' is not a folder"),
+    "home-of-no-user": ("~gslam-no-such-user/data", "GSLAM_DATA='~gslam-no-such-user/data': cannot expand '~' (no such "
+                        "user or no home folder)"),
+}
+
+
+@pytest.mark.parametrize("name", DATA_ROOTS)
+def test_a_data_root_that_names_no_folder_is_one_line(name: str, world: World, tmp_path: Path, capsys, monkeypatch):
+    """A spec's {data}/ under a GSLAM_DATA that names no folder: the error
+    named the path joined below it (or, for ~ of no user, was a traceback)."""
+    value, says = (v.format(d=tmp_path) for v in DATA_ROOTS[name])
+    (tmp_path / "f.txt").write_text("mine\n")
+    (tmp_path / "spec.yaml").write_text(f"name: x\nconfig: {TELEMAX_CONFIG}\ninputs: {{recorded: [{{path: '{{data}}/carmen/c.log'}}]}}\n")
+    monkeypatch.setenv("GSLAM_DATA", value)
+    code, err, leaked = _run(["ablate", str(tmp_path / "spec.yaml"), "--out", str(tmp_path / "o")], capsys)
+    assert code == 1 and err.count("\n") == 1 and says in err and "Traceback" not in err, err
+    assert not leaked and sorted(p.name for p in tmp_path.iterdir()) == ["f.txt", "spec.yaml"]
+
+
+def test_a_relative_data_root_is_from_the_working_folder(world: World, tmp_path: Path, capsys, monkeypatch):
+    """GSLAM_DATA=data read from the working folder, as a shell user means
+    it; it was taken from the spec's folder, where nothing was found."""
+    (tmp_path / "data" / "carmen").mkdir(parents=True)
+    carmen()(tmp_path / "data" / "carmen", world)
+    (tmp_path / "specs").mkdir()
+    (tmp_path / "specs" / "spec.yaml").write_text(
+        f"name: x\nconfig: {CONFIGS / 'datasets' / 'carmen.yaml'}\ninputs: {{recorded: [{{path: '{{data}}/carmen/c.log'}}]}}\n")
+    monkeypatch.setenv("GSLAM_DATA", "data")
+    monkeypatch.chdir(tmp_path)
+    code, err, leaked = _run(["ablate", "specs/spec.yaml", "--out", "o"], capsys)
+    assert code == 0 and not leaked, err[-800:]
+    assert len(list((tmp_path / "o" / "jobs").iterdir())) == 1
 
 
 def test_corpus_counts():

@@ -28,7 +28,7 @@ from typing import Any
 import yaml
 
 from slam.config import PipelineConfig, check_given_once, config_files, dump_config, load_config
-from validation.base.yamlio import load_yaml
+from validation.base.yamlio import load_yaml, yaml_kind
 from slam.errors import GslamError
 from validation.base.errors import InputError
 from slam.results.outdir import result_folder
@@ -111,7 +111,10 @@ def load_variants(path: str | Path, only: list[str] | None = None) -> dict[str, 
     folded: dict[str, str] = {}
     reserved = {f.casefold() for f in COMPARE_FILES}
     for key, overrides in data.items():
-        name = str(key)
+        if not isinstance(key, str):
+            raise GslamError(f"{path}: variant name {_yaml_scalar(key)}: YAML reads it as {yaml_kind(key)}, not as a "
+                             "name; quote it (a variant's name names its result folder)")
+        name = key
         if not PLAIN_NAME.fullmatch(name) or name.casefold() in reserved:
             raise GslamError(f"{path}: variant {name!r}: a variant's name names its result folder: {PLAIN_NAME_RULE}, "
                              f"other than {', '.join(COMPARE_FILES)} in any case")

@@ -449,7 +449,7 @@ def describe_validation_error(source: str, err: ValidationError, what: str = "co
     loc = prefix + _loc_text(first["loc"], unknown=first["type"] == "extra_forbidden")
     if first["type"] == "extra_forbidden":
         hint = _did_you_mean(model, first["loc"]) if model is not None else ""
-        return f"{source}: unknown {what} key '{loc}'{hint}"
+        return f"{source}: unknown {what} key '{loc}'{hint}{_not_ascii(str(first['loc'][-1]))}"
     msg = first["msg"].removeprefix("Value error, ")
     return f"{source}: {loc}: {msg}" if loc else f"{source}: {msg}"
 
@@ -475,6 +475,19 @@ def _did_you_mean(model: type[BaseModel], loc: tuple) -> str:
     known = [f.alias or name for name, f in node.model_fields.items()]
     near = difflib.get_close_matches(str(loc[-1]), known, n=1, cutoff=0.6)
     return f"; did you mean '{near[0]}'?" if near else ""
+
+
+def _not_ascii(key: str) -> str:
+    """`` (its 'ѕ' is U+0455 CYRILLIC SMALL LETTER DZE; keys are ASCII)`` for
+    the characters of an unknown ``key`` that only look like the ASCII ones
+    of a known key (pasted from a document, typed on another keyboard)."""
+    import unicodedata
+
+    odd = list(dict.fromkeys(c for c in key if not c.isascii()))
+    if not odd:
+        return ""
+    named = ", ".join(f"'{c}' is U+{ord(c):04X} {unicodedata.name(c, 'unnamed')}" for c in odd[:3])
+    return f" (its {named}{', ...' if len(odd) > 3 else ''}; keys are ASCII)"
 
 
 def set_dotted(tree: dict[str, Any], dotted: str, value: Any) -> None:

@@ -29,16 +29,24 @@ from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 
+from slam.errors import GslamError
+
 DATA_ENV = "GSLAM_DATA"
 
 
 def data_root() -> Path:
-    """The folder holding the recorded data sets: ``$GSLAM_DATA`` if set,
-    else ``shared/data`` beside the project folder (``../shared/data``
-    relative to the project root)."""
+    """The folder holding the recorded data sets: ``$GSLAM_DATA`` if set (a
+    relative path from the working folder, ``~`` expanded), else
+    ``shared/data`` beside the project folder (``../shared/data`` relative
+    to the project root). Raises :class:`GslamError` for a ``~user`` that
+    names no user."""
     env = os.environ.get(DATA_ENV)
     if env:
-        return Path(env).expanduser()
+        try:
+            return Path(env).expanduser().absolute()
+        except RuntimeError:  # ~user of no user, or no home at all
+            raise GslamError(f"{DATA_ENV}={env!r}: cannot expand '~' (no such user or no home folder); "
+                             "expected the folder holding the data sets") from None
     return Path(__file__).resolve().parents[2].parent / "shared" / "data"
 
 

@@ -29,6 +29,7 @@ class _ScanStream(_Stream):
         self.first: Any = None
 
     def add(self, msg: Any) -> None:
+        self._finite_angles(np.array([[msg.angle_min, msg.angle_increment]]), len(self.stamps))
         if self.first is None:
             self.first = msg
         first = self.first
@@ -50,6 +51,7 @@ class _ScanStream(_Stream):
         self.first = None
 
     def check_columns(self, cols: dict[str, np.ndarray], offset: int) -> None:
+        self._finite_angles(np.column_stack([cols["angle_min"], cols["angle_increment"]]), offset)
         if self.first is None:
             head = (float(cols[k][0]) for k in ("angle_min", "angle_increment", "range_min", "range_max"))
             self.first = _ScanHead(*head, cols["ranges"].shape[1])
@@ -57,10 +59,7 @@ class _ScanStream(_Stream):
         beams = cols["ranges"].shape[1]  # one per chunk: its messages share one layout
         if beams != first.beams:
             raise GslamError(f"{self.where}: message {offset} has {beams} beams, the first had {first.beams}")
-        # As in add(): a NaN angle differs from everything, but message 0 is the reference.
         differs = (cols["angle_min"] != first.angle_min) | (cols["angle_increment"] != first.angle_increment)
-        if offset == 0:
-            differs[0] = False
         if differs.any():
             raise GslamError(f"{self.where}: beam angles change at message {offset + int(np.argmax(differs))}")
 
@@ -70,9 +69,14 @@ class _ScanStream(_Stream):
         if cols is not None:
             self.block = cols["ranges"]
             self.blocks = []  # the block is the only copy kept
-        first = self.first
-        angles = np.array([[first.angle_min, first.angle_increment]])
-        self._finite("angle_min/angle_increment", angles)
+
+    def _finite_angles(self, angles: np.ndarray, offset: int) -> None:
+        """Rows of (angle_min, angle_increment) from message ``offset`` on
+        are finite: a NaN angle is no layout (and differs from every other,
+        which would read as angles that change)."""
+        bad = ~np.isfinite(angles).all(axis=1)
+        if bad.any():
+            raise GslamError(f"{self.where}: non-finite angle_min/angle_increment at message {offset + int(np.argmax(bad))}")
 
     def build(self, t0_ns: int) -> Scans:
         first = self.first

@@ -227,6 +227,17 @@ def load_yaml(path: str | Path, what: str = "YAML file") -> dict[str, Any]:
     return data
 
 
+def yaml_kind(value: Any) -> str:
+    """What YAML made of an unquoted key that is no text (``yes`` a truth value)."""
+    if isinstance(value, bool):
+        return "a truth value (as it reads yes, no, on, off, true and false unquoted)"
+    if value is None:
+        return "null (as it reads ~, null and an empty key)"
+    if isinstance(value, (int, float)):
+        return "a number"
+    return f"a {type(value).__name__}"
+
+
 class Strict(BaseModel):
     """The base of every config model of the project: an unknown key is an
     error (a typo in an ablation must not silently run the default), NaN
@@ -239,12 +250,14 @@ class Strict(BaseModel):
     @classmethod
     def _no_truth_value_for_a_number(cls, data: Any) -> Any:
         """``max_iterations: true`` is a slip, not 1: pydantic would take a
-        YAML ``true`` or ``false`` for the number 1 or 0."""
+        YAML ``true`` or ``false`` for the number 1 or 0, alone or inside a
+        list of numbers (a waypoint ``[1.0, yes]``, seeds ``[true]``)."""
         if isinstance(data, dict):
             for name, field in cls.model_fields.items():
-                value = data.get(field.alias or name)
-                if isinstance(value, bool) and _numeric(field.annotation):
-                    raise ValueError(f"{name}: expected a number, not {str(value).lower()}")
+                where = _truth_value_for_a_number(field.annotation, data.get(field.alias or name))
+                if where is not None:
+                    path, value = where
+                    raise ValueError(f"{'.'.join([name, *path])}: expected a number, not {str(value).lower()}")
         return data
 
 
@@ -257,6 +270,38 @@ def _numeric(tp: Any) -> bool:
         args = [a for a in get_args(tp) if a is not type(None)]
         return bool(args) and all(_numeric(a) for a in args)
     return tp in (int, float)
+
+
+def _truth_value_for_a_number(tp: Any, value: Any) -> tuple[list[str], bool] | None:
+    """Where in ``value`` a bool stands for a number of type ``tp`` (the
+    indices or keys down to it, and the bool), looking into the lists,
+    tuples and mappings ``tp`` says hold numbers; None if nowhere. Nested
+    models are left to their own check."""
+    if isinstance(value, bool):
+        return ([], value) if _numeric(tp) else None
+    origin, args = get_origin(tp), get_args(tp)
+    if origin is Annotated:
+        return _truth_value_for_a_number(args[0], value)
+    if origin in (Union, types.UnionType):
+        for arg in args:
+            found = _truth_value_for_a_number(arg, value)
+            if found is not None:
+                return found
+        return None
+    if origin in (list, tuple) and isinstance(value, (list, tuple)):
+        variadic = origin is list or (len(args) == 2 and args[1] is Ellipsis)
+        for i, item in enumerate(value):
+            if not variadic and i >= len(args):
+                break
+            found = _truth_value_for_a_number(args[0] if variadic else args[i], item)
+            if found is not None:
+                return [str(i), *found[0]], found[1]
+    if origin is dict and isinstance(value, dict) and len(args) == 2:
+        for key, item in value.items():
+            found = _truth_value_for_a_number(args[1], item)
+            if found is not None:
+                return [str(key), *found[0]], found[1]
+    return None
 
 
 class StrictFrozen(Strict):

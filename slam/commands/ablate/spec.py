@@ -18,14 +18,16 @@ import os
 from pathlib import Path
 from typing import Annotated, Any
 
-from pydantic import Discriminator, Field, Tag, ValidationError, model_validator
+import yaml
+from pydantic import Discriminator, Field, Tag, ValidationError, field_validator, model_validator
 
 from slam.config import describe_validation_error
 from validation.base.yamlio import load_yaml
 from slam.errors import GslamError
 from slam.readers.files import check_exists
 from slam.results.out_checks import resolve_path
-from validation.base.yamlio import StrictFrozen
+from slam.results.records import PLAIN_NAME, PLAIN_NAME_RULE
+from validation.base.yamlio import StrictFrozen, yaml_kind
 
 SCENARIO_PREFIX = "scenario."
 
@@ -194,13 +196,25 @@ class AblationSpec(StrictFrozen):
     plots: bool = False
     metrics: list[str] | None = None
 
+    @field_validator("variants", mode="before")
+    @classmethod
+    def _names_are_text(cls, variants: Any) -> Any:
+        """A name YAML read as something else (``no:`` a truth value) is
+        named as YAML read it, not by pydantic's index for it."""
+        for key in variants if isinstance(variants, dict) else ():
+            if not isinstance(key, str):
+                shown = yaml.safe_dump(key, default_flow_style=True).split("\n")[0]
+                raise ValueError(f"name {shown}: YAML reads it as {yaml_kind(key)}, not as a name; quote it")
+        return variants
+
     @model_validator(mode="after")
     def _names(self) -> "AblationSpec":
         if not self.variants:
             raise ValueError("variants: at least one variant is needed")
         for name in self.variants:
-            if not name or any(c in name for c in "/\\ "):
-                raise ValueError(f"variants: name '{name}' must be non-empty without '/', '\\' or spaces")
+            # a variant's name is in its jobs' folder names and a row of summary.md
+            if not PLAIN_NAME.fullmatch(name):
+                raise ValueError(f"variants: name {name!r}: a variant's name names its jobs: {PLAIN_NAME_RULE}")
         for key in self.sweep_keys():
             if not key or key.startswith(".") or key.endswith(".") or ".." in key:
                 raise ValueError(f"sweep: '{key}' is not a dotted key")
@@ -232,14 +246,19 @@ DATA_PLACEHOLDER = "{data}"
 
 def _expand_recorded(spec: AblationSpec, source: Path) -> AblationSpec:
     """Resolve ``{data}`` and expand globs in the recorded inputs' paths."""
-    from slam.readers.datasets import data_root
+    from slam.readers.datasets import DATA_ENV, data_root
 
     base_dir = resolve_path(source).parent
     recorded: list[RecordedInput] = []
     for rec in spec.inputs.recorded:
         text = str(rec.path)
         if text.startswith(DATA_PLACEHOLDER):
-            text = str(data_root()) + text[len(DATA_PLACEHOLDER):]
+            root = data_root()
+            if not root.is_dir():
+                given = f"{DATA_ENV}={os.environ[DATA_ENV]!r}" if os.environ.get(DATA_ENV) else f"the data root {root}"
+                raise GslamError(f"{source}: recorded input {rec.path}: {given} is not a folder; expected the folder "
+                                 "holding the data sets (carmen/, broad/, librsf/, rosbag/)")
+            text = str(root) + text[len(DATA_PLACEHOLDER):]
         p = Path(text) if Path(text).is_absolute() else base_dir / text
         if not any(c in p.name for c in "*?["):
             recorded.append(rec.model_copy(update={"path": p}))
