@@ -1629,6 +1629,14 @@ class Warned:
     also: str | None = None  # a part of the result's metrics.json
 
 
+def _marked(text: str, line: int) -> str:
+    """``text`` with a byte-order mark at the start of ``line`` (from 1), as
+    ``cat`` leaves one where a second file begins."""
+    lines = text.split("\n")
+    lines[line - 1] = "\ufeff" + lines[line - 1]
+    return "\n".join(lines)
+
+
 def _some(fraction: float, value: float) -> Callable[[np.ndarray, int], np.ndarray]:
     def change(r: np.ndarray, k: int) -> np.ndarray:
         r = r.copy()
@@ -1717,6 +1725,13 @@ WARNINGS: list[Warned] = [
     Warned("bag-laser-upside-down", BAG, "", bag(each("/scan", lambda t, m: (
         setattr(m, "angle_min", m.angle_max), setattr(m, "angle_increment", -m.angle_increment),
         setattr(m, "ranges", m.ranges[::-1].copy()))))),
+    # -- the ninth attack: two logs joined by cat, the second's byte-order mark hiding its first record (skipped before) --
+    Warned("carmen-byte-order-mark-in-the-middle", CARMEN, "c.log:61: a byte-order mark inside the CARMEN text log (files "
+           "joined?); read past it", carmen(encoding=lambda s: _marked(s, 61).encode()), '"n_poses": 40'),
+    Warned("librsf-byte-order-marks-in-the-middle", LIBRSF, "X_Input.txt:51: a byte-order mark inside the libRSF text file "
+           "(files joined?), and 1 more after it; read past it", both(librsf_with("loop 9.0 1.0 1"), _rewritten(
+               "X_Input.txt", lambda b: b.replace(b"\nodom2 5.0 ", b"\n\xef\xbb\xbfodom2 5.0 ").replace(
+                   b"\nloop", b"\n\xef\xbb\xbfloop")))),
 ]
 
 

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import errno
+import logging
 import os
 from pathlib import Path
 
 from slam.errors import GslamError
 from validation.base.yamlio import wide_encoding
 
+log = logging.getLogger(__name__)
 
 SNIFF_BYTES = 1 << 20
 """How much of a text log is looked at before the whole is read: a binary
 file (a disk image, a sparse file of zeros) is refused on its first
 megabyte, not after gigabytes are in memory."""
+BOM = "\ufeff"
 
 
 def check_exists(path: Path) -> None:
@@ -33,7 +36,7 @@ def check_exists(path: Path) -> None:
 
 def sniff_log(head: bytes, source: str | Path, what: str) -> None:
     """Refuse a log whose first bytes ``head`` are binary (as :func:`decode_log`)."""
-    decode_log(head, source, what)
+    _text(head, source, what)
 
 
 def decode_log(data: bytes, source: str | Path, what: str) -> str:
@@ -41,7 +44,20 @@ def decode_log(data: bytes, source: str | Path, what: str) -> str:
     libRSF): a byte-order mark dropped, a stray byte that is not UTF-8 (a
     Latin-1 host name or comment) kept as U+FFFD, so that only a field that
     is read can fail, at its line. NUL bytes, or mostly undecodable bytes,
-    are binary content."""
+    are binary content. A byte-order mark further on (two files joined by
+    ``cat``) hid its line's record type, which was then skipped as unknown:
+    it is dropped too, with one warning naming the first line that had one."""
+    text = _text(data, source, what)
+    marks = text.count(BOM)
+    if marks:
+        line = len((text[: text.index(BOM)] + ".").splitlines())
+        log.warning("%s:%d: a byte-order mark inside the %s (files joined?)%s; read past it", source, line, what,
+                    f", and {marks - 1} more after it" if marks > 1 else "")
+        text = text.replace(BOM, "")
+    return text
+
+
+def _text(data: bytes, source: str | Path, what: str) -> str:
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
     wide = wide_encoding(data)
