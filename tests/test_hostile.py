@@ -1537,6 +1537,23 @@ ERRORS: list[Case] = [
           ("with-a-newline", '"a\\nb"', "'a\\nb': a variant's name names its jobs: ASCII letters and digits"),
           ("with-a-nul", '"a\\0b"', "'a\\x00b': a variant's name names its jobs"),
       )),
+    # -- the ninth attack: a sweep's title and a recorded input's name with control characters, written into
+    # -- summary.md's title and report.html as they were --
+    *(Case(f"ablate-{name}", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), f"spec.yaml: {says}", spec(**{key: value}))
+      for name, key, value, says in (
+          ("name-with-a-newline", "name", "two\nlines", "name: holds the control character '\\n' at character 4; "
+           "expected a title of one line"),
+          ("name-with-a-nul", "name", "a\0b", "name: holds the control character '\\x00'"),
+          ("name-with-a-terminal-escape", "name", "\x1b]0;pwned\x07", "name: holds the control character '\\x1b' at "
+           "character 1"),
+          ("description-with-a-nul", "description", "one\ntwo\0", "description: holds the control character '\\x00' at "
+           "character 8; expected text of lines and tabs"),
+      )),
+    Case("ablate-recorded-input-named-with-a-newline", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "spec.yaml: inputs.recorded.0.name: 'a\\nb': a recorded input's name names its jobs: ASCII letters",
+         both(carmen(), lambda d, w: (d / "spec.yaml").write_text(
+             f"name: x\nconfig: {CONFIGS / 'datasets' / 'carmen.yaml'}\n"
+             f"inputs: {{recorded: [{{path: {d / 'c.log'}, name: \"a\\nb\"}}]}}\n"))),
     # -- kinds every command already answers in one line, kept so that none turns into a traceback or a hang --
     *(Case(f"{name}-alias-bomb", argv, "expands to more than 1,000,000 values (YAML aliases)", make)
       for name, argv, make in (
@@ -1820,6 +1837,26 @@ def test_a_relative_data_root_is_from_the_working_folder(world: World, tmp_path:
     code, err, leaked = _run(["ablate", "specs/spec.yaml", "--out", "o"], capsys)
     assert code == 0 and not leaked, err[-800:]
     assert len(list((tmp_path / "o" / "jobs").iterdir())) == 1
+
+
+@pytest.mark.parametrize("command", ["ablate", "compare"])
+def test_text_of_the_users_reaches_report_html_as_text(command: str, world: World, tmp_path: Path, capsys):
+    """A sweep's name and description, a recording's file name: shown in
+    report.html as the text given, never read by the browser as HTML."""
+    hostile = "<script>alert(1)</script>"
+    carmen(name=f"{hostile[:8]}.log")(tmp_path, world)
+    if command == "ablate":
+        (tmp_path / "spec.yaml").write_text(yaml.safe_dump({
+            "name": hostile, "description": '<img src=x onerror="alert(1)">', "config": str(TELEMAX_CONFIG),
+            "inputs": {"scenarios": [{"path": str(world.scenario), "seeds": [1]}]}, "variants": {"a": {}}}))
+        argv = ["ablate", str(tmp_path / "spec.yaml")]
+    else:
+        argv = ["compare", str(tmp_path / f"{hostile[:8]}.log"), "--config", str(CONFIGS / "datasets" / "carmen.yaml"),
+                "--only", "ungated", *QUICK]
+    code, err, leaked = _run([*argv, "--out", str(tmp_path / "o")], capsys)
+    assert code == 0 and not leaked, err[-800:]
+    page = (tmp_path / "o" / "report.html").read_text()
+    assert "&lt;script&gt;" in page and "<script" not in page and "<img src=x" not in page
 
 
 def test_corpus_counts():

@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import math
 import os
+import unicodedata
 from pathlib import Path
 from typing import Annotated, Any
 
 import yaml
-from pydantic import Discriminator, Field, Tag, ValidationError, field_validator, model_validator
+from pydantic import Discriminator, Field, Tag, ValidationError, ValidationInfo, field_validator, model_validator
 
 from slam.config import describe_validation_error
 from validation.base.yamlio import load_yaml
@@ -159,6 +160,14 @@ class RecordedInput(StrictFrozen):
     name: str | None = None
     sweep: SweepSpec | None = None
 
+    @field_validator("name")
+    @classmethod
+    def _plain_name(cls, name: str | None) -> str | None:
+        # it names the input's jobs and its table in summary.md, as a variant's name does
+        if name is not None and not PLAIN_NAME.fullmatch(name):
+            raise ValueError(f"{name!r}: a recorded input's name names its jobs: {PLAIN_NAME_RULE}")
+        return name
+
     def label(self) -> str:
         return self.name or self.path.name.split(".")[0]
 
@@ -195,6 +204,19 @@ class AblationSpec(StrictFrozen):
     sweep: SweepSpec = SweepSpec()
     plots: bool = False
     metrics: list[str] | None = None
+
+    @field_validator("name", "description")
+    @classmethod
+    def _printable(cls, text: str, info: ValidationInfo) -> str:
+        """The name is the title of summary.md and report.html, one line; a
+        control character there (a NUL, a newline, a terminal escape) would
+        break the title or be written into both files."""
+        allowed = "" if info.field_name == "name" else "\n\t"
+        bad = next((c for c in text if c not in allowed and unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)
+        if bad is not None:
+            where = "a title of one line" if info.field_name == "name" else "text of lines and tabs"
+            raise ValueError(f"holds the control character {bad!r} at character {text.index(bad) + 1}; expected {where}")
+        return text
 
     @field_validator("variants", mode="before")
     @classmethod
