@@ -1554,6 +1554,13 @@ ERRORS: list[Case] = [
          both(carmen(), lambda d, w: (d / "spec.yaml").write_text(
              f"name: x\nconfig: {CONFIGS / 'datasets' / 'carmen.yaml'}\n"
              f"inputs: {{recorded: [{{path: {d / 'c.log'}, name: \"a\\nb\"}}]}}\n"))),
+    # -- one fault given twice: the two were added, 4 deg/s of gyro bias for the 2 asked for --
+    *(Case(f"inject-{name}", ("inject", "{run}", "--fault", first, "--fault", second, "--out", "{d}/o"),
+           "--fault gyro_bias@2:4,bias_deg_s=2.0,label_deg_s=0.57 given twice; each --fault is added on top of the others")
+      for name, first, second in (
+          ("fault-given-twice", "gyro_bias@2:4", "gyro_bias@2:4"),
+          ("fault-given-twice-once-with-its-default-spelled-out", "gyro_bias@2:4", "gyro_bias@2.0:4,bias_deg_s=2"),
+      )),
     # -- kinds every command already answers in one line, kept so that none turns into a traceback or a hang --
     *(Case(f"{name}-alias-bomb", argv, "expands to more than 1,000,000 values (YAML aliases)", make)
       for name, argv, make in (
@@ -1742,6 +1749,10 @@ WARNINGS: list[Warned] = [
     Warned("bag-laser-upside-down", BAG, "", bag(each("/scan", lambda t, m: (
         setattr(m, "angle_min", m.angle_max), setattr(m, "angle_increment", -m.angle_increment),
         setattr(m, "ranges", m.ranges[::-1].copy()))))),
+    Warned("inject-two-gyro-biases-overlap", ("inject", "{run}", "--fault", "gyro_bias@2:6", "--fault",
+                                              "gyro_bias@4:8,bias_deg_s=1", "--out", "{d}/o"),
+           "--fault gyro_bias@2:6,bias_deg_s=2.0,label_deg_s=0.57 and --fault gyro_bias@4:8,bias_deg_s=1.0,label_deg_s=0.57 "
+           "overlap from 4 to 6 s: both are added there"),
     # -- the ninth attack: two logs joined by cat, the second's byte-order mark hiding its first record (skipped before) --
     Warned("carmen-byte-order-mark-in-the-middle", CARMEN, "c.log:61: a byte-order mark inside the CARMEN text log (files "
            "joined?); read past it", carmen(encoding=lambda s: _marked(s, 61).encode()), '"n_poses": 40'),
@@ -1793,7 +1804,7 @@ def test_odd_but_usable_input_is_used_with_one_warning(case: Warned, world: Worl
     if case.says:
         assert sum(case.says in s for s in said) == 1, f"expected {case.says!r} once in: {said}"
     out = d / "o"
-    assert json.loads((out / ".gslam-result.json").read_text())["command"] in ("map", "simulate")
+    assert json.loads((out / ".gslam-result.json").read_text())["command"] in ("map", "simulate", "inject")
     if case.also is not None:
         assert case.also in (out / "metrics.json").read_text()
     after = checksums(d, world.run, world.scenario.parent, CONFIGS)

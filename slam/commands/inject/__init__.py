@@ -74,6 +74,24 @@ def _check_intervals(faults: Sequence[Fault], rec: Recording) -> None:
             raise GslamError(no_sample(fault, sample))
 
 
+def _check_repeats(faults: Sequence[Fault]) -> None:
+    """A fault given twice is refused: each ``--fault`` is added, so the two
+    would add up (twice the gyro bias) where one was meant. Two faults of
+    one kind over overlapping intervals both act there, one on top of the
+    other: said in one warning line naming both."""
+    for i, a in enumerate(faults):
+        for b in faults[i + 1 :]:
+            if a.kind != b.kind:
+                continue
+            if a == b:
+                raise GslamError(f"--fault {a.text()} given twice; each --fault is added on top of the others, so "
+                                 "the two would add up: give it once (or one fault of twice the size)")
+            start, end = max(a.start_s, b.start_s), min(a.end_s, b.end_s)
+            if start < end:
+                log.warning("--fault %s and --fault %s overlap from %g to %g s: both are added there, one on top of "
+                            "the other", a.text(), b.text(), start, end)
+
+
 def _sidecar(rec: Recording, source: Path, faults: Sequence[Fault], truth: dict[str, list[Interval]],
              injected: dict[str, list[Interval]]) -> str:
     data: dict = {
@@ -110,6 +128,7 @@ def inject(
     parsed = [parse_fault(f) if isinstance(f, str) else f for f in faults]
     if not parsed:
         raise GslamError("gslam inject: no fault given; add --fault KIND@T0:T1 (kinds: " + ", ".join(KINDS) + ")")
+    _check_repeats(parsed)
     fmt = guess_format(input_path) if config.format == "auto" else config.format
     if fmt == "librsf":
         raise GslamError(f"{input_path}: gslam inject writes ROS bags, CARMEN logs and BROAD trials, not libRSF data sets")
