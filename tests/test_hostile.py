@@ -1561,6 +1561,18 @@ ERRORS: list[Case] = [
           ("fault-given-twice", "gyro_bias@2:4", "gyro_bias@2:4"),
           ("fault-given-twice-once-with-its-default-spelled-out", "gyro_bias@2:4", "gyro_bias@2.0:4,bias_deg_s=2"),
       )),
+    # -- a sweep value given twice on one axis: one job in silence, where seeds given twice are refused --
+    *(Case(f"ablate-{name}", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), f"spec.yaml: {says}", make)
+      for name, make, says in (
+          ("grid-value-twice-as-int-and-float", spec(sweep={"grid": {"gating.inflation": [2, 2.0]}}),
+           "sweep: grid.gating.inflation: 2 and 2.0 are one value, so two jobs would compute the same thing"),
+          ("grid-value-twice-in-a-second-grid", spec(sweep={"grid": [{"gating.inflation": [2]},
+                                                                     {"gating.inflation": [3, 2, 3]}]}),
+           "sweep: grid.1.gating.inflation: 3 and 3 are one value"),
+          ("input-sweep-value-twice", lambda d, w: spec_in(d, w, inputs={"scenarios": [{
+              "path": str(w.scenario), "seeds": [1], "sweep": {"grid": {"validation.mode": ["off", "on", "off"]}}}]}),
+           "inputs.scenarios.0.sweep: grid.validation.mode: 'off' and 'off' are one value"),
+      )),
     # -- kinds every command already answers in one line, kept so that none turns into a traceback or a hang --
     *(Case(f"{name}-alias-bomb", argv, "expands to more than 1,000,000 values (YAML aliases)", make)
       for name, argv, make in (

@@ -82,6 +82,18 @@ Grid = Annotated[
 ]
 
 
+_NONE = object()
+
+
+def _same_value(a: Any, b: Any) -> bool:
+    """One value to a config: 2 and 2.0 are; true and 1 are not (YAML's truth values are no numbers)."""
+    return a == b and isinstance(a, bool) == isinstance(b, bool)
+
+
+def _shown(value: Any) -> str:
+    return yaml.safe_dump(value, default_flow_style=True).split("\n")[0].removesuffix(" ...")
+
+
 class SweepSpec(StrictFrozen):
     """``grid``: a mapping key -> values (their full product), or a list of
     such mappings (the union of their products: one-at-a-time sweeps).
@@ -90,6 +102,21 @@ class SweepSpec(StrictFrozen):
 
     grid: Grid = Field(default_factory=dict)
     random: RandomSweep | None = None
+
+    @model_validator(mode="after")
+    def _values_once(self) -> "SweepSpec":
+        """A value given twice on one axis (``[2, 2.0]``) would be one job
+        in silence where the spec asks for two, while a seed given twice is
+        refused: refused alike."""
+        for i, grid in enumerate(self.grids()):
+            for key, values in grid.items():
+                for k, value in enumerate(values):
+                    same = next((v for v in values[:k] if _same_value(v, value)), _NONE)
+                    if same is not _NONE:
+                        where = f"grid.{i}.{key}" if isinstance(self.grid, list) else f"grid.{key}"
+                        raise ValueError(f"{where}: {_shown(same)} and {_shown(value)} are one value, so two jobs "
+                                         "would compute the same thing; give each value once")
+        return self
 
     def grids(self) -> list[dict[str, list[Any]]]:
         return self.grid if isinstance(self.grid, list) else [self.grid]
