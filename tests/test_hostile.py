@@ -1765,6 +1765,15 @@ WARNINGS: list[Warned] = [
                                               "gyro_bias@4:8,bias_deg_s=1", "--out", "{d}/o"),
            "--fault gyro_bias@2:6,bias_deg_s=2.0,label_deg_s=0.57 and --fault gyro_bias@4:8,bias_deg_s=1.0,label_deg_s=0.57 "
            "overlap from 4 to 6 s: both are added there"),
+    # -- a metric of the spec's that no job writes: a column of '–' in summary.md, said nowhere --
+    *(Warned(f"ablate-metric-{name}", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), says,
+             spec(metrics=[metric, "ate_rmse_m"]))
+      for name, metric, says in (
+          ("unknown", "nope", "metrics: no finished job wrote 'nope', so its column of summary.md is empty; the metrics are "
+           "the columns of summary.csv ("),
+          ("with-a-typo", "ate_rmse", "metrics: no finished job wrote 'ate_rmse', so its column of summary.md is empty; "
+           "did you mean 'ate_rmse_m'?"),
+      )),
     # -- the ninth attack: two logs joined by cat, the second's byte-order mark hiding its first record (skipped before) --
     Warned("carmen-byte-order-mark-in-the-middle", CARMEN, "c.log:61: a byte-order mark inside the CARMEN text log (files "
            "joined?); read past it", carmen(encoding=lambda s: _marked(s, 61).encode()), '"n_poses": 40'),
@@ -1816,7 +1825,7 @@ def test_odd_but_usable_input_is_used_with_one_warning(case: Warned, world: Worl
     if case.says:
         assert sum(case.says in s for s in said) == 1, f"expected {case.says!r} once in: {said}"
     out = d / "o"
-    assert json.loads((out / ".gslam-result.json").read_text())["command"] in ("map", "simulate", "inject")
+    assert json.loads((out / ".gslam-result.json").read_text())["command"] in ("map", "simulate", "inject", "ablate")
     if case.also is not None:
         assert case.also in (out / "metrics.json").read_text()
     after = checksums(d, world.run, world.scenario.parent, CONFIGS)

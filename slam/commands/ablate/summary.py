@@ -12,8 +12,10 @@ text, so its numbers equal the files. One derived column is added:
 from __future__ import annotations
 
 import csv
+import difflib
 import io
 import json
+import logging
 import math
 import time
 from collections import defaultdict
@@ -33,6 +35,8 @@ from slam.results.atomic import write_text
 from slam.outputs.plots import save_figure
 from slam.outputs.report import Figure as ReportFigure
 from slam.outputs.report import Section, Table
+
+log = logging.getLogger(__name__)
 
 JOB_COLUMNS = ("job_id", "status", "error", "input", "seed", "variant")
 # (column, label) of the headline metrics in summary.md and the figures.
@@ -122,6 +126,7 @@ def write_summary(out_dir: Path, jobs: list[Job], spec: AblationSpec, report_htm
     columns = list(JOB_COLUMNS) + sweep_keys
     for row in rows:
         columns += [k for k in row if k not in columns]
+    _check_metrics_named(spec, rows, columns)
     csv_path, md_path = out_dir / "summary.csv", out_dir / "summary.md"
     write_text(csv_path, _csv(rows, columns))
     write_text(md_path, _markdown(rows, spec, sweep_keys))
@@ -132,6 +137,23 @@ def write_summary(out_dir: Path, jobs: list[Job], spec: AblationSpec, report_htm
         write_report(out_dir, rows, spec, figures)
         summary.report_s = time.perf_counter() - t
     return summary
+
+
+def _check_metrics_named(spec: AblationSpec, rows: list[dict[str, Any]], columns: list[str]) -> None:
+    """One warning line for each metric of the spec's ``metrics`` that no
+    finished job wrote (a typo): its column of summary.md would be '–', as
+    for a metric of no value. Said once the jobs ran: which metrics a job
+    writes depends on its input and config."""
+    if not spec.metrics or not any(r["status"] == "ok" for r in rows):
+        return
+    written = [c for c in columns if c not in JOB_COLUMNS and c not in spec.sweep_keys() and c != "input_path"]
+    for metric in spec.metrics:
+        if metric not in written:
+            near = difflib.get_close_matches(metric, written, n=1)
+            hint = f"did you mean '{near[0]}'? " if near else ""
+            log.warning("metrics: no finished job wrote '%s', so its column of summary.md is empty; %sthe metrics "
+                        "are the columns of summary.csv (%d), e.g. %s", metric, hint, len(written),
+                        ", ".join(m for m, _ in HEADLINE))
 
 
 def _csv(rows: list[dict[str, Any]], columns: list[str]) -> str:
