@@ -10,12 +10,14 @@ import logging
 import math
 import os
 import platform
+import re
 import shlex
 import signal
 import sys
 import unicodedata
 import warnings
 from pathlib import Path
+from typing import NoReturn
 
 from slam import __version__
 from slam.errors import Terminated, reader_left
@@ -303,7 +305,21 @@ def _names(text: str) -> list[str]:
 def _out_path(text: str) -> str:
     if not text.strip():
         raise argparse.ArgumentTypeError("is empty; give a path (an unset shell variable?)")
+    if text == "-":  # the shell's word for standard output, which gslam writes no result to
+        raise argparse.ArgumentTypeError("'-' would be a file or folder named '-', not standard output, which gslam "
+                                         "writes no result to; give a path (./- for one named '-')")
     return text
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, whose 'expected one argument' says how to give a value
+    that starts with '-' (``--clean -5:10`` reads -5:10 as an option)."""
+
+    def error(self, message: str) -> NoReturn:
+        flag = re.fullmatch(r"argument (--[\w-]+)(?:/\S+)?: expected one argument", message)
+        if flag is not None:
+            message += f" (a value that starts with '-' is read as an option: give it as {flag[1]}=VALUE)"
+        super().error(message)
 
 
 def _sub(sub, name: str, help: str, examples: str, common: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -321,10 +337,10 @@ def _add_out(parser: argparse.ArgumentParser, what: str, **kwargs) -> None:
 def build_parser() -> argparse.ArgumentParser:
     # -v and -q work before and after the command; SUPPRESS keeps a flag
     # given before it from being reset by the command's parser.
-    common = argparse.ArgumentParser(add_help=False)
+    common = _Parser(add_help=False)
     common.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log progress details")
     common.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars")
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="gslam",
         description="Offline SLAM (GTSAM) with sensor validation that gates each factor per time step.",
         epilog=EXAMPLES,

@@ -1573,6 +1573,21 @@ ERRORS: list[Case] = [
               "path": str(w.scenario), "seeds": [1], "sweep": {"grid": {"validation.mode": ["off", "on", "off"]}}}]}),
            "inputs.scenarios.0.sweep: grid.validation.mode: 'off' and 'off' are one value"),
       )),
+    # -- a value that starts with '-' (argparse took it for an option), '-' as an output (a folder named '-') --
+    Case("calibrate-clean-from-a-negative-start", (*CAL[:-1], "-5:10", "--out", "{d}/c.yaml"),
+         "argument --clean: expected one argument (a value that starts with '-' is read as an option: give it as "
+         "--clean=VALUE)", code=2),
+    Case("calibrate-clean-negative-start-as-told", (*CAL[:-2], "--clean=-5:10", "--out", "{d}/c.yaml"),
+         "--clean -5:10: expected START:END in seconds from the run's start, END > START >= 0"),
+    *(Case(f"{name}-out-a-dash", (*argv, flag, "-"), f"argument {flag}: '-' would be a file or folder named '-', not "
+           "standard output", code=2)
+      for name, argv, flag in (
+          ("map", (*MAP, *QUICK), "--out"),
+          ("simulate", ("simulate", "{scen}"), "--out"),
+          ("ablate", ("ablate", "{spec}"), "--out"),
+          ("calibrate", ("calibrate", "{run}", "--config", "{cfg}"), "--out"),
+          ("inspect", ("inspect", "{run}"), "--config-out"),
+      )),
     # -- kinds every command already answers in one line, kept so that none turns into a traceback or a hang --
     *(Case(f"{name}-alias-bomb", argv, "expands to more than 1,000,000 values (YAML aliases)", make)
       for name, argv, make in (
