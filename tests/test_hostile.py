@@ -1504,6 +1504,13 @@ ERRORS: list[Case] = [
          bag(each("/scan", lambda t, m: setattr(m, "angle_increment", math.nan)))),
     Case("bag-angle-min-nan-from-message-5", BAG, "scan topic '/scan': non-finite angle_min/angle_increment at message 5",
          bag(from_message("/scan", 5, lambda m: setattr(m, "angle_min", math.nan)))),
+    # -- a NaN range limit: 'the laser returns nothing (its range limits are [0.1, nan] m)' before, a warning --
+    *(Case(f"bag-{name}", BAG, f"scan topic '/scan': non-finite range_min/range_max at message {says}", bag(change))
+      for name, change, says in (
+          ("range-max-nan", each("/scan", lambda t, m: setattr(m, "range_max", math.nan)), "0 (0.1, nan)"),
+          ("range-min-nan-from-message-3", from_message("/scan", 3, lambda m: setattr(m, "range_min", math.nan)), "3 (nan,"),
+          ("range-max-minus-inf", each("/scan", lambda t, m: setattr(m, "range_max", -math.inf)), "0 (0.1, -inf)"),
+      )),
     # -- keys holding characters that look like others or like none: shown as the key they seemed to be --
     *(Case(f"config-key-{name}", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), f"c.yaml: unknown config key {says}",
            text("c.yaml", content))

@@ -30,6 +30,7 @@ class _ScanStream(_Stream):
 
     def add(self, msg: Any) -> None:
         self._finite_angles(np.array([[msg.angle_min, msg.angle_increment]]), len(self.stamps))
+        self._finite_limits(np.array([msg.range_min]), np.array([msg.range_max]), len(self.stamps))
         if self.first is None:
             self.first = msg
         first = self.first
@@ -52,6 +53,7 @@ class _ScanStream(_Stream):
 
     def check_columns(self, cols: dict[str, np.ndarray], offset: int) -> None:
         self._finite_angles(np.column_stack([cols["angle_min"], cols["angle_increment"]]), offset)
+        self._finite_limits(cols["range_min"], cols["range_max"], offset)
         if self.first is None:
             head = (float(cols[k][0]) for k in ("angle_min", "angle_increment", "range_min", "range_max"))
             self.first = _ScanHead(*head, cols["ranges"].shape[1])
@@ -77,6 +79,17 @@ class _ScanStream(_Stream):
         bad = ~np.isfinite(angles).all(axis=1)
         if bad.any():
             raise GslamError(f"{self.where}: non-finite angle_min/angle_increment at message {offset + int(np.argmax(bad))}")
+
+    def _finite_limits(self, range_min: np.ndarray, range_max: np.ndarray, offset: int) -> None:
+        """range_min finite and range_max a number or +inf (no limit, as
+        REP-117 allows) from message ``offset`` on: a NaN limit is a corrupt
+        field, as a NaN angle is, not a laser that returns nothing."""
+        with np.errstate(invalid="ignore"):
+            bad = ~np.isfinite(range_min) | np.isnan(range_max) | (range_max == -np.inf)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise GslamError(f"{self.where}: non-finite range_min/range_max at message {offset + k} "
+                             f"({float(range_min[k]):g}, {float(range_max[k]):g}); expected the laser's range limits in m")
 
     def build(self, t0_ns: int) -> Scans:
         first = self.first
