@@ -1511,6 +1511,14 @@ ERRORS: list[Case] = [
           ("range-min-nan-from-message-3", from_message("/scan", 3, lambda m: setattr(m, "range_min", math.nan)), "3 (nan,"),
           ("range-max-minus-inf", each("/scan", lambda t, m: setattr(m, "range_max", -math.inf)), "0 (0.1, -inf)"),
       )),
+    # -- inspect lists a bag's topics without reading their messages (docs/cli.md); its starter reads them as map does --
+    *(Case(f"inspect-config-out-bag-{name}", ("inspect", "{d}/b", "--config-out", "{d}/s.yaml"), f"b: {says}", bag(change))
+      for name, change, says in (
+          ("angle-increment-nan", each("/scan", lambda t, m: setattr(m, "angle_increment", math.nan)),
+           "scan topic '/scan': non-finite angle_min/angle_increment at message 0"),
+          ("scans-without-beams", each("/scan", lambda t, m: setattr(m, "ranges", m.ranges[:0].copy())),
+           "laser scans have no beams"),
+      )),
     # -- keys holding characters that look like others or like none: shown as the key they seemed to be --
     *(Case(f"config-key-{name}", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), f"c.yaml: unknown config key {says}",
            text("c.yaml", content))
