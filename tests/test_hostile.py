@@ -1804,6 +1804,13 @@ WARNINGS: list[Warned] = [
           ("with-a-typo", "ate_rmse", "metrics: no finished job wrote 'ate_rmse', so its column of summary.md is empty; "
            "did you mean 'ate_rmse_m'?"),
       )),
+    # -- gslam inject into a CARMEN log holding a byte that is no ASCII: a UnicodeEncodeError traceback before --
+    *(Warned(f"inject-carmen-{name}", ("inject", "{d}/c.log", "--fault", "laser_cut@2:4", "--out", "{d}/o"), "",
+             carmen(encoding=encoding))
+      for name, encoding in (
+          ("with-a-latin1-host", lambda s: s.replace("host", "h\xf4st").encode("latin-1")),
+          ("with-a-utf8-comment", lambda s: ("# r\u00e9glages du laser \u2014 lab\n" + s).encode()),
+      )),
     # -- the ninth attack: two logs joined by cat, the second's byte-order mark hiding its first record (skipped before) --
     Warned("carmen-byte-order-mark-in-the-middle", CARMEN, "c.log:61: a byte-order mark inside the CARMEN text log (files "
            "joined?); read past it", carmen(encoding=lambda s: _marked(s, 61).encode()), '"n_poses": 40'),
@@ -1919,6 +1926,19 @@ def test_text_of_the_users_reaches_report_html_as_text(command: str, world: Worl
     assert code == 0 and not leaked, err[-800:]
     page = (tmp_path / "o" / "report.html").read_text()
     assert "&lt;script&gt;" in page and "<script" not in page and "<img src=x" not in page
+
+
+def test_an_injected_carmen_log_keeps_its_bytes_that_are_no_utf8(world: World, tmp_path: Path, capsys):
+    """A Latin-1 host name in a CARMEN log: gslam inject failed with a
+    traceback writing it back; every line it does not change is now the
+    log's own, byte for byte."""
+    carmen(encoding=lambda s: s.replace("host", "h\xf4st").encode("latin-1"))(tmp_path, world)
+    code, err, leaked = _run(["inject", str(tmp_path / "c.log"), "--fault", "laser_cut@2:4", "--out", str(tmp_path / "o")],
+                             capsys)
+    assert code == 0 and not leaked, err[-800:]
+    given, written = ((p.read_bytes().split(b"\n")) for p in (tmp_path / "c.log", tmp_path / "o" / "bag" / "c.log"))
+    assert [ln for ln in given if ln.startswith(b"ODOM")] == [ln for ln in written if ln.startswith(b"ODOM")]
+    assert all(b"h\xf4st" in ln for ln in written if ln)
 
 
 def test_corpus_counts():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import logging
 import os
+import re
 from pathlib import Path
 
 from slam.errors import GslamError
@@ -17,6 +18,7 @@ SNIFF_BYTES = 1 << 20
 file (a disk image, a sparse file of zeros) is refused on its first
 megabyte, not after gigabytes are in memory."""
 BOM = "\ufeff"
+_NOT_UTF8 = re.compile("[\udc80-\udcff]")
 
 
 def check_exists(path: Path) -> None:
@@ -42,7 +44,7 @@ def sniff_log(head: bytes, source: str | Path, what: str) -> None:
 def decode_log(data: bytes, source: str | Path, what: str) -> str:
     """The text of a log whose fields are ASCII numbers and words (CARMEN,
     libRSF): a byte-order mark dropped, a stray byte that is not UTF-8 (a
-    Latin-1 host name or comment) kept as U+FFFD, so that only a field that
+    Latin-1 host name or comment) kept as it is, so that only a field that
     is read can fail, at its line. NUL bytes, or mostly undecodable bytes,
     are binary content. A byte-order mark further on (two files joined by
     ``cat``) hid its line's record type, which was then skipped as unknown:
@@ -63,7 +65,9 @@ def _text(data: bytes, source: str | Path, what: str) -> str:
     wide = wide_encoding(data)
     if wide is not None:
         raise GslamError(f"{source}: cannot read: {wide} text; expected a {what} in ASCII or UTF-8 (save it as UTF-8)")
-    text = data.decode("utf-8", errors="replace")
-    if "\0" in text or text.count("\ufffd") > 0.1 * max(len(text), 1):
+    # A byte that is not UTF-8 is kept as Python keeps a path's (a lone
+    # surrogate), so that gslam inject writes the log back byte for byte.
+    text = data.decode("utf-8", errors="surrogateescape")
+    if "\0" in text or len(_NOT_UTF8.findall(text)) > 0.1 * max(len(text), 1):
         raise GslamError(f"{source}: cannot read: not a {what} (binary content)")
     return text

@@ -99,7 +99,7 @@ def inject_carmen(source: Path, dest: Path, rec: Recording, faults: list[Fault])
 
 def _write(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    data = text.encode("ascii")
+    data = text.encode("utf-8", errors="surrogateescape")  # a Latin-1 byte of the log's, as it was
     if path.name.lower().endswith(".gz"):
         with open(path, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0, filename="") as f:
             f.write(data)
