@@ -299,6 +299,9 @@ def _names(text: str) -> list[str]:
     names = [n.strip() for n in text.split(",")]
     if not all(names):
         raise argparse.ArgumentTypeError(f"expected comma-separated variant names, got '{text}'")
+    twice = next((n for k, n in enumerate(names) if n in names[:k]), None)
+    if twice is not None:  # run once in silence: a slip for another name, most likely
+        raise argparse.ArgumentTypeError(f"'{twice}' given twice in '{text}'; give each variant once")
     return names
 
 

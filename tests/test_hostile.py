@@ -1603,6 +1603,15 @@ ERRORS: list[Case] = [
           ("calibrate", ("calibrate", "{run}", "--config", "{cfg}"), "--out"),
           ("inspect", ("inspect", "{run}"), "--config-out"),
       )),
+    # -- a truth.json fault lasting past the data (scored as missed there), a variant named twice in --only --
+    *(Case(f"truth-fault-{name}", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"),
+           f"truth.json: faults.IMU_YAW [{start:g}, {end:g}] s after t0 1700000000 reaches outside the recording "
+           "(1700000000 s plus 24.0 s) by more than 10 s", copy_run(lambda r, start=start, end=end: (r / "truth.json").write_text(
+               json.dumps({**json.loads((r / "truth.json").read_text()), "faults": {"IMU_YAW": [[start, end]]}}))))
+      for name, start, end in (("ending-2000-s-after-the-start", 1.0, 2000.0), ("starting-30-s-before-the-start", -30.0, 5.0))),
+    *(Case(f"{command}-only-a-variant-twice", (command, *argv, "--only", "ungated,gated,ungated", "--out", "{d}/o"),
+           "argument --only: 'ungated' given twice in 'ungated,gated,ungated'; give each variant once", code=2)
+      for command, argv in (("compare", ("{run}", "--config", "{cfg}")), ("demo", ()))),
     # -- kinds every command already answers in one line, kept so that none turns into a traceback or a hang --
     *(Case(f"{name}-alias-bomb", argv, "expands to more than 1,000,000 values (YAML aliases)", make)
       for name, argv, make in (

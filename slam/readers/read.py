@@ -229,9 +229,10 @@ TRUTH_SLACK_S = 10.0
 def attach_sidecar(rec: Recording, sidecar: Sidecar, source: str | Path = SIDECAR) -> None:
     """Fill ``rec.faults`` (shifted into the recording's time base) and
     ``rec.magnetic_reference`` from the sidecar; a one-line
-    :class:`GslamError` naming ``source`` if a fault lies outside the
+    :class:`GslamError` naming ``source`` if a fault reaches outside the
     recording by more than :data:`TRUTH_SLACK_S` (a ``t0`` or faults of
-    another recording would leave it without truth in silence)."""
+    another recording would leave it without truth in silence, and a fault
+    lasting past the data would be scored as missed there)."""
     shift = sidecar.t0 - rec.t0
     rec.faults = {
         name: [(start + shift, end + shift) for start, end in intervals]
@@ -243,6 +244,10 @@ def attach_sidecar(rec: Recording, sidecar: Sidecar, source: str | Path = SIDECA
                 raise GslamError(f"{source}: faults.{name} [{start:g}, {end:g}] s after t0 {sidecar.t0:.10g} lies "
                                  f"outside the recording ({rec.t0:.10g} s plus {rec.duration:.1f} s); the truth of "
                                  "another recording?")
+            if end + shift > rec.duration + TRUTH_SLACK_S or start + shift < -TRUTH_SLACK_S:
+                raise GslamError(f"{source}: faults.{name} [{start:g}, {end:g}] s after t0 {sidecar.t0:.10g} reaches "
+                                 f"outside the recording ({rec.t0:.10g} s plus {rec.duration:.1f} s) by more than "
+                                 f"{TRUTH_SLACK_S:g} s; a fault is scored where the data are")
     mag = sidecar.magnetic_reference
     if mag is not None:
         rec.magnetic_reference = MagneticReference(mag.strength_T, mag.dip_rad, mag.declination_rad)
