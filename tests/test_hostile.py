@@ -22,13 +22,21 @@ user finds after the first (tests/test_fuzz.py), built for the classes:
   that break a table, keys holding characters that show as others or as
   nothing (a zero-width or no-break space, a right-to-left override, a
   Cyrillic letter), NaN beam angles, a data root (GSLAM_DATA) that names
-  no folder; and kinds already answered, kept so that none regresses: alias
+  no folder;
+* the ninth attack: a byte-order mark inside a text log (two files
+  joined), control characters in a sweep's title or a recorded input's
+  name, text of the user's in report.html, one fault or one variant
+  given twice and faults of one kind that overlap, a sweep value given
+  twice on one axis, a summary metric no job writes, a value starting
+  with '-' and '-' as an output, NaN range limits in a LaserScan, bytes
+  of a CARMEN log that are no ASCII written back by inject, truth.json
+  faults lasting past the data; and kinds already answered, kept so that none regresses: alias
   bombs and deep nesting in every YAML input, NaN on keys of every type,
   NUL bytes and lines of millions of values in text logs, ``-`` as a path.
 
 Error cases run as tests/test_fuzz.py's do (exit 1 or 2, one error line
 saying what the case expects, nothing of the user's changed, no traceback,
-no hang). Warning cases must map or simulate with one warning line saying
+no hang). Warning cases must map, simulate, inject or ablate with one warning line saying
 what the case expects, write the result, and change nothing else. No case
 may let a Python warning (numpy's overflow) through. Signals and full
 disks are at the end, as real processes.
