@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import CONFIGS, REPO, include_in_readme, publish, simulated, table
+from scripts.bench.common import CONFIGS, REPO, carmen_log, include_in_readme, publish, simulated, table
 from scripts.bench.peers import PeerRun, export_scans, kiss_slam
 from slam.config import load_config
 from slam.outputs.evaluation import ate, rpe
@@ -314,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
         work = args.work if args.work is not None else Path(tmp)
         rows: list[Row] = []
         for name in args.logs:
-            path = root / "carmen" / f"{name}-corrected.log.gz"
+            path = carmen_log(root, name)
             if not path.is_file():
                 print(f"{path}: not found; skipped", file=sys.stderr)
                 continue

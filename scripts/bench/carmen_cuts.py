@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import KERNELS, csv_text, publish, quiet_logging
+from scripts.bench.common import KERNELS, carmen_log, csv_text, publish, quiet_logging
 from slam.commands.calibrate import calibrate
 from slam.commands.compare import load_variants
 from slam.config import load_config, validation_sections
@@ -166,20 +166,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "runs/bench_carmen_cuts")
     args = ap.parse_args(argv)
     quiet_logging()
-    root = (args.data or data_root()) / "carmen"
+    root = args.data or data_root()
     args.out.mkdir(parents=True, exist_ok=True)
     variants = load_variants(ROOT / "configs/variants.yaml")
     base = load_config(args.config)
     rows = []
     t_all = time.perf_counter()
-    tuning = [root / f"{n}-corrected.log.gz" for n in TUNING]
+    tuning = [carmen_log(root, n) for n in TUNING]
     rates = check_flag_rates(tuning, args.config)
     log.info("scan check on the tuning logs' scans (uncut): %s", rates)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         calibrated = calibrate(tuning, args.config, tmp / "cal.yaml").out
         for name in args.logs:
-            source = root / f"{name}-corrected.log.gz"
+            source = carmen_log(root, name)
             spans = cut_spans(source, base)
             run = inject(source, cuts(spans), tmp / f"{name}_cut", config=base.input).run_dir
             rec = read_recording(run, base.input)

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import KERNELS, publish
+from scripts.bench.common import HUSKY_BAG, KERNELS, publish
 from scripts.bench.judges import COURSE_LAG, MIN_SPEED_M_S, WRONG_DEG, Course, ate_vs_gps, gps_course, yaw_at
 from slam.commands.compare import load_variants
 from slam.config import PipelineConfig, load_config
@@ -182,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "runs/bench_husky")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    path = args.bag or data_root() / "rosbag" / "test1_husky_2015.bag"
+    path = args.bag or data_root() / HUSKY_BAG
     if not path.is_file():
         print(f"{path}: not found (set GSLAM_DATA to the data folder)", file=sys.stderr)
         return 1

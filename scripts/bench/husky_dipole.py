@@ -64,7 +64,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from scripts.bench.common import base_config, csv_text, publish, quiet_logging
+from scripts.bench.common import HUSKY_BAG, base_config, csv_text, publish, quiet_logging
 from scripts.bench.judges import (
     AFTER_LABEL_S,
     REAL_DRIFT,
@@ -171,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-folds", action="store_true", help="only the dipoles of --faults, without the two clean-stretch folds")
     args = ap.parse_args(argv)
     quiet_logging()
-    bag = (args.data or data_root()) / "rosbag/test1_husky_2015.bag"
+    bag = (args.data or data_root()) / HUSKY_BAG
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
     t_all = time.perf_counter()

@@ -45,7 +45,7 @@ import time
 from pathlib import Path
 
 
-from scripts.bench.common import KERNELS, publish, quiet_logging
+from scripts.bench.common import HUSKY_BAG, KERNELS, publish, quiet_logging
 from scripts.bench.judges import AFTER_LABEL_S, REAL_DRIFT, ate_vs_gps, false_alarms, gps_wanders
 from slam.commands.compare import load_variants
 from slam.config import load_config
@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     quiet_logging()
     for fault in args.faults:  # every spec checked before any work
         parse_fault(fault)
-    bag = (args.data or data_root()) / "rosbag/test1_husky_2015.bag"
+    bag = (args.data or data_root()) / HUSKY_BAG
     config = load_config(args.config, ["validation.mode=on", "output.plots=false"])
     kernels = load_variants(ROOT / "configs/variants.yaml", list(KERNELS))
     ungated = ["validation.mode=off", "output.plots=false"]

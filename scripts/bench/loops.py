@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import publish, quiet_logging
+from scripts.bench.common import carmen_log, publish, quiet_logging
 from slam.commands.compare import load_variants
 from slam.config import load_config
 from slam.results.atomic import write_text
@@ -189,7 +189,7 @@ def bench_false_loops(report: Report, cache: Path, seeds: list[int], root: Path,
     rows = []
     cases = [(f"telemax_lab s{s}", simulated(cache, s), TELEMAX, ["validation.mode=on", "loops.enabled=true"]) for s in seeds]
     for name in CARMEN_LOGS:
-        path = root / "carmen" / f"{name}-corrected.log.gz"
+        path = carmen_log(root, name)
         if path.is_file():
             cases.append((name, path, CARMEN, ["loops.enabled=true"]))
     for k, (label, path, config, overrides) in enumerate(cases):
@@ -263,7 +263,7 @@ def bench_corridor(report: Report, root: Path) -> None:
 def bench_runtime(report: Report, cache: Path, root: Path, repeats: int) -> None:
     cases = [("telemax_lab s1 (gated)", simulated(cache, 1), TELEMAX, ["validation.mode=on"])]
     for name in CARMEN_LOGS:
-        cases.append((name, root / "carmen" / f"{name}-corrected.log.gz", CARMEN, []))
+        cases.append((name, carmen_log(root, name), CARMEN, []))
     cases.append(("libRSF Corridor", root / "librsf" / "Corridor_Input.txt", CORRIDOR, []))
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -66,7 +66,7 @@ from pathlib import Path
 import numpy as np
 
 from scripts.bench.carmen_cuts import TUNING, cut_spans, cuts
-from scripts.bench.common import csv_text, publish, quiet_logging, simulated, table
+from scripts.bench.common import HUSKY_BAG, carmen_log, csv_text, publish, quiet_logging, simulated, table
 from scripts.bench.gating import parse_seeds
 from scripts.bench.husky_faults import FAULTS, judged_alarms
 from scripts.bench.judges import gps_wanders
@@ -166,7 +166,7 @@ def telemax(seeds: list[int], tmp: Path, rows: list[Row], notes: list[str]) -> N
 
 
 def husky(data: Path, faults: tuple[str, ...], tmp: Path, rows: list[Row], notes: list[str]) -> None:
-    bag = data / "rosbag/test1_husky_2015.bag"
+    bag = data / HUSKY_BAG
     learnt, proposed, dropped = _propose_and_learn(bag, CONFIGS["husky"], [bag], tmp / "husky_model", "0:180")
     notes.append(f"Husky: {proposed} relations proposed, {dropped} dropped by calibrate (learnt on 0-180 s)")
     shipped = load_config(CONFIGS["husky"])
@@ -188,7 +188,7 @@ def husky(data: Path, faults: tuple[str, ...], tmp: Path, rows: list[Row], notes
 
 
 def carmen(data: Path, logs: tuple[str, ...], tmp: Path, rows: list[Row], notes: list[str]) -> None:
-    paths = {name: data / f"carmen/{name}-corrected.log.gz" for name in {*logs, *TUNING}}
+    paths = {name: carmen_log(data, name) for name in {*logs, *TUNING}}
     learn = [paths[name] for name in TUNING]
     learnt, proposed, dropped = _propose_and_learn(learn[0], CONFIGS["carmen"], learn, tmp / "carmen_model", None)
     notes.append(f"CARMEN: {proposed} relations proposed, {dropped} dropped by calibrate (learnt on "

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scripts.bench.common import carmen_log
 from slam.config import load_config
 from slam.outputs.evaluation import ate, rpe
 from slam.readers.datasets import data_root
@@ -71,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.ERROR)
     root = data_root() if args.root is None else args.root
     for name in args.logs:
-        path = root / "carmen" / f"{name}-corrected.log.gz"
+        path = carmen_log(root, name)
         if not path.is_file():
             print(f"{path}: not found; skipped", file=sys.stderr)
             continue

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scripts.bench.common import commit, machine
+from scripts.bench.common import HUSKY_BAG, commit, machine
 from scripts.bench.judges import ate_vs_gps
 from slam.config import load_config, validation_sections
 from slam.results.atomic import write_text
@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     start = time.perf_counter()
-    bag = Path(os.path.relpath((args.data or data_root()) / "rosbag/test1_husky_2015.bag", ROOT))
+    bag = Path(os.path.relpath((args.data or data_root()) / HUSKY_BAG, ROOT))
     out = Path(os.path.relpath(args.out.resolve(), ROOT))
     (ROOT / out).mkdir(parents=True, exist_ok=True)
     figures = args.page.parent / "figures"
