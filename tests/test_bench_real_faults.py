@@ -200,3 +200,24 @@ def test_a_blame_of_the_husky_bags_own_compass_fault_is_right_but_not_an_injecte
     (comps, start, end), = own_faults(HUSKY)
     assert comps == ["IMU_YAW"] and 180.0 < start < 230.0 and end == float("inf")
     assert own_faults("intel") == []
+
+
+def test_placement_sets_are_summarised_by_medians_of_the_ratios_set_by_set():
+    first = _rows("a", "cut3", {"gated": 1.0, "cauchy": 2.0, "huber": 4.0, "interval_oracle": 1.0},
+                  detected=2, missed=1, stretches_found=3, stretches=3, alarm_fraction=0.1)
+    second = _rows("a", "cut3", {"gated": 3.0, "cauchy": 6.0, "huber": 1.0, "interval_oracle": 2.0},
+                   detected=1, missed=2, stretches_found=1, stretches=3, alarm_fraction=0.3)
+    third = _rows("a", "cut3", {"gated": 2.0, "cauchy": 1.0, "huber": 8.0, "interval_oracle": 4.0},
+                  detected=3, missed=0, stretches_found=2, stretches=3, alarm_fraction=0.2)
+    for rows, sets in ((first, "0.2 0.5 0.8"), (second, "0.1 0.4 0.7"), (third, "0.3 0.6 0.9")):
+        for r in rows:
+            r["placements"] = sets
+    text, f = summarise(first + second + third)
+    # gated against each set's best kernel: 1/1 (a kernel at 1.0 by default), 3/1, 2/1; the median is 2
+    assert f["gated / best kernel, worst"] == pytest.approx(2.0)
+    # against the interval oracle set by set: 1, 1.5, 0.5
+    assert f["gated / interval oracle, geometric mean"] == pytest.approx(1.0)
+    assert f["labelled intervals detected"] == pytest.approx(6 / 9)
+    assert f["injected stretches found"] == pytest.approx(6 / 9)
+    assert "| a | cut3 (3 sets) | 1.000 | 2.000 |" in text  # ungated and gated: the medians over the sets
+    assert "| 0.200 |" in text and "| 6/9 | 6/9 |" in text and "3 sets of placements" in text
