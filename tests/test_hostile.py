@@ -30,7 +30,14 @@ user finds after the first (tests/test_fuzz.py), built for the classes:
   twice on one axis, a summary metric no job writes, a value starting
   with '-' and '-' as an output, NaN range limits in a LaserScan, bytes
   of a CARMEN log that are no ASCII written back by inject, truth.json
-  faults lasting past the data; and kinds already answered, kept so that none regresses: alias
+  faults lasting past the data;
+* the tenth attack: numbers in a text log that Python reads and C's strtod
+  does not (a '_' between digits, digits of another script); a libRSF
+  header of column names or a number spelled as a word, a bag's
+  metadata.yaml naming another storage, a compression not applied, counts,
+  topics, a format or a version the database does not hold; output paths
+  through /proc and /sys; walls and legs of no length, waypoints a
+  nanometre apart, scientific notation and -0.0; and kinds already answered, kept so that none regresses: alias
   bombs and deep nesting in every YAML input, NaN on keys of every type,
   NUL bytes and lines of millions of values in text logs, ``-`` as a path.
 
@@ -1694,6 +1701,49 @@ ERRORS: list[Case] = [
     Case("calibrate-clean-three-times", (*CAL[:-1], "0:5:10", "--out", "{d}/c.yaml"), "--clean 0:5:10: expected START:END"),
     Case("calibrate-false-alarm-inf", ("calibrate", "{run}", "--config", "{cfg}", "--false-alarm", "inf", "--out",
                                        "{d}/c.yaml"), "--false-alarm inf: expected a share of steps"),
+    # -- the tenth attack: numbers Python reads and C's strtod does not ('1_0' is 10 to one, 1 to the other; digits
+    # -- of another script), read in silence before --
+    *(Case(f"librsf-{name}", LIBRSF, says, both(librsf_with("loop 9.0 1.0 1"), _rewritten("X_Input.txt", change)))
+      for name, change, says in (
+          ("speed-with-an-underscore", lambda b: b.replace(b"odom2 1.0 0.5 ", b"odom2 1.0 0.5_0 "),
+           "X_Input.txt:11: expected odom2 t vx vy wz var_vx var_vy var_wz; vx is '0.5_0', not a plain number"),
+          ("time-in-arabic-indic-digits", lambda b: b.replace(b"odom2 1.0 ", "odom2 \u0661.\u0660 ".encode()),
+           "X_Input.txt:11: expected odom2 t vx vy wz var_vx var_vy var_wz; t is '\u0661.\u0660', not a plain number"),
+          ("loop-time-in-fullwidth-digits", lambda b: b.replace(b"loop 9.0", "loop \uff19.0".encode()),
+           "X_Input.txt:101: expected loop t t_other weight; t is '\uff19.0', not a plain number"),
+      )),
+    *(Case(f"carmen-{name}", CARMEN, says, make)
+      for name, make, says in (
+          ("range-with-an-underscore", carmen(encoding=lambda s: s.replace(" 3 ", " 3_0 ", 1).encode()),
+           "c.log:1: expected FLASER n r_1..r_n x y theta odom_x odom_y odom_theta ts host logger_ts; r_"),
+          ("odometry-in-fullwidth-digits", carmen(encoding=lambda s: s.replace("ODOM 0.100 ", "ODOM \uff10.100 ", 1).encode()),
+           "c.log:3: expected ODOM x y theta tv rv accel ts host logger_ts; x is '\uff10.100', not a plain number"),
+          ("beam-count-with-an-underscore", carmen(encoding=lambda s: s.replace("FLASER 181 ", "FLASER 1_81 ").encode()),
+           "c.log:1: expected FLASER n r_1..r_n x y theta odom_x odom_y odom_theta ts host logger_ts; the beam count is "
+           "'1_81', not a plain number"),
+          ("param-fov-with-an-underscore", carmen(head="PARAM laser_front_laser_fov 1_80"),
+           "c.log:2: expected a number in PARAM laser_front_laser_fov"),
+      )),
+    # -- the tenth attack's kinds already answered in one line, kept so that none regresses: a libRSF header of column
+    # -- names, a number spelled as a word, a bag's metadata.yaml naming another storage or a compression not applied,
+    # -- output paths through /proc and /sys --
+    Case("librsf-header-of-column-names", LIBRSF, "X_Input.txt:1: expected odom2 t vx vy wz var_vx var_vy var_wz",
+         both(librsf_with("loop 9.0 1.0 1"), _rewritten("X_Input.txt", lambda b: b"odom2 t vx vy wz var_vx var_vy var_wz\n" + b))),
+    Case("librsf-speed-spelled-infinity", LIBRSF, "X_Input.txt:1: expected odom2 t vx vy wz var_vx var_vy var_wz",
+         both(librsf_with("loop 9.0 1.0 1"), _rewritten("X_Input.txt", lambda b: b.replace(b" 0.5 ", b" infinity ", 1)))),
+    *(Case(f"bag-metadata-{name}", ("map", "{d}/run", "--config", "{cfg}", "--out", "{d}/o"), says,
+           copy_run(lambda r, change=change: (r / "bag" / "metadata.yaml").write_text(
+               change((r / "bag" / "metadata.yaml").read_text()))))
+      for name, change, says in (
+          ("storage-mcap-for-a-db3", lambda m: m.replace("storage_identifier: sqlite3", "storage_identifier: mcap"),
+           "bag: not a readable ROS bag"),
+          ("without-storage-identifier", lambda m: m.replace("  storage_identifier: sqlite3\n", ""),
+           "bag: not a readable ROS bag (A metadata key is missing KeyError('storage_identifier').)"),
+          ("file-compression-not-applied", lambda m: m.replace("compression_format: ''", "compression_format: zstd").replace(
+              "compression_mode: ''", "compression_mode: FILE"), "bag: not a readable ROS bag (Unable to decompress"),
+      )),
+    Case("map-out-through-proc", (*MAP, "--out", "/proc/self/gslam-o"), "/proc/self/gslam-o: --out cannot be written"),
+    Case("map-out-in-sys", (*MAP, "--out", "/sys/kernel/gslam-o"), "/sys/kernel/gslam-o: --out cannot be written"),
 ]
 
 
@@ -1718,6 +1768,14 @@ def _marked(text: str, line: int) -> str:
     lines = text.split("\n")
     lines[line - 1] = "\ufeff" + lines[line - 1]
     return "\n".join(lines)
+
+
+def _first_topic_twice(metadata: str) -> str:
+    """A bag's metadata.yaml with its first topic listed a second time."""
+    tree = yaml.safe_load(metadata)
+    topics = tree["rosbag2_bagfile_information"]["topics_with_message_count"]
+    topics.append(topics[0])
+    return yaml.safe_dump(tree)
 
 
 def _some(fraction: float, value: float) -> Callable[[np.ndarray, int], np.ndarray]:
@@ -1835,6 +1893,26 @@ WARNINGS: list[Warned] = [
            "(files joined?), and 1 more after it; read past it", both(librsf_with("loop 9.0 1.0 1"), _rewritten(
                "X_Input.txt", lambda b: b.replace(b"\nodom2 5.0 ", b"\n\xef\xbb\xbfodom2 5.0 ").replace(
                    b"\nloop", b"\n\xef\xbb\xbfloop")))),
+    # -- the tenth attack: usable oddities read as they are (numbers in scientific notation and -0.0, what a bag's
+    # -- metadata.yaml says of its topics where the database says otherwise, walls and legs of no length) --
+    Warned("librsf-scientific-notation-and-minus-zero", LIBRSF, "", both(librsf_with("loop 9.0 1.0 1"), _rewritten(
+        "X_Input.txt", lambda b: b.replace(b" 0.5 0 ", b" 5E-1 -0.0 ").replace(b" 0.01 0.01 0.01", b" 1e-2 1.0e-02 1e-320")))),
+    *(Warned(f"bag-metadata-{name}", ("map", "{d}/run", "--config", "{cfg}", *QUICK, "--out", "{d}/o"), "",
+             copy_run(lambda r, change=change: (r / "bag" / "metadata.yaml").write_text(
+                 change((r / "bag" / "metadata.yaml").read_text()))), '"n_poses"')
+      for name, change in (
+          ("counts-of-another-bag", lambda m: m.replace("message_count: 2400", "message_count: 10")),
+          ("a-topic-listed-twice", _first_topic_twice),
+          ("serialization-format-unknown", lambda m: m.replace("serialization_format: cdr", "serialization_format: json", 1)),
+          ("version-from-the-future", lambda m: m.replace("version: 8", "version: 99")),
+      )),
+    *(Warned(f"scenario-{name}", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "", scenario(change))
+      for name, change in (
+          ("wall-of-no-length", lambda t: t["world"]["walls"].append([[3.0, 6.0], [3.0, 6.0]])),
+          ("a-waypoint-given-twice", lambda t: t["robot"]["waypoints"].insert(1, list(t["robot"]["waypoints"][1]))),
+          ("waypoints-a-nanometre-apart", lambda t: t["robot"]["waypoints"].insert(
+              2, [t["robot"]["waypoints"][1][0] + 1e-9, t["robot"]["waypoints"][1][1]])),
+      )),
 ]
 
 

@@ -69,7 +69,7 @@ from slam.config import InputConfig
 from slam.errors import GslamError
 from validation.base.geometry import wrap_angle
 from slam.readers.data_checks import MAX_RANGE_M
-from slam.readers.files import SNIFF_BYTES, decode_log, sniff_log
+from slam.readers.files import SNIFF_BYTES, decode_log, sniff_log, unplain_number
 from validation.base.yamlio import check_regular_file
 from slam.recording import relative_poses
 from slam.recording import Recording, Scans, Trajectory
@@ -141,6 +141,10 @@ def _floats(parts: list[str], where: str, expected: str, names: Callable[[int], 
         values = np.array(parts, dtype=np.float64)
     except ValueError:
         raise GslamError(f"{where}: expected {expected}") from None
+    odd = unplain_number(parts)
+    if odd is not None:
+        raise GslamError(f"{where}: expected {expected}; {names(odd)} is {parts[odd]!r}, not a plain number (ASCII "
+                         "digits, no '_')")
     bad = ~np.isfinite(values)
     if bad.any():
         k = int(np.argmax(bad))
@@ -162,6 +166,9 @@ def _count(parts: list[str], i: int, where: str, expected: str) -> int:
         n = int(parts[i])
     except (IndexError, ValueError):
         raise GslamError(f"{where}: expected {expected}") from None
+    if unplain_number([parts[i]]) is not None:
+        raise GslamError(f"{where}: expected {expected}; the beam count is {parts[i]!r}, not a plain number (ASCII "
+                         "digits, no '_')")
     if n < 1:
         raise GslamError(f"{where}: expected a positive beam count in {expected}")
     return n
@@ -208,8 +215,11 @@ def _parse_flaser(d: _Log, parts: list[str], where: str) -> None:
                      _ranges_then(n, "x", "y", "theta", "odom_x", "odom_y", "odom_theta", "ts"))
     if len(parts) > n + 11:  # n is not the number of ranges: every field after them would be read shifted
         raise GslamError(f"{where}: expected {_FLASER} ({n + 11} fields, got {len(parts)}){_more(parts, n + 11, 'n')}")
+    given = d.params.get("laser_front_laser_fov", str(DEFAULT_FOV_DEG))
     try:
-        fov = float(d.params.get("laser_front_laser_fov", DEFAULT_FOV_DEG))
+        fov = float(given)
+        if unplain_number([given]) is not None:
+            raise ValueError(given)
     except ValueError:
         raise GslamError(f"{where}: expected a number in PARAM laser_front_laser_fov") from None
     if not 0.0 < fov <= 360.0:
@@ -225,6 +235,9 @@ def _parse_robotlaser(d: _Log, parts: list[str], where: str) -> None:
         m = int(parts[9 + n])
     except (IndexError, ValueError):
         raise GslamError(f"{where}: expected {_ROBOTLASER1}") from None
+    if unplain_number([parts[9 + n]]) is not None:
+        raise GslamError(f"{where}: expected {_ROBOTLASER1}; the remission count is {parts[9 + n]!r}, not a plain "
+                         "number (ASCII digits, no '_')")
     tail = 10 + n + max(m, 0)  # laser pose, robot pose, tv rv fwd side turn_axis, ts
     if m < 0 or len(parts) < tail + 14:
         raise GslamError(f"{where}: expected {_ROBOTLASER1} ({tail + 14} fields, got {len(parts)})")
@@ -371,6 +384,8 @@ def _range_max(d: _Log, ranges: np.ndarray) -> float:
     param = d.params.get("robot_front_laser_max")
     if param is not None:
         try:
+            if unplain_number([param]) is not None:
+                raise ValueError(param)
             return float(param)
         except ValueError:
             log.warning("PARAM robot_front_laser_max %r is not a number; ignored", param)

@@ -21,6 +21,19 @@ BOM = "\ufeff"
 _NOT_UTF8 = re.compile("[\udc80-\udcff]")
 
 
+def unplain_number(parts: list[str]) -> int | None:
+    """The index of the first of ``parts`` that Python reads as a number but
+    C's ``strtod``, and so the tools that write and read these logs, do not:
+    digits grouped by ``_`` (``1_000`` is 1000 to Python, 1 to C) or digits
+    of another script (fullwidth, Arabic-Indic); None if every part is plain
+    ASCII. A log holding one was edited or garbled: read as Python reads it,
+    its value would differ from the one its tools see."""
+    joined = "".join(parts)
+    if joined.isascii() and "_" not in joined:
+        return None
+    return next(k for k, p in enumerate(parts) if not p.isascii() or "_" in p)
+
+
 def check_exists(path: Path) -> None:
     """A one-line :class:`GslamError` if there is nothing at ``path``: no
     such file, a link to nothing, or a loop of links (which ``exists``
