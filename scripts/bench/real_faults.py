@@ -84,6 +84,7 @@ import argparse
 import dataclasses
 import logging
 import math
+import statistics
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -335,16 +336,9 @@ def over_placements(rows: list[dict]) -> list[dict]:
             values = [r[key] for r in group if isinstance(r.get(key), (int, float))]
             if not values:
                 continue
-            row[key] = sum(values) if key in SUMMED else _mid(values)
+            row[key] = sum(values) if key in SUMMED else statistics.median(values)
         out.append(row)
     return out
-
-
-def _mid(xs: list[float]) -> float:
-    """The middle value of ``xs``, the mean of the two middle ones for an even count."""
-    xs = sorted(xs)
-    mid = len(xs) // 2
-    return xs[mid] if len(xs) % 2 else 0.5 * (xs[mid - 1] + xs[mid])
 
 
 def ratio(a: dict, b: dict) -> float:
@@ -353,7 +347,7 @@ def ratio(a: dict, b: dict) -> float:
     sets = [k for k in a.get("set_errors", {}) if k in b.get("set_errors", {})]
     if len(sets) <= 1:
         return error(a) / error(b)
-    return _mid([a["set_errors"][k] / b["set_errors"][k] for k in sets])
+    return statistics.median([a["set_errors"][k] / b["set_errors"][k] for k in sets])
 
 
 def read_rows(path: Path) -> list[dict]:
@@ -400,7 +394,7 @@ def vs_best_kernel(m: dict[str, dict]) -> tuple[str, float]:
     sets = [s for s in g.get("set_errors", {}) if all(s in m[k].get("set_errors", {}) for k in KERNELS)]
     if len(sets) <= 1:
         return best, error(g) / error(m[best])
-    return best, _mid([g["set_errors"][s] / min(m[k]["set_errors"][s] for k in KERNELS) for s in sets])
+    return best, statistics.median([g["set_errors"][s] / min(m[k]["set_errors"][s] for k in KERNELS) for s in sets])
 
 
 def figures(by: dict[tuple[str, str], dict[str, dict]]) -> dict[str, float | None]:

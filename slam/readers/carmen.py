@@ -69,7 +69,7 @@ from slam.config import InputConfig
 from slam.errors import GslamError
 from validation.base.geometry import wrap_angle
 from slam.readers.data_checks import MAX_RANGE_M
-from slam.readers.files import SNIFF_BYTES, decode_log, sniff_log, unplain_number
+from slam.readers.files import NOT_PLAIN, SNIFF_BYTES, decode_log, plain, sniff_log, unplain_number
 from validation.base.yamlio import check_regular_file
 from slam.recording import relative_poses
 from slam.recording import Recording, Scans, Trajectory
@@ -143,8 +143,7 @@ def _floats(parts: list[str], where: str, expected: str, names: Callable[[int], 
         raise GslamError(f"{where}: expected {expected}") from None
     odd = unplain_number(parts)
     if odd is not None:
-        raise GslamError(f"{where}: expected {expected}; {names(odd)} is {parts[odd]!r}, not a plain number (ASCII "
-                         "digits, no '_')")
+        raise GslamError(f"{where}: expected {expected}; {names(odd)} is {parts[odd]!r}, {NOT_PLAIN}")
     bad = ~np.isfinite(values)
     if bad.any():
         k = int(np.argmax(bad))
@@ -166,9 +165,8 @@ def _count(parts: list[str], i: int, where: str, expected: str) -> int:
         n = int(parts[i])
     except (IndexError, ValueError):
         raise GslamError(f"{where}: expected {expected}") from None
-    if unplain_number([parts[i]]) is not None:
-        raise GslamError(f"{where}: expected {expected}; the beam count is {parts[i]!r}, not a plain number (ASCII "
-                         "digits, no '_')")
+    if not plain(parts[i]):
+        raise GslamError(f"{where}: expected {expected}; the beam count is {parts[i]!r}, {NOT_PLAIN}")
     if n < 1:
         raise GslamError(f"{where}: expected a positive beam count in {expected}")
     return n
@@ -218,7 +216,7 @@ def _parse_flaser(d: _Log, parts: list[str], where: str) -> None:
     given = d.params.get("laser_front_laser_fov", str(DEFAULT_FOV_DEG))
     try:
         fov = float(given)
-        if unplain_number([given]) is not None:
+        if not plain(given):
             raise ValueError(given)
     except ValueError:
         raise GslamError(f"{where}: expected a number in PARAM laser_front_laser_fov") from None
@@ -235,9 +233,8 @@ def _parse_robotlaser(d: _Log, parts: list[str], where: str) -> None:
         m = int(parts[9 + n])
     except (IndexError, ValueError):
         raise GslamError(f"{where}: expected {_ROBOTLASER1}") from None
-    if unplain_number([parts[9 + n]]) is not None:
-        raise GslamError(f"{where}: expected {_ROBOTLASER1}; the remission count is {parts[9 + n]!r}, not a plain "
-                         "number (ASCII digits, no '_')")
+    if not plain(parts[9 + n]):
+        raise GslamError(f"{where}: expected {_ROBOTLASER1}; the remission count is {parts[9 + n]!r}, {NOT_PLAIN}")
     tail = 10 + n + max(m, 0)  # laser pose, robot pose, tv rv fwd side turn_axis, ts
     if m < 0 or len(parts) < tail + 14:
         raise GslamError(f"{where}: expected {_ROBOTLASER1} ({tail + 14} fields, got {len(parts)})")
@@ -384,7 +381,7 @@ def _range_max(d: _Log, ranges: np.ndarray) -> float:
     param = d.params.get("robot_front_laser_max")
     if param is not None:
         try:
-            if unplain_number([param]) is not None:
+            if not plain(param):
                 raise ValueError(param)
             return float(param)
         except ValueError:

@@ -21,6 +21,15 @@ BOM = "\ufeff"
 _NOT_UTF8 = re.compile("[\udc80-\udcff]")
 
 
+NOT_PLAIN = "not a plain number (ASCII digits, no '_')"
+"""Why :func:`unplain_number` refuses a field, for the readers' messages."""
+
+
+def plain(text: str) -> bool:
+    """Whether ``text`` holds only ASCII and no ``_`` (see :func:`unplain_number`)."""
+    return text.isascii() and "_" not in text
+
+
 def unplain_number(parts: list[str]) -> int | None:
     """The index of the first of ``parts`` that Python reads as a number but
     C's ``strtod``, and so the tools that write and read these logs, do not:
@@ -28,10 +37,9 @@ def unplain_number(parts: list[str]) -> int | None:
     of another script (fullwidth, Arabic-Indic); None if every part is plain
     ASCII. A log holding one was edited or garbled: read as Python reads it,
     its value would differ from the one its tools see."""
-    joined = "".join(parts)
-    if joined.isascii() and "_" not in joined:
+    if plain("".join(parts)):
         return None
-    return next(k for k, p in enumerate(parts) if not p.isascii() or "_" in p)
+    return next(k for k, p in enumerate(parts) if not plain(p))
 
 
 def check_exists(path: Path) -> None:

@@ -40,7 +40,7 @@ from slam.errors import GslamError
 from validation.base.bounds import shown_beside
 from validation.base.geometry import wrap_angle
 from slam.readers.carmen import chain_steps
-from slam.readers.files import SNIFF_BYTES, check_exists, decode_log, sniff_log, unplain_number
+from slam.readers.files import NOT_PLAIN, SNIFF_BYTES, check_exists, decode_log, sniff_log, unplain_number
 from validation.base.yamlio import check_regular_file
 from slam.recording import Gyro, PlaceMatches, Recording, Trajectory
 
@@ -112,7 +112,7 @@ def _read_rows(path: Path, wanted: dict[str, tuple[int, str]]) -> dict[str, np.n
         odd = unplain_number(parts[1 : count + 1])
         if odd is not None:
             raise GslamError(f"{path}:{lineno}: expected {expected}; {expected.split()[odd + 1]} is "
-                             f"{parts[odd + 1]!r}, not a plain number (ASCII digits, no '_')")
+                             f"{parts[odd + 1]!r}, {NOT_PLAIN}")
         if len(values) < count or not all(np.isfinite(values)):
             raise GslamError(f"{path}:{lineno}: expected {expected}")
         given, known = len(parts) - 1, len(expected.split()) - 1

@@ -252,8 +252,7 @@ class AblationSpec(StrictFrozen):
         named as YAML read it, not by pydantic's index for it."""
         for key in variants if isinstance(variants, dict) else ():
             if not isinstance(key, str):
-                shown = yaml.safe_dump(key, default_flow_style=True).split("\n")[0]
-                raise ValueError(f"name {shown}: YAML reads it as {yaml_kind(key)}, not as a name; quote it")
+                raise ValueError(f"name {_shown(key)}: YAML reads it as {yaml_kind(key)}, not as a name; quote it")
         return variants
 
     @model_validator(mode="after")
