@@ -42,9 +42,7 @@ def gslam_map(tmp_path: Path, relative: str, config: str, gating: str = "off", *
 def test_carmen_intel_graph_and_validation(tmp_path):
     m = gslam_map(tmp_path, "carmen/intel-corrected.log.gz", "carmen.yaml", "on")
     assert m["n_poses"] == 910
-    # One scan matching factor per step, but for the steps the gating
-    # excludes in every direction (measured: 2).
-    assert 900 <= m["factor_counts"]["scan_matching"] <= 909
+    assert m["factor_counts"]["scan_matching"] == 909
     # Measured: 8.0 % over 1 m and 9.2 % over 10 m of the corrected path.
     assert m["rpe_trans_pct_1m"] < 12.0 and m["rpe_trans_pct_10m"] < 14.0
     # One scan every 2.9 s: each stream is judged by its own sample period,
