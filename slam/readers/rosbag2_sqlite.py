@@ -57,12 +57,20 @@ class PlainBag:
         self._conn = conn
 
     def raw(self, topic: str) -> list[bytes]:
-        """The CDR bytes of every message on ``topic``, in rosbags' order."""
-        query = "SELECT data FROM messages WHERE topic_id = ? ORDER BY timestamp, id"
+        """The CDR bytes of every message on ``topic``, in rosbags' order;
+        a message stored as text or a number (a database edited by hand, or
+        written by another tool) is refused naming the topic and the row."""
+        query = "SELECT id, data FROM messages WHERE topic_id = ? ORDER BY timestamp, id"
         try:
-            return [bytes(data) for (data,) in self._conn.execute(query, (self.topics[topic].id,))]
+            rows = self._conn.execute(query, (self.topics[topic].id,)).fetchall()
         except sqlite3.Error as err:
             raise GslamError(f"{self.db}: corrupt bag ({err})") from None
+        for k, (row, data) in enumerate(rows):
+            if not isinstance(data, bytes):
+                raise GslamError(f"{self.db}: corrupt bag: topic '{topic}', message {k} (row {row} of table messages) "
+                                 f"holds {type(data).__name__ if data is not None else 'nothing'}; expected the bytes "
+                                 "of a CDR message")
+        return [data for _, data in rows]
 
     def close(self) -> None:
         self._conn.close()
