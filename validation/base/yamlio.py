@@ -98,20 +98,21 @@ def decode_text(data: bytes, source: str, what: str = "file", kind: str = "text"
     """UTF-8 text (a leading byte-order mark dropped), with a one-line
     error that says what the bytes are: binary, UTF-16 or UTF-32, or text with a byte
     that is not UTF-8 (Latin-1?) at a line."""
+    expected = what if what.split(" ")[0] == kind else f"{kind} {what}"  # a 'YAML file' is not a 'YAML YAML file'
     if data.startswith(_BOM):
         data = data[len(_BOM):]
     wide = wide_encoding(data)
     if wide is not None:
-        raise ValidationError(f"{source}: {wide} text; expected a {kind} {what} in UTF-8 (save it as UTF-8)")
+        raise ValidationError(f"{source}: {wide} text; expected a {expected} in UTF-8 (save it as UTF-8)")
     if b"\0" in data:
-        raise ValidationError(f"{source}: binary content; expected a {kind} {what} (text)")
+        raise ValidationError(f"{source}: binary content; expected a {expected} (text)")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as e:
         line = data.count(b"\n", 0, e.start) + 1
         byte = data[e.start]
         raise ValidationError(f"{source}: line {line}: byte 0x{byte:02X} is not UTF-8 text (a Latin-1 character?); "
-                              f"expected a {kind} {what} in UTF-8") from None
+                              f"expected a {expected} in UTF-8") from None
 
 
 def read_text(path: str | Path, what: str = "file", kind: str = "YAML") -> str:
