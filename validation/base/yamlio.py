@@ -239,20 +239,15 @@ def yaml_kind(value: Any) -> str:
     return f"a {type(value).__name__}"
 
 
-class Strict(BaseModel):
-    """The base of every config model of the project: an unknown key is an
-    error (a typo in an ablation must not silently run the default), NaN
-    and infinity are refused, and an assignment is validated as a loaded
-    value is."""
-
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
+class NoTruthValueForANumber(BaseModel):
+    """A model whose numbers may not be given as true or false: pydantic
+    would take a YAML ``true`` or JSON ``false`` for the number 1 or 0,
+    alone or inside a list of numbers (a waypoint ``[1.0, yes]``, seeds
+    ``[true]``, a fault interval ``[true, 2]``)."""
 
     @model_validator(mode="before")
     @classmethod
     def _no_truth_value_for_a_number(cls, data: Any) -> Any:
-        """``max_iterations: true`` is a slip, not 1: pydantic would take a
-        YAML ``true`` or ``false`` for the number 1 or 0, alone or inside a
-        list of numbers (a waypoint ``[1.0, yes]``, seeds ``[true]``)."""
         if isinstance(data, dict):
             for name, field in cls.model_fields.items():
                 where = _truth_value_for_a_number(field.annotation, data.get(field.alias or name))
@@ -260,6 +255,15 @@ class Strict(BaseModel):
                     path, value = where
                     raise ValueError(f"{'.'.join([name, *path])}: expected a number, not {str(value).lower()}")
         return data
+
+
+class Strict(NoTruthValueForANumber):
+    """The base of every config model of the project: an unknown key is an
+    error (a typo in an ablation must not silently run the default), NaN
+    and infinity are refused, a truth value is no number, and an
+    assignment is validated as a loaded value is."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
 
 
 def _numeric(tp: Any) -> bool:
