@@ -52,7 +52,7 @@ from slam.readers.rosbag_imu import _CompassImuStream, _CompassMagStream, _GyroS
 from slam.readers.rosbag_poses import _GpsStream, _PoseStream
 from slam.readers.rosbag_scans import _ScanStream
 from slam.readers.rosbag_streams import _NS, IMU, LASER_SCAN, MAGNETIC_FIELD, NAV_SAT_FIX, ODOMETRY, POSE_STAMPED, _Stream
-from validation.base.yamlio import SAFE_LOADER, check_regular_file
+from validation.base.yamlio import SAFE_LOADER, check_regular_file, read_text
 from slam.recording import Recording, Scans
 
 # The reader's public names, with the message types and world_yaw_rate of the
@@ -130,16 +130,27 @@ def resolve_bag_path(path: Path) -> Path:
 
 
 def _check_listed_files(path: Path) -> None:
-    """Each file a rosbag2 folder's metadata.yaml lists is a name of a file
-    in that folder: rosbags reads '../x.db3' or '/elsewhere/x.db3' as
-    'x.db3' of the folder (and says that one is missing), the plain reader
-    of :mod:`rosbag2_sqlite` would read the file outside, another
-    recording's. Metadata that is not a mapping of names is left to rosbags
-    to refuse."""
+    """The folder's metadata.yaml is UTF-8 text holding a mapping of
+    rosbag2_bagfile_information (rosbags said 'NoneType' object is not
+    subscriptable, or named a byte's position in the file), and each file
+    it lists is a name of a file in that folder: rosbags reads '../x.db3'
+    or '/elsewhere/x.db3' as 'x.db3' of the folder (and says that one is
+    missing), the plain reader of :mod:`rosbag2_sqlite` would read the file
+    outside, another recording's. YAML that does not parse, and metadata
+    whose file list is not a list, are left to rosbags to refuse."""
+    meta_file = path / "metadata.yaml"
+    text = read_text(meta_file, "bag metadata file", "YAML")
     try:
-        info = yaml.load((path / "metadata.yaml").read_text(), Loader=SAFE_LOADER)["rosbag2_bagfile_information"]
+        tree = yaml.load(text, Loader=SAFE_LOADER)
+    except Exception:  # YAML rosbags refuses in its own words
+        return
+    info = tree.get("rosbag2_bagfile_information") if isinstance(tree, dict) else None
+    if not isinstance(info, dict):
+        raise GslamError(f"{meta_file}: expected a mapping holding rosbag2_bagfile_information (the metadata "
+                         f"ros2 bag record writes), found {_metadata_held(tree)}")
+    try:
         listed = list(info["relative_file_paths"])
-    except Exception:  # any YAML, or none: rosbags says what it makes of it
+    except Exception:  # rosbags says what it makes of it
         return
     for name in listed:
         if not isinstance(name, str) or name in ("", ".", "..") or PurePath(name).name != name:
@@ -148,6 +159,17 @@ def _check_listed_files(path: Path) -> None:
         if not (path / name).is_file():
             raise GslamError(f"{path / 'metadata.yaml'}: relative_file_paths lists {name!r}, which is no file "
                              f"in {path}; expected the bag's own files, beside metadata.yaml (a bag copied in part?)")
+
+
+def _metadata_held(tree: Any) -> str:
+    """What a metadata.yaml without a mapping of rosbag2_bagfile_information holds, in a few words."""
+    if tree is None:
+        return "an empty file"
+    if not isinstance(tree, dict):
+        return f"a YAML {type(tree).__name__}"
+    if "rosbag2_bagfile_information" not in tree:
+        return "keys " + ", ".join(repr(key) for key in list(tree)[:3])
+    return f"rosbag2_bagfile_information of a {type(tree['rosbag2_bagfile_information']).__name__}"
 
 
 def open_bag(path: Path) -> Any:
