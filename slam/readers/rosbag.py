@@ -175,7 +175,23 @@ def _metadata_held(tree: Any) -> str:
 def open_bag(path: Path) -> Any:
     """An open ``rosbags`` reader of the bag at ``path`` (as for
     :func:`resolve_bag_path`); the caller closes it."""
-    return _open_reader(resolve_bag_path(path))
+    path = resolve_bag_path(path)
+    return _open_reader(path, _storage_read(path))
+
+
+def _storage_read(path: Path) -> list[Path] | None:
+    """The files to read instead of the rosbag2 folder ``path`` when its
+    metadata.yaml disagrees with them on the topics they hold
+    (:func:`rosbag2_sqlite.metadata_mismatch`), said in one warning; None
+    when the folder is read as it is. The files are what was recorded;
+    read through the metadata, a misstated topic gave no messages."""
+    mismatch = rosbag2_sqlite.metadata_mismatch(path) if path.is_dir() else None
+    if mismatch is None:
+        return None
+    more = f" (and {mismatch.count - 1} more such difference{'s' if mismatch.count > 2 else ''})" if mismatch.count > 1 else ""
+    log.warning("%s: %s%s; read as %s hold%s them", path / "metadata.yaml", mismatch.said, more,
+                " and ".join(f.name for f in mismatch.files), "" if len(mismatch.files) > 1 else "s")
+    return mismatch.files
 
 
 def _make_streams(path: Path, config: InputConfig) -> list[_Stream]:
@@ -220,8 +236,11 @@ def check_magic(path: Path) -> None:
         raise GslamError(f"{path}: not a readable ROS bag (a {path.suffix} file starts with {magic!r}, this one with {head!r})")
 
 
-def _open_reader(path: Path) -> Any:
-    check_magic(path)
+def _open_reader(path: Path, files: list[Path] | None = None) -> Any:
+    """An open rosbags reader of ``path``, or of its storage ``files``
+    instead (see :func:`_storage_read`)."""
+    for file in files or [path]:
+        check_magic(file)
     try:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
@@ -230,7 +249,7 @@ def _open_reader(path: Path) -> Any:
     # Bags without embedded definitions (old rosbag2 sqlite files) need one.
     store = get_typestore(Stores.ROS1_NOETIC if path.suffix == ".bag" else Stores.LATEST)
     try:
-        reader = AnyReader([path], default_typestore=store)
+        reader = AnyReader(files or [path], default_typestore=store)
         reader.open()
     except Exception as err:  # rosbags raises many types for foreign or broken files
         files = rosbag_mcap.mcap_files(path)
@@ -428,6 +447,7 @@ def read_rosbag(path: str | Path, config: InputConfig, on_scans: ScansHook | Non
     own scans are relative to ``t0``, as every stream).
     """
     path = resolve_bag_path(Path(path))
+    storage = _storage_read(path)
     streams = _make_streams(path, config)
     counts: dict[str, int] = {}
     done: list[_Stream] = []
@@ -445,7 +465,7 @@ def read_rosbag(path: str | Path, config: InputConfig, on_scans: ScansHook | Non
             plain.close()
     rest = [s for s in streams if s.topic not in counts]
     if rest:
-        reader = _open_reader(path)
+        reader = _open_reader(path, storage)
         try:
             wanted = _connections(reader, path, rest)
             streams = [s for s in streams if s.topic in counts or s in rest]  # absent optional ones dropped
