@@ -290,6 +290,16 @@ ERRORS: list[Case] = [
                                                               for k in range(100)) + LOOP + "\n"),
            "X_Input.txt: odom2 line #2: expected increasing times, got 0.0 after 0.0"),
       )),
+    # -- a ground truth beside the log that is no file: mapped without truth before, saying there was none --
+    *(Case(f"librsf-ground-truth-{name}", LIBRSF, says, both(librsf_with(LOOP), make))
+      for name, make, says in (
+          ("a-folder", lambda d, w: (d / "X_GT.txt").mkdir(), "X_GT.txt: cannot read libRSF ground truth (a folder; "
+                                                              "expected a file)"),
+          ("a-named-pipe", lambda d, w: os.mkfifo(d / "X_GT.txt"), "X_GT.txt: cannot read libRSF ground truth: it is a "
+                                                                   "named pipe, not a regular file"),
+          ("a-link-to-nothing", lambda d, w: (d / "X_GT.txt").symlink_to(d / "gone.txt"),
+           "X_GT.txt: a symbolic link to"),
+      )),
     # -- CARMEN logs cut short or joined to bytes of no log --
     Case("carmen-last-line-cut", CARMEN, "c.log:118: expected FLASER n r_1..r_n x y theta odom_x odom_y odom_theta ts "
          "host logger_ts (192 fields, got 9)",
