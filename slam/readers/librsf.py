@@ -58,7 +58,8 @@ _LOOP = "loop t t_other weight"
 
 def dataset_files(path: str | Path) -> tuple[Path, Path | None]:
     """``(input, groundtruth or None)`` for a ``*_Input.txt``, a ``*_GT.txt``
-    or a folder holding exactly one ``*_Input.txt``."""
+    or a folder holding exactly one ``*_Input.txt``; None when no
+    ``*_GT.txt`` is beside the input."""
     path = Path(path)
     check_exists(path)
     if path.is_dir():
@@ -76,7 +77,13 @@ def dataset_files(path: str | Path) -> tuple[Path, Path | None]:
     if not name.endswith(INPUT_SUFFIX):
         raise GslamError(f"{path}: expected a libRSF *{INPUT_SUFFIX} or *{GT_SUFFIX} file")
     gt = path.with_name(name[: -len(INPUT_SUFFIX)] + GT_SUFFIX)
-    return path, gt if gt.is_file() else None
+    if not (gt.exists() or gt.is_symlink()):
+        return path, None
+    # One there that is no file (a folder, a named pipe, a link to nothing)
+    # is named, not taken for none: the run would be scored without truth.
+    check_exists(gt)
+    check_regular_file(gt, "libRSF ground truth")
+    return path, gt
 
 
 def looks_like_librsf(path: str | Path) -> bool:

@@ -28,12 +28,12 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Annotated, Callable, Mapping, Protocol
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import ConfigDict, Field, ValidationError
 
 from slam.config import GpsInputConfig, InputConfig
 from slam.readers.data_checks import check_recording, check_time_offsets
 from validation.base.yamlio import read_text
-from validation.base.yamlio import check_regular_file, unique_keys
+from validation.base.yamlio import MAX_INT_DIGITS, NoTruthValueForANumber, check_regular_file, unique_keys
 from slam.errors import GslamError
 from validation.base import bounds
 from validation.base.bounds import within
@@ -152,7 +152,7 @@ def guess_format(path: str | Path) -> str:
 # --- sidecar -------------------------------------------------------------
 
 
-class _Sidecar(BaseModel):
+class _Sidecar(NoTruthValueForANumber):
     # Keys added by newer simulators are ignored: this is data, not a config.
     model_config = ConfigDict(extra="ignore", allow_inf_nan=False)
 
@@ -179,7 +179,7 @@ class Sidecar(_Sidecar):
     scenario: str = ""
     seed: int | None = None
     t0: float
-    duration_s: float | None = None
+    duration_s: Annotated[float, Field(ge=0.0)] | None = None
     faults: dict[str, list[tuple[float, float]]] = Field(default_factory=dict)
     magnetic_reference: _MagneticReference | None = None
     gps_datum: _Datum | None = None
@@ -189,12 +189,21 @@ def _no_constant(name: str) -> float:
     raise ValueError(f"{name} is not a number; expected finite numbers")
 
 
+def _plain_int(digits: str) -> int:
+    """An integer of truth.json, refused past :data:`MAX_INT_DIGITS` digits
+    (Python's own limit, 4300, said 'use sys.set_int_max_str_digits()')."""
+    if len(digits.lstrip("-")) > MAX_INT_DIGITS:
+        raise ValueError(f"an integer of {len(digits.lstrip('-')):,} digits ({digits[:8]}...); expected a number of "
+                         f"at most {MAX_INT_DIGITS} digits")
+    return int(digits)
+
+
 def load_sidecar(path: str | Path) -> Sidecar:
     """Read and check a ``truth.json``; one-line :class:`GslamError` if bad."""
     path = Path(path)
     text = read_text(path, "truth.json sidecar", "JSON")
     try:
-        data = json.loads(text, parse_constant=_no_constant, object_pairs_hook=unique_keys)
+        data = json.loads(text, parse_constant=_no_constant, parse_int=_plain_int, object_pairs_hook=unique_keys)
     except json.JSONDecodeError as e:
         raise GslamError(f"{path}: line {e.lineno}: invalid JSON ({e.msg})") from None
     except ValueError as e:
@@ -205,8 +214,9 @@ def load_sidecar(path: str | Path) -> Sidecar:
         sidecar = Sidecar.model_validate(data)
     except ValidationError as e:
         first = e.errors()[0]
-        loc = ".".join(str(p) for p in first["loc"]) or "top level"
-        raise GslamError(f"{path}: {loc}: {first['msg'].removeprefix('Value error, ')}") from None
+        loc = ".".join(str(p) for p in first["loc"])
+        where = f"{loc}: " if loc else ""  # a check of the whole names its key itself
+        raise GslamError(f"{path}: {where}{first['msg'].removeprefix('Value error, ')}") from None
     unknown = sorted(set(sidecar.faults) - set(COMPONENTS) - set(SENSOR_MODALITIES))
     if unknown:
         raise GslamError(

@@ -52,7 +52,7 @@ from slam.readers.rosbag_imu import _CompassImuStream, _CompassMagStream, _GyroS
 from slam.readers.rosbag_poses import _GpsStream, _PoseStream
 from slam.readers.rosbag_scans import _ScanStream
 from slam.readers.rosbag_streams import _NS, IMU, LASER_SCAN, MAGNETIC_FIELD, NAV_SAT_FIX, ODOMETRY, POSE_STAMPED, _Stream
-from validation.base.yamlio import SAFE_LOADER, check_regular_file
+from validation.base.yamlio import SAFE_LOADER, check_regular_file, read_text
 from slam.recording import Recording, Scans
 
 # The reader's public names, with the message types and world_yaw_rate of the
@@ -130,16 +130,27 @@ def resolve_bag_path(path: Path) -> Path:
 
 
 def _check_listed_files(path: Path) -> None:
-    """Each file a rosbag2 folder's metadata.yaml lists is a name of a file
-    in that folder: rosbags reads '../x.db3' or '/elsewhere/x.db3' as
-    'x.db3' of the folder (and says that one is missing), the plain reader
-    of :mod:`rosbag2_sqlite` would read the file outside, another
-    recording's. Metadata that is not a mapping of names is left to rosbags
-    to refuse."""
+    """The folder's metadata.yaml is UTF-8 text holding a mapping of
+    rosbag2_bagfile_information (rosbags said 'NoneType' object is not
+    subscriptable, or named a byte's position in the file), and each file
+    it lists is a name of a file in that folder: rosbags reads '../x.db3'
+    or '/elsewhere/x.db3' as 'x.db3' of the folder (and says that one is
+    missing), the plain reader of :mod:`rosbag2_sqlite` would read the file
+    outside, another recording's. YAML that does not parse, and metadata
+    whose file list is not a list, are left to rosbags to refuse."""
+    meta_file = path / "metadata.yaml"
+    text = read_text(meta_file, "bag metadata file", "YAML")
     try:
-        info = yaml.load((path / "metadata.yaml").read_text(), Loader=SAFE_LOADER)["rosbag2_bagfile_information"]
+        tree = yaml.load(text, Loader=SAFE_LOADER)
+    except Exception:  # YAML rosbags refuses in its own words
+        return
+    info = tree.get("rosbag2_bagfile_information") if isinstance(tree, dict) else None
+    if not isinstance(info, dict):
+        raise GslamError(f"{meta_file}: expected a mapping holding rosbag2_bagfile_information (the metadata "
+                         f"ros2 bag record writes), found {_metadata_held(tree)}")
+    try:
         listed = list(info["relative_file_paths"])
-    except Exception:  # any YAML, or none: rosbags says what it makes of it
+    except Exception:  # rosbags says what it makes of it
         return
     for name in listed:
         if not isinstance(name, str) or name in ("", ".", "..") or PurePath(name).name != name:
@@ -150,10 +161,37 @@ def _check_listed_files(path: Path) -> None:
                              f"in {path}; expected the bag's own files, beside metadata.yaml (a bag copied in part?)")
 
 
+def _metadata_held(tree: Any) -> str:
+    """What a metadata.yaml without a mapping of rosbag2_bagfile_information holds, in a few words."""
+    if tree is None:
+        return "an empty file"
+    if not isinstance(tree, dict):
+        return f"a YAML {type(tree).__name__}"
+    if "rosbag2_bagfile_information" not in tree:
+        return "keys " + ", ".join(repr(key) for key in list(tree)[:3])
+    return f"rosbag2_bagfile_information of a {type(tree['rosbag2_bagfile_information']).__name__}"
+
+
 def open_bag(path: Path) -> Any:
     """An open ``rosbags`` reader of the bag at ``path`` (as for
     :func:`resolve_bag_path`); the caller closes it."""
-    return _open_reader(resolve_bag_path(path))
+    path = resolve_bag_path(path)
+    return _open_reader(path, _storage_read(path))
+
+
+def _storage_read(path: Path) -> list[Path] | None:
+    """The files to read instead of the rosbag2 folder ``path`` when its
+    metadata.yaml disagrees with them on the topics they hold
+    (:func:`rosbag2_sqlite.metadata_mismatch`), said in one warning; None
+    when the folder is read as it is. The files are what was recorded;
+    read through the metadata, a misstated topic gave no messages."""
+    mismatch = rosbag2_sqlite.metadata_mismatch(path) if path.is_dir() else None
+    if mismatch is None:
+        return None
+    more = f" (and {mismatch.count - 1} more such difference{'s' if mismatch.count > 2 else ''})" if mismatch.count > 1 else ""
+    log.warning("%s: %s%s; read as %s hold%s them", path / "metadata.yaml", mismatch.said, more,
+                " and ".join(f.name for f in mismatch.files), "" if len(mismatch.files) > 1 else "s")
+    return mismatch.files
 
 
 def _make_streams(path: Path, config: InputConfig) -> list[_Stream]:
@@ -198,8 +236,11 @@ def check_magic(path: Path) -> None:
         raise GslamError(f"{path}: not a readable ROS bag (a {path.suffix} file starts with {magic!r}, this one with {head!r})")
 
 
-def _open_reader(path: Path) -> Any:
-    check_magic(path)
+def _open_reader(path: Path, files: list[Path] | None = None) -> Any:
+    """An open rosbags reader of ``path``, or of its storage ``files``
+    instead (see :func:`_storage_read`)."""
+    for file in files or [path]:
+        check_magic(file)
     try:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
@@ -208,7 +249,7 @@ def _open_reader(path: Path) -> Any:
     # Bags without embedded definitions (old rosbag2 sqlite files) need one.
     store = get_typestore(Stores.ROS1_NOETIC if path.suffix == ".bag" else Stores.LATEST)
     try:
-        reader = AnyReader([path], default_typestore=store)
+        reader = AnyReader(files or [path], default_typestore=store)
         reader.open()
     except Exception as err:  # rosbags raises many types for foreign or broken files
         files = rosbag_mcap.mcap_files(path)
@@ -406,6 +447,7 @@ def read_rosbag(path: str | Path, config: InputConfig, on_scans: ScansHook | Non
     own scans are relative to ``t0``, as every stream).
     """
     path = resolve_bag_path(Path(path))
+    storage = _storage_read(path)
     streams = _make_streams(path, config)
     counts: dict[str, int] = {}
     done: list[_Stream] = []
@@ -423,7 +465,7 @@ def read_rosbag(path: str | Path, config: InputConfig, on_scans: ScansHook | Non
             plain.close()
     rest = [s for s in streams if s.topic not in counts]
     if rest:
-        reader = _open_reader(path)
+        reader = _open_reader(path, storage)
         try:
             wanted = _connections(reader, path, rest)
             streams = [s for s in streams if s.topic in counts or s in rest]  # absent optional ones dropped

@@ -15,6 +15,10 @@ rosbag2 since ROS 2 Iron) is the hash of the standard definition
 cross-check with rosbags is needed. Bags without hashes (Humble and
 older), compressed, split or MCAP bags, and foreign types are read with
 rosbags. The file is opened read-only.
+
+:func:`metadata_mismatch` says where a bag folder's metadata.yaml
+disagrees with its sqlite3 files on their topics; the reader then reads
+the files themselves, as the plain reader always does.
 """
 
 from __future__ import annotations
@@ -57,12 +61,20 @@ class PlainBag:
         self._conn = conn
 
     def raw(self, topic: str) -> list[bytes]:
-        """The CDR bytes of every message on ``topic``, in rosbags' order."""
-        query = "SELECT data FROM messages WHERE topic_id = ? ORDER BY timestamp, id"
+        """The CDR bytes of every message on ``topic``, in rosbags' order;
+        a message stored as text or a number (a database edited by hand, or
+        written by another tool) is refused naming the topic and the row."""
+        query = "SELECT id, data FROM messages WHERE topic_id = ? ORDER BY timestamp, id"
         try:
-            return [bytes(data) for (data,) in self._conn.execute(query, (self.topics[topic].id,))]
+            rows = self._conn.execute(query, (self.topics[topic].id,)).fetchall()
         except sqlite3.Error as err:
             raise GslamError(f"{self.db}: corrupt bag ({err})") from None
+        for k, (row, data) in enumerate(rows):
+            if not isinstance(data, bytes):
+                raise GslamError(f"{self.db}: corrupt bag: topic '{topic}', message {k} (row {row} of table messages) "
+                                 f"holds {type(data).__name__ if data is not None else 'nothing'}; expected the bytes "
+                                 "of a CDR message")
+        return [data for _, data in rows]
 
     def close(self) -> None:
         self._conn.close()
@@ -99,6 +111,78 @@ def _open_plain(path: Path) -> PlainBag | None:
         conn.close()
         return None
     return PlainBag(db, conn, topics)
+
+
+@dataclass(frozen=True)
+class Mismatch:
+    """What a rosbag2 folder's metadata.yaml says of its topics that its
+    sqlite3 files do not hold: the first difference in words, how many
+    there are, and the files, which are read instead."""
+
+    said: str
+    count: int
+    files: list[Path]
+
+
+def metadata_mismatch(path: Path) -> Mismatch | None:
+    """Where the metadata.yaml of the rosbag2 folder ``path`` disagrees with
+    its uncompressed sqlite3 files on the topics they hold (a name, a
+    message type, a serialization format, a type hash or a message count),
+    or None if it agrees, or if the bag is of another storage or cannot be
+    compared (the readers say why). rosbags takes the topics from the
+    metadata and matches the files' messages to them: a topic whose type,
+    format or hash the metadata misstates gave no messages at all, one the
+    metadata leaves out was not in the bag, though the file holds them."""
+    try:
+        return _metadata_mismatch(path)
+    except (OSError, sqlite3.Error, yaml.YAMLError, KeyError, TypeError, ValueError, AttributeError):
+        return None
+
+
+def _metadata_mismatch(path: Path) -> Mismatch | None:
+    info = yaml.load((path / "metadata.yaml").read_text(), Loader=SAFE_LOADER)["rosbag2_bagfile_information"]
+    if info.get("storage_identifier") != "sqlite3" or info.get("compression_mode"):
+        return None
+    files = [path / name for name in info["relative_file_paths"]]
+    listed: dict[str, tuple] = {}
+    for entry in info["topics_with_message_count"]:
+        meta = entry["topic_metadata"]
+        listed[meta["name"]] = (meta["type"], meta["serialization_format"], meta.get("type_description_hash") or "",
+                                entry["message_count"])
+    held: dict[str, list] = {}
+    for file in files:
+        conn = sqlite3.connect(f"{file.resolve().as_uri()}?mode=ro", uri=True)
+        try:
+            hashed = "type_description_hash" in {row[1] for row in conn.execute("PRAGMA table_info(topics)")}
+            type_hash_column = "type_description_hash" if hashed else "''"
+            counts = dict(conn.execute("SELECT topic_id, count(*) FROM messages GROUP BY topic_id"))
+            rows = conn.execute(f"SELECT id, name, type, serialization_format, {type_hash_column} FROM topics")
+            for topic_id, name, msgtype, fmt, type_hash in rows:
+                count = counts.get(topic_id, 0)
+                if name in held:
+                    held[name][3] += count
+                else:
+                    held[name] = [msgtype, fmt, type_hash or "", count]
+        finally:
+            conn.close()
+    where = " and ".join(f.name for f in files)
+    found = []
+    for name in sorted(set(listed) | set(held)):
+        if name not in held:
+            found.append(f"lists topic '{name}', which {where} does not hold")
+        elif name not in listed:
+            found.append(f"does not list topic '{name}', which {where} holds ({held[name][0]})")
+        else:
+            (m_type, m_fmt, m_hash, m_count), (d_type, d_fmt, d_hash, d_count) = listed[name], held[name]
+            if m_type != d_type:
+                found.append(f"lists topic '{name}' as {m_type}, {where} holds it as {d_type}")
+            elif m_fmt != d_fmt:
+                found.append(f"lists topic '{name}' as {m_fmt}, {where} holds it as {d_fmt}")
+            elif m_hash and d_hash and m_hash != d_hash:
+                found.append(f"lists topic '{name}' with type hash {m_hash}, {where} holds it with {d_hash}")
+            elif m_count != d_count:
+                found.append(f"lists {m_count} messages on topic '{name}', {where} holds {d_count}")
+    return Mismatch(found[0], len(found), files) if found else None
 
 
 def _standard_topics(conn: sqlite3.Connection) -> dict[str, Topic] | None:

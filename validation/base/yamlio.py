@@ -98,20 +98,21 @@ def decode_text(data: bytes, source: str, what: str = "file", kind: str = "text"
     """UTF-8 text (a leading byte-order mark dropped), with a one-line
     error that says what the bytes are: binary, UTF-16 or UTF-32, or text with a byte
     that is not UTF-8 (Latin-1?) at a line."""
+    expected = what if what.split(" ")[0] == kind else f"{kind} {what}"  # a 'YAML file' is not a 'YAML YAML file'
     if data.startswith(_BOM):
         data = data[len(_BOM):]
     wide = wide_encoding(data)
     if wide is not None:
-        raise ValidationError(f"{source}: {wide} text; expected a {kind} {what} in UTF-8 (save it as UTF-8)")
+        raise ValidationError(f"{source}: {wide} text; expected a {expected} in UTF-8 (save it as UTF-8)")
     if b"\0" in data:
-        raise ValidationError(f"{source}: binary content; expected a {kind} {what} (text)")
+        raise ValidationError(f"{source}: binary content; expected a {expected} (text)")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as e:
         line = data.count(b"\n", 0, e.start) + 1
         byte = data[e.start]
         raise ValidationError(f"{source}: line {line}: byte 0x{byte:02X} is not UTF-8 text (a Latin-1 character?); "
-                              f"expected a {kind} {what} in UTF-8") from None
+                              f"expected a {expected} in UTF-8") from None
 
 
 def read_text(path: str | Path, what: str = "file", kind: str = "YAML") -> str:
@@ -238,20 +239,15 @@ def yaml_kind(value: Any) -> str:
     return f"a {type(value).__name__}"
 
 
-class Strict(BaseModel):
-    """The base of every config model of the project: an unknown key is an
-    error (a typo in an ablation must not silently run the default), NaN
-    and infinity are refused, and an assignment is validated as a loaded
-    value is."""
-
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
+class NoTruthValueForANumber(BaseModel):
+    """A model whose numbers may not be given as true or false: pydantic
+    would take a YAML ``true`` or JSON ``false`` for the number 1 or 0,
+    alone or inside a list of numbers (a waypoint ``[1.0, yes]``, seeds
+    ``[true]``, a fault interval ``[true, 2]``)."""
 
     @model_validator(mode="before")
     @classmethod
     def _no_truth_value_for_a_number(cls, data: Any) -> Any:
-        """``max_iterations: true`` is a slip, not 1: pydantic would take a
-        YAML ``true`` or ``false`` for the number 1 or 0, alone or inside a
-        list of numbers (a waypoint ``[1.0, yes]``, seeds ``[true]``)."""
         if isinstance(data, dict):
             for name, field in cls.model_fields.items():
                 where = _truth_value_for_a_number(field.annotation, data.get(field.alias or name))
@@ -259,6 +255,15 @@ class Strict(BaseModel):
                     path, value = where
                     raise ValueError(f"{'.'.join([name, *path])}: expected a number, not {str(value).lower()}")
         return data
+
+
+class Strict(NoTruthValueForANumber):
+    """The base of every config model of the project: an unknown key is an
+    error (a typo in an ablation must not silently run the default), NaN
+    and infinity are refused, a truth value is no number, and an
+    assignment is validated as a loaded value is."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
 
 
 def _numeric(tp: Any) -> bool:
