@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from slam import __version__
-from slam.errors import Terminated, reader_left
+from slam.errors import GslamError, Terminated, reader_left
 from slam.outputs.plot_home import plot_home
 from slam.processes.signals import STOPS, as_interrupt
 from validation.base.errors import InputError
@@ -231,6 +231,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_ablate(args: argparse.Namespace) -> int:
     from slam.commands.ablate import load_spec, run_ablation
 
+    if args.address is not None and args.backend != "ray":  # read by Ray only: ignored in silence otherwise
+        raise GslamError(f"--address {args.address}: a Ray cluster's address, but --backend is {args.backend}; "
+                         "give --backend ray, or leave --address out")
     spec_path = _config_path(args.spec)
     spec = load_spec(spec_path, max_seeds=args.seeds, max_jobs=args.max_jobs)
     res = run_ablation(spec, args.out, workers=args.workers, backend=args.backend, address=args.address,
@@ -314,9 +317,29 @@ def _out_path(text: str) -> str:
     return text
 
 
+class _Once(argparse.Action):
+    """argparse's store, refusing the option a second time: argparse keeps
+    the last in silence (``--out a --out b`` wrote b), where a key given
+    twice to ``--set`` is refused."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        given = namespace.__dict__.setdefault("_given_once", {})
+        if self.dest in given:
+            parser.error(f"argument {'/'.join(self.option_strings)}: given twice ({given[self.dest]!r}, then "
+                         f"{option_string}={values!r}); the second would silently replace the first: give it once")
+        given[self.dest] = values
+        setattr(namespace, self.dest, values)
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse, whose 'expected one argument' says how to give a value
-    that starts with '-' (``--clean -5:10`` reads -5:10 as an option)."""
+    that starts with '-' (``--clean -5:10`` reads -5:10 as an option), and
+    whose options of one value may be given once."""
+
+    def add_argument(self, *args, **kwargs):
+        if kwargs.get("action") is None and args and args[0].startswith("-"):
+            kwargs["action"] = _Once
+        return super().add_argument(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         flag = re.fullmatch(r"argument (--[\w-]+)(?:/\S+)?: expected one argument", message)

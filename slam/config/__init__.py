@@ -129,12 +129,12 @@ class TimeOffsetsConfig(Strict):
     gyro's) gets +0.1; one stamped late gets a negative offset.
     ``gslam calibrate`` measures the yaw streams' offsets against the gyro."""
 
-    scan: float = 0.0
-    gyro: float = 0.0
-    compass: float = 0.0
-    odometry: float = 0.0
-    gps: float = 0.0
-    groundtruth: float = 0.0
+    scan: Annotated[float, bounds.TIME_OFFSET_S] = 0.0
+    gyro: Annotated[float, bounds.TIME_OFFSET_S] = 0.0
+    compass: Annotated[float, bounds.TIME_OFFSET_S] = 0.0
+    odometry: Annotated[float, bounds.TIME_OFFSET_S] = 0.0
+    gps: Annotated[float, bounds.TIME_OFFSET_S] = 0.0
+    groundtruth: Annotated[float, bounds.TIME_OFFSET_S] = 0.0
 
     def shifted(self) -> dict[str, float]:
         """The streams with a non-zero offset."""
@@ -156,7 +156,7 @@ class ExtraOdometryConfig(Strict):
 
     topic: str
     frame: StreamFrameConfig = StreamFrameConfig()
-    time_offset_s: float = 0.0
+    time_offset_s: Annotated[float, bounds.TIME_OFFSET_S] = 0.0
 
 
 class InputConfig(Strict):
@@ -291,7 +291,7 @@ class CompassFactorConfig(FactorConfig):
     its priors together say no more than those. Null: independent errors."""
 
     sigma_yaw_deg: bounds.Sigma_deg = Field(3.0, gt=0.0)
-    correlation_s: float | None = Field(None, gt=0.0)
+    correlation_s: Annotated[float, bounds.CORRELATION_S] | None = Field(None, gt=0.0)
 
 
 class ScanMatchingFactorConfig(FactorConfig):
@@ -361,7 +361,7 @@ class EvaluationConfig(Strict):
     for the oracle and the validation metrics.
     """
 
-    rpe_deltas_m: list[float] = Field(default_factory=lambda: [5.0])
+    rpe_deltas_m: list[Annotated[float, Field(gt=0.0), bounds.PATH_DELTA_M]] = Field(default_factory=lambda: [5.0])
     max_time_offset_s: Annotated[float, bounds.MATCH_OFFSET_S] = Field(0.05, gt=0.0)
     sm_output_faults: bool = True
     sm_fault_window_s: Annotated[float, bounds.within(1e-2, 3600.0, "s", "shorter than any scan period",

@@ -378,13 +378,14 @@ def _read_plain(
     streams: list[_Stream],
     counts: dict[str, int],
     on_scans: Callable[[_Stream], None] | None,
-) -> None:
+) -> list[_Stream]:
     """Read the streams whose topics ``plain`` serves with the standard
     definitions, the scans first (``on_scans`` is called with their stream
     as soon as they are read), adding the number of messages per topic read
-    to ``counts``. A topic whose messages do not decode in bulk is left to
-    rosbags."""
+    to ``counts``; return the streams read. A topic whose messages do not
+    decode in bulk is left to rosbags."""
     by_topic: dict[str, list[_Stream]] = {}
+    read: list[_Stream] = []
     for stream in sorted(streams, key=lambda s: s.name != "scan"):
         topic = plain.topics.get(stream.topic)
         if topic is not None and topic.msgtype in stream.msgtypes and cdr.supported(topic.msgtype):
@@ -405,9 +406,11 @@ def _read_plain(
                 s.add_columns(cols)
         else:
             counts[name] = len(raws)
+            read += group
             scan = next((s for s in group if s.name == "scan"), None)
             if scan is not None and on_scans is not None:
                 on_scans(scan)
+    return read
 
 
 def _raw_messages(reader: Any, path: Path, conns: list[Any]):
@@ -458,12 +461,15 @@ def read_rosbag(path: str | Path, config: InputConfig, on_scans: ScansHook | Non
         on_scans(scan.build(scan.first_ns()))
 
     plain = rosbag2_sqlite.open_plain(path) if path.is_dir() else None
+    read_plain: list[_Stream] = []
     if plain is not None:
         try:
-            _read_plain(plain, streams, counts, scans_read if on_scans is not None else None)
+            read_plain = _read_plain(plain, streams, counts, scans_read if on_scans is not None else None)
         finally:
             plain.close()
-    rest = [s for s in streams if s.topic not in counts]
+    # By stream, not by topic: a stream set to another stream's topic (the
+    # scan on the IMU's) was skipped there for its type and must be checked.
+    rest = [s for s in streams if not any(s is r for r in read_plain)]
     if rest:
         reader = _open_reader(path, storage)
         try:
@@ -474,7 +480,7 @@ def read_rosbag(path: str | Path, config: InputConfig, on_scans: ScansHook | Non
                 scan = first[0]
                 counts.update(_read_messages(reader, path, first, {scan.topic: wanted[scan.topic]}))
                 scans_read(scan)
-            rest = [s for s in rest if s not in done and s.topic not in counts]
+            rest = [s for s in rest if s not in done]
             counts.update(_read_messages(reader, path, rest, {s.topic: wanted[s.topic] for s in rest}))
         finally:
             reader.close()

@@ -175,6 +175,7 @@ def check_bounded(scenario: Scenario, source: str) -> MissionEstimate:
         raise GslamError(f"{source}: {scans} scans of {sensors.laser.beams} beams (sensors.laser) over about "
                          f"{duration:.0f} s; at most {MAX_LASER_VALUES:.0e} ranges in all")
     check_work(scenario, source, duration, scans)
+    check_doors(scenario, source)
     check_route(scenario, source)
     return MissionEstimate(duration, path_m, scans)
 
@@ -185,6 +186,26 @@ def _route_points(robot: RobotConfig, count: int = 200) -> np.ndarray:
     along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
     at = np.linspace(0.0, along[-1], count)
     return np.column_stack([np.interp(at, along, pts[:, 0]), np.interp(at, along, pts[:, 1])])
+
+
+def check_doors(scenario: Scenario, source: str) -> None:
+    """A one-line :class:`GslamError` naming ``source`` for a door that cuts
+    no wall: :mod:`slam.sim.world` cuts a segment whose line passes within
+    1 cm of a door's centre, beside the segment; a door that does so for no
+    segment was ignored in silence (a typo of its centre, a wall moved)."""
+    segs = wall_segments(scenario.world)
+    if not scenario.world.doors:
+        return
+    a, d = segs[:, 0], segs[:, 1] - segs[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    for i, door in enumerate(scenario.world.doors):
+        c = np.asarray(door.center, dtype=float) - a
+        along = (c[:, 0] * d[:, 0] + c[:, 1] * d[:, 1]) / length
+        off = np.abs(d[:, 0] * c[:, 1] - d[:, 1] * c[:, 0]) / length
+        cuts = (off <= 0.01) & (along >= -door.width_m / 2) & (along <= length + door.width_m / 2)
+        if not cuts.any():
+            raise GslamError(f"{source}: world.doors.{i}: the door at ({door.center[0]:g}, {door.center[1]:g}) cuts "
+                             "no wall: its centre lies on none (within 1 cm); give a point of the wall it opens")
 
 
 def check_work(scenario: Scenario, source: str, duration: float, scans: int) -> None:

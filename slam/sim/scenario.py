@@ -99,6 +99,33 @@ class WorldConfig(Strict):
     )
     disturbers: list[Disturber] = Field(default_factory=list)
 
+    @model_validator(mode="after")
+    def _shapes(self) -> "WorldConfig":
+        """What the simulator would use in silence as nothing: an obstacle or
+        a region of no area, a region whose name another one holds (the
+        laser and the slip would be of either). A door that cuts no wall is
+        refused by :func:`slam.sim.budget.check_doors`, once the cost of
+        cutting is known to be bounded."""
+        for i, poly in enumerate(self.obstacles):
+            if _area(poly) == 0.0:
+                raise ValueError(f"obstacles.{i}: its points enclose no area; the laser would see a line or "
+                                 "a point, not an obstacle (give its corners in order round it)")
+        named: dict[str, str] = {}
+        for where, region in [*((f"regions.{i}", r) for i, r in enumerate(self.regions)),
+                              ("default_region", self.default_region)]:
+            if where != "default_region" and _area(region.polygon) == 0.0:
+                raise ValueError(f"{where}.polygon: its points enclose no area; no point of the route lies in it")
+            if region.name in named:
+                raise ValueError(f"{where}.name: {region.name!r} names {named[region.name]} too; give each region "
+                                 "a name of its own")
+            named[region.name] = where
+        return self
+
+
+def _area(polygon: list[Point]) -> float:
+    """The area a polygon's points enclose (shoelace; m^2)."""
+    return abs(sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(polygon, polygon[1:] + polygon[:1]))) / 2.0
+
 
 # --- robot ---------------------------------------------------------------
 

@@ -141,6 +141,15 @@ window over its cell size, on both sides): 2000 makes a grid of at least
 MATCH_OFFSET_S = within(None, 10.0, "s", high="a pose that far from the stamp is another place (a ground robot "
                         "moves metres a second)")
 """The largest time between an estimate's stamp and the pose or fix it is compared with (s)."""
+TIME_OFFSET_S = within(-2.0**32, 2.0**32, "s", "no two clocks of one robot differ by more than a ROS time spans "
+                       "(136 years)", "no two clocks of one robot differ by more than a ROS time spans (136 years)")
+"""A stream's clock offset (s); one as long as the recording is refused
+against the recording itself (:mod:`slam.readers.data_checks`)."""
+CORRELATION_S = within(1e-3, 1e6, "s", "shorter than any sensor's period: independent errors (null) say so",
+                       "an error alike for eleven days is a bias, not a wander")
+"""How long a sensor's error stays alike (s)."""
+PATH_DELTA_M = within(None, 1e6, "m", high="a path of more than 1000 km is no ground robot's run")
+"""A length of path a metric is taken over (m)."""
 ORACLE_K_SIGMA = within(0.5, 100.0, "sigmas", "it would exclude 62 % of good measurements",
                         "it would exclude nothing a Gaussian error makes")
 """The multiple of sigma beyond which the oracle excludes a measurement."""

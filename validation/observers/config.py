@@ -331,7 +331,7 @@ class ObserversConfig(StrictFrozen):
     scan_ceiling: ScanCeilingConfig = ScanCeilingConfig()
     max_gap_s: bounds.Window_s = Field(0.5, gt=0.0)
     gap_periods: float | None = Field(3.0, gt=0.0)
-    stream_max_gap_s: dict[str, float] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
+    stream_max_gap_s: dict[str, Annotated[float, Field(gt=0.0), bounds.WINDOW_S]] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
     min_coverage: float = Field(0.25, ge=0.0, le=1.0)
     gps_speed_window_s: bounds.Window_s = Field(5.0, gt=0.0)
     gps_course_min_speed_mps: Annotated[float, bounds.within(None, 100.0, "m/s", high="no ground robot drives "

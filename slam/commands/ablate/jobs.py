@@ -233,6 +233,9 @@ def _scenario_tree(path: Path, pairs: list[tuple[str, Any]], where: str) -> dict
     spelled out."""
     tree = load_yaml(path, "scenario")
     for key, value in pairs:
+        if key == "seed":  # each job's seed replaced it in silence, while summary.md showed the value set
+            raise GslamError(f"{where}: scenario.seed: a job's seed is its input's (inputs.scenarios.N.seeds), which "
+                             "would replace the value set here in silence; give the seeds there")
         set_path(tree, key, value)
     found = non_finite(tree)
     if found is not None:

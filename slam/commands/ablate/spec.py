@@ -33,6 +33,9 @@ from validation.base.yamlio import StrictFrozen, yaml_kind
 SCENARIO_PREFIX = "scenario."
 
 
+INT64_MAX = 2**63 - 1
+
+
 class Distribution(StrictFrozen):
     """One randomly sampled parameter: exactly one of ``uniform: [lo, hi]``,
     ``log_uniform: [lo, hi]``, ``integer: [lo, hi]`` (inclusive) or
@@ -42,6 +45,15 @@ class Distribution(StrictFrozen):
     log_uniform: tuple[float, float] | None = None
     integer: tuple[int, int] | None = None
     choice: list[Any] | None = Field(None, min_length=1)
+
+    @field_validator("integer")
+    @classmethod
+    def _int64(cls, bounds: tuple[int, int] | None) -> tuple[int, int] | None:
+        """numpy draws integers of 64 bits: a bound beyond them raised in the draw."""
+        if bounds is not None and any(abs(b) > INT64_MAX for b in bounds):
+            raise ValueError(f"[{bounds[0]:.3g}, {bounds[1]:.3g}] reaches beyond a 64-bit integer (+-{INT64_MAX:.3g}), "
+                             "which numpy draws; no count a config holds comes near it")
+        return bounds
 
     @model_validator(mode="after")
     def _exactly_one(self) -> "Distribution":

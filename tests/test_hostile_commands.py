@@ -1,0 +1,171 @@
+"""The commands, flags, configs and specs attacked as a user would misuse
+them, after tests/test_fuzz.py and tests/test_hostile.py:
+
+* a topic of one stream set to another stream's topic (the scan on the IMU's
+  topic, the gyro on the laser's), whose messages are of another type;
+* a flag that takes one value given twice (``--out a --out b``): argparse
+  keeps the last in silence, where ``--set`` given twice is refused;
+* a flag that only one choice of another flag reads (``--address`` without
+  ``--backend ray``), ignored in silence;
+* an ablation spec whose random integers no 64-bit integer holds, or that
+  sets or sweeps ``scenario.seed``, which each job's own seed replaced in
+  silence while summary.md showed the swept value;
+* scenario worlds of a door that cuts no wall, two regions of one name, an
+  obstacle or a region of no area;
+* config numbers without a physical bound: RPE deltas (refused after the
+  mapping, naming no key), negative or endless stream gaps, clock offsets
+  no ROS time holds, a compass error correlated for 1e308 s.
+
+Each case runs as tests/test_fuzz.py's do: exit 1 or 2, one error line
+saying what the case expects, no traceback, nothing outside ``--out``
+changed (the case folder, the shared run, the scenario's folder and the
+shipped configs are checksummed before and after), no hang.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from slam.cli import main
+from tests.test_fuzz import (  # noqa: F401 - world is a fixture
+    Case, World, check_error_output, expand, prepare, scenario, spec, text, time_limit, world,
+)
+from tests.test_hostile import checksums
+
+pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
+
+TIME_LIMIT_S = 60
+MAP = ("map", "{run}", "--config", "{cfg}")
+QUICK = ("--set", "output.plots=false")
+SIM = ("simulate", "{d}/s.yaml", "--out", "{d}/o")
+ABLATE = ("ablate", "{d}/spec.yaml", "--out", "{d}/o", "--workers", "1")
+CAL = ("calibrate", "{run}", "--config", "{cfg}")
+
+
+def _map_set(*overrides: str) -> tuple[str, ...]:
+    return (*MAP, *QUICK, *(a for kv in overrides for a in ("--set", kv)), "--out", "{d}/o")
+
+
+def _world(change):
+    return scenario(lambda t: change(t["world"]))
+
+
+CASES: list[Case] = [
+    # -- a stream's topic set to another stream's, of another message type --
+    Case("scan-topic-is-the-imus", _map_set("input.topics.scan=/imu/data"),
+         "scan topic '/imu/data': type is sensor_msgs/msg/Imu, expected sensor_msgs/msg/LaserScan"),
+    Case("gyro-topic-is-the-lasers", _map_set("input.topics.gyro=/scan"),
+         "gyro topic '/scan': type is sensor_msgs/msg/LaserScan, expected sensor_msgs/msg/Imu"),
+    Case("odometry-topic-is-the-imus", _map_set("input.topics.odometry=/imu/data"),
+         "odometry topic '/imu/data': type is sensor_msgs/msg/Imu"),
+    Case("compass-topic-is-the-odometrys", _map_set("input.topics.compass=/odom"),
+         "compass topic '/odom': type is nav_msgs/msg/Odometry"),
+    Case("calibrate-scan-topic-is-the-imus", (*CAL, "--set", "input.topics.scan=/imu/data", "--out", "{d}/c.yaml"),
+         "scan topic '/imu/data': type is sensor_msgs/msg/Imu"),
+    # -- a flag of one value given twice --
+    Case("map-out-twice", (*MAP, *QUICK, "--out", "{d}/a", "--out", "{d}/b"), "argument --out: given twice", code=2),
+    Case("map-gating-twice", (*MAP, *QUICK, "--gating", "on", "--gating", "off", "--out", "{d}/o"),
+         "argument --gating: given twice", code=2),
+    Case("map-config-twice", (*MAP, "--config", "{cfg}", "--out", "{d}/o"), "argument --config: given twice", code=2),
+    Case("map-out-twice-as-equals", (*MAP, "--out={d}/a", "--out={d}/b"), "argument --out: given twice", code=2),
+    Case("compare-only-twice", ("compare", "{run}", "--config", "{cfg}", "--only", "gated", "--only", "ungated",
+                                "--out", "{d}/o"), "argument --only: given twice", code=2),
+    Case("compare-variants-twice", ("compare", "{run}", "--config", "{cfg}", "--variants", "{variants}",
+                                    "--variants", "{variants}", "--out", "{d}/o"), "argument --variants: given twice",
+         code=2),
+    Case("simulate-seed-twice", ("simulate", "{scen}", "--seed", "1", "--seed", "2", "--out", "{d}/o"),
+         "argument --seed: given twice", code=2),
+    Case("demo-out-twice", ("demo", "--out", "{d}/a", "--out", "{d}/b"), "argument --out: given twice", code=2),
+    Case("ablate-workers-twice", ("ablate", "{spec}", "--workers", "1", "--workers", "2", "--out", "{d}/o"),
+         "argument --workers: given twice", code=2),
+    Case("ablate-backend-twice", ("ablate", "{spec}", "--backend", "ray", "--backend", "local", "--out", "{d}/o"),
+         "argument --backend: given twice", code=2),
+    Case("calibrate-clean-twice", (*CAL, "--clean", "0:5", "--clean", "10:20", "--out", "{d}/c.yaml"),
+         "argument --clean: given twice", code=2),
+    Case("calibrate-false-alarm-twice", (*CAL, "--false-alarm", "0.01", "--false-alarm", "0.02", "--out", "{d}/c.yaml"),
+         "argument --false-alarm: given twice", code=2),
+    Case("calibrate-lag-reference-twice", (*CAL, "--lag-reference", "gyro", "--lag-reference", "none",
+                                           "--out", "{d}/c.yaml"), "argument --lag-reference: given twice", code=2),
+    Case("inspect-config-out-twice", ("inspect", "{run}", "--config-out", "{d}/a.yaml", "--config-out", "{d}/b.yaml"),
+         "argument --config-out: given twice", code=2),
+    Case("inject-config-twice", ("inject", "{run}", "--config", "{cfg}", "--config", "{cfg}", "--fault",
+                                 "gyro_bias@2:4", "--out", "{d}/o"), "argument --config: given twice", code=2),
+    # -- a flag only another flag's choice reads --
+    Case("ablate-address-without-ray", ("ablate", "{spec}", "--address", "auto", "--out", "{d}/o"),
+         "--address auto: a Ray cluster's address, but --backend is local"),
+    Case("ablate-address-with-local", ("ablate", "{spec}", "--backend", "local", "--address", "10.0.0.1:6379",
+                                       "--out", "{d}/o"), "--address 10.0.0.1:6379: a Ray cluster's address"),
+    # -- ablation specs --
+    Case("ablate-random-integer-beyond-int64", ABLATE, "sweep.random.params.backend.max_iterations.integer",
+         spec(sweep={"random": {"samples": 2, "params": {"backend.max_iterations": {"integer": [1, 10**23]}}}})),
+    Case("ablate-random-integer-below-int64", ABLATE, "sweep.random.params.backend.max_iterations.integer",
+         spec(sweep={"random": {"samples": 2, "params": {"backend.max_iterations": {"integer": [-10**23, 5]}}}})),
+    Case("ablate-set-scenario-seed", ABLATE, "scenario.seed: a job's seed is its input's",
+         spec(set={"scenario.seed": 3})),
+    Case("ablate-sweep-scenario-seed", ABLATE, "scenario.seed: a job's seed is its input's",
+         spec(sweep={"grid": {"scenario.seed": [3, 4]}})),
+    Case("ablate-variant-scenario-seed", ABLATE, "scenario.seed: a job's seed is its input's",
+         spec(variants={"a": {"scenario.seed": 7}})),
+    Case("ablate-set-rpe-delta-negative", ABLATE, "evaluation.rpe_deltas_m.0",
+         spec(set={"evaluation.rpe_deltas_m": [-1.0]})),
+    # -- scenario worlds --
+    Case("scenario-door-in-no-wall", SIM, "world.doors.2: the door at (500, 500) cuts no wall",
+         _world(lambda w: w["doors"].append({"center": [500.0, 500.0], "width_m": 1.0}))),
+    Case("scenario-door-beside-a-wall", SIM, "world.doors.2: the door at (12.5, 3.5) cuts no wall",
+         _world(lambda w: w["doors"].append({"center": [12.5, 3.5], "width_m": 0.5}))),
+    Case("scenario-two-regions-of-one-name", SIM, "world: regions.3.name: 'lab' names regions.0 too",
+         _world(lambda w: w["regions"].append(dict(w["regions"][0])))),
+    Case("scenario-default-region-named-as-a-region", SIM, "world: default_region.name: 'lab' names regions.0 too",
+         _world(lambda w: w["default_region"].update(name="lab"))),
+    Case("scenario-obstacle-of-no-area", SIM, "world: obstacles.13: its points enclose no area",
+         _world(lambda w: w["obstacles"].append([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]]))),
+    Case("scenario-obstacle-one-point-thrice", SIM, "world: obstacles.13: its points enclose no area",
+         _world(lambda w: w["obstacles"].append([[1.0, 1.0], [1.0, 1.0], [1.0, 1.0]]))),
+    Case("scenario-region-of-no-area", SIM, "world: regions.3.polygon: its points enclose no area",
+         _world(lambda w: w["regions"].append({"name": "flat", "kind": "indoor", "slip": 0.01,
+                                               "polygon": [[0, 0], [1, 1], [2, 2]]}))),
+    # -- config numbers without a physical bound --
+    Case("rpe-delta-negative", _map_set("evaluation.rpe_deltas_m=[-5]"),
+         "--set evaluation.rpe_deltas_m=[-5]: evaluation.rpe_deltas_m.0: Input should be greater than 0"),
+    Case("rpe-delta-zero", _map_set("evaluation.rpe_deltas_m=[5, 0]"), "evaluation.rpe_deltas_m.1"),
+    Case("rpe-delta-1e308", _map_set("evaluation.rpe_deltas_m=[1e308]"), "evaluation.rpe_deltas_m.0: 1e+308 m is above"),
+    Case("rpe-delta-in-a-config-file", (*MAP[:2], "--config", "{d}/c.yaml", *QUICK, "--out", "{d}/o"),
+         "c.yaml: evaluation.rpe_deltas_m.0", text("c.yaml", "evaluation: {rpe_deltas_m: [-1]}\n")),
+    Case("stream-gap-negative", _map_set("validation.observers.stream_max_gap_s.gps_speed=-1"),
+         "validation.observers.stream_max_gap_s.gps_speed"),
+    Case("stream-gap-zero", _map_set("validation.observers.stream_max_gap_s.gps_sigma=0"),
+         "validation.observers.stream_max_gap_s.gps_sigma"),
+    Case("stream-gap-1e308", _map_set("validation.observers.stream_max_gap_s.gps_speed=1e308"),
+         "validation.observers.stream_max_gap_s.gps_speed"),
+    Case("time-offset-1e308", _map_set("input.time_offsets_s.gps=1e308"), "input.time_offsets_s.gps: 1e+308 s is above"),
+    Case("time-offset-minus-1e300", _map_set("input.time_offsets_s.groundtruth=-1e300"),
+         "input.time_offsets_s.groundtruth: -1e+300 s is below"),
+    Case("extra-odometry-offset-1e308", _map_set("input.extra_odometry.vo={{topic: /odom, time_offset_s: 1e308}}"),
+         "input.extra_odometry.vo.time_offset_s: 1e+308 s is above"),
+    Case("compass-correlation-1e308", _map_set("backend.factors.compass.correlation_s=1e308"),
+         "backend.factors.compass.correlation_s: 1e+308 s is above"),
+    Case("compass-correlation-1e-300", _map_set("backend.factors.compass.correlation_s=1e-300"),
+         "backend.factors.compass.correlation_s: 1e-300 s is below"),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def test_a_misused_command_gives_one_clean_error(case: Case, world: World, tmp_path: Path, capsys):
+    d, watched, before = prepare(case, world, tmp_path, checksums)
+    capsys.readouterr()
+    with time_limit(TIME_LIMIT_S):
+        try:
+            code = main(["-q", *expand(case.argv, d, world)])
+        except SystemExit as e:  # argparse
+            code = e.code
+    out, err = capsys.readouterr()
+    assert code == case.code, f"exit {code}, stdout: {out[-500:]}, stderr: {err[-500:]}"
+    check_error_output(code, err, case)
+    assert checksums(*watched) == before, "an input changed, or something was left behind"
+
+
+def test_corpus_counts():
+    assert len(CASES) >= 40
+    assert len({c.id for c in CASES}) == len(CASES)
