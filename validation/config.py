@@ -51,7 +51,7 @@ class ValidationConfig(StrictFrozen):
 
     mode: GatingMode = GatingMode.OFF
     pass_: Pass = Field("offline", alias="pass")
-    rate_hz: float = Field(10.0, gt=0.0)
+    rate_hz: bounds.Rate_hz = Field(10.0, gt=0.0)
     oracle_k_sigma: Annotated[float, bounds.ORACLE_K_SIGMA] = Field(3.0, gt=0.0)
     model: SystemModel | None = None
     observers: ObserversConfig = ObserversConfig()

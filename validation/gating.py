@@ -133,7 +133,7 @@ class GatingConfig(StrictFrozen):
     recheck_factors: tuple[str, ...] = ("compass", "gps")
     recheck_window_s: Annotated[float, bounds.SPAN_S] = Field(5.0, ge=0.0)
     baseline_factors: tuple[str, ...] = ("scan_matching",)
-    baseline_m: float = Field(5.0, gt=0.0)
+    baseline_m: Annotated[float, bounds.PATH_DELTA_M] = Field(5.0, gt=0.0)
     factors: dict[str, dict[str, list[str]]] = Field(default_factory=_default_factors)
 
     @field_validator("factors", mode="before")

@@ -206,12 +206,12 @@ class FrontendConfig(Strict):
 
     enabled: bool = True
     initial_guess: Literal["constant_velocity", "odometry"] = "constant_velocity"
-    min_range_m: float = Field(0.1, ge=0.0)
+    min_range_m: bounds.LaserRange_m = Field(0.1, ge=0.0)
     max_range_m: bounds.LaserRange_m = Field(30.0, gt=0.0)
-    voxel_size_m: float = Field(0.1, gt=0.0)
+    voxel_size_m: Annotated[float, bounds.MAP_VOXEL_M] = Field(0.1, gt=0.0)
     max_points_per_voxel: bounds.Count = Field(20, ge=1)
     initial_threshold_m: bounds.MatchDistance_m = Field(0.5, gt=0.0)
-    min_motion_m: float = Field(0.05, ge=0.0)
+    min_motion_m: bounds.LaserRange_m = Field(0.05, ge=0.0)
     max_iterations: bounds.Iterations = Field(500, ge=1)
     threads: bounds.Threads = Field(1, ge=0)
 

@@ -6,7 +6,7 @@ along the path where a key says ``separation`` or ``spacing``.
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field
 
@@ -29,7 +29,7 @@ class DescriptorConfig(Strict):
 
     rings: bounds.Count = Field(20, ge=2)
     sectors: bounds.Count = Field(60, ge=4)
-    max_radius_m: float = Field(15.0, gt=0.0)
+    max_radius_m: bounds.LaserRange_m = Field(15.0, gt=0.0)
     max_distance: float = Field(0.25, ge=0.0, le=1.0)
     candidates: bounds.Count = Field(2, ge=0)
     linear_window_m: bounds.SearchWindow_m = Field(1.5, ge=0.0)
@@ -53,7 +53,7 @@ class RegistrationConfig(Strict):
     kernel_m: bounds.MatchDistance_m = Field(0.1, gt=0.0)
     max_iterations: bounds.Iterations = Field(20, ge=1)
     normal_half_window: bounds.Count = Field(2, ge=1)
-    normal_max_gap_m: float = Field(0.3, gt=0.0)
+    normal_max_gap_m: bounds.LaserRange_m = Field(0.3, gt=0.0)
     min_linearity: float = Field(0.8, ge=0.0, le=1.0)
 
 
@@ -66,12 +66,12 @@ class CorrelativeConfig(Strict):
     best score, the one nearest the guess. Skipped when the search window is
     within ``skip_below_m`` and ``skip_below_deg``: ICP's own basin covers it."""
 
-    resolution_m: float = Field(0.2, gt=0.0)
-    angular_step_deg: float = Field(1.0, gt=0.0)
+    resolution_m: Annotated[float, bounds.GRID_CELL_M] = Field(0.2, gt=0.0)
+    angular_step_deg: Annotated[float, bounds.ANGLE_DEG] = Field(1.0, gt=0.0)
     max_points: bounds.Count = Field(60, ge=3)
     tie_tolerance: float = Field(0.05, ge=0.0, le=1.0)
-    skip_below_m: float = Field(0.5, ge=0.0)
-    skip_below_deg: float = Field(5.0, ge=0.0)
+    skip_below_m: bounds.SearchWindow_m = Field(0.5, ge=0.0)
+    skip_below_deg: Annotated[float, bounds.ANGLE_DEG] = Field(5.0, ge=0.0)
 
 
 class AcceptanceConfig(Strict):
@@ -88,10 +88,10 @@ class AcceptanceConfig(Strict):
     """
 
     min_overlap: float = Field(0.6, gt=0.0, le=1.0)
-    max_rms_m: float = Field(0.05, gt=0.0)
+    max_rms_m: bounds.MatchDistance_m = Field(0.05, gt=0.0)
     min_relative_information: float = Field(0.05, ge=0.0, le=1.0)
     min_pinned: bounds.Count = Field(1, ge=1, le=3)
-    max_correction_m: float = Field(3.0, gt=0.0)
+    max_correction_m: bounds.SearchWindow_m = Field(3.0, gt=0.0)
 
 
 class FileLoopsConfig(Strict):
@@ -101,7 +101,7 @@ class FileLoopsConfig(Strict):
     ``min_weight`` are dropped (libRSF's own threshold is 0.43)."""
 
     sigma_m: bounds.Sigma_m = Field(0.5, gt=0.0)
-    min_weight: float = Field(0.43, ge=0.0)
+    min_weight: Annotated[float, bounds.LOOP_WEIGHT] = Field(0.43, ge=0.0)
 
 
 class LoopsConfig(Strict):
@@ -139,19 +139,19 @@ class LoopsConfig(Strict):
 
     enabled: bool = False
     source: Literal["auto", "submaps", "scans", "file"] = "auto"
-    local_map_m: float = Field(3.0, ge=0.0)
-    query_map_m: float = Field(3.0, ge=0.0)
+    local_map_m: Annotated[float, bounds.PATH_DELTA_M] = Field(3.0, ge=0.0)
+    query_map_m: Annotated[float, bounds.PATH_DELTA_M] = Field(3.0, ge=0.0)
     local_map_scans: bounds.Count = Field(10, ge=1)
-    voxel_m: float = Field(0.1, gt=0.0)
-    query_spacing_m: float = Field(1.0, ge=0.0)
-    min_separation_m: float = Field(10.0, ge=0.0)
-    candidate_distance_m: float = Field(3.0, ge=0.0)
-    search_radius_m: float = Field(0.5, ge=0.0)
-    search_radius_per_m: float = Field(0.05, ge=0.0)
-    max_search_radius_m: float = Field(3.0, ge=0.0)
-    search_yaw_deg: float = Field(3.0, ge=0.0)
-    search_yaw_per_m_deg: float = Field(0.5, ge=0.0)
-    max_search_yaw_deg: float = Field(20.0, ge=0.0)
+    voxel_m: Annotated[float, bounds.MAP_VOXEL_M] = Field(0.1, gt=0.0)
+    query_spacing_m: Annotated[float, bounds.PATH_DELTA_M] = Field(1.0, ge=0.0)
+    min_separation_m: Annotated[float, bounds.PATH_DELTA_M] = Field(10.0, ge=0.0)
+    candidate_distance_m: bounds.SearchWindow_m = Field(3.0, ge=0.0)
+    search_radius_m: bounds.SearchWindow_m = Field(0.5, ge=0.0)
+    search_radius_per_m: Annotated[float, bounds.DRIFT_PER_M] = Field(0.05, ge=0.0)
+    max_search_radius_m: bounds.SearchWindow_m = Field(3.0, ge=0.0)
+    search_yaw_deg: Annotated[float, bounds.ANGLE_DEG] = Field(3.0, ge=0.0)
+    search_yaw_per_m_deg: Annotated[float, bounds.TURN_PER_M_DEG] = Field(0.5, ge=0.0)
+    max_search_yaw_deg: Annotated[float, bounds.ANGLE_DEG] = Field(20.0, ge=0.0)
     max_candidates: bounds.Count = Field(2, ge=1)
     information_scale: bounds.InformationScale = Field(1.0, gt=0.0)
     robust_kernel: Literal["none", "huber", "cauchy", "dcs"] | None = None

@@ -68,11 +68,11 @@ class RefineConfig(_Strict):
     inlier_distance_m: bounds.MatchDistance_m = Field(0.1, gt=0.0)
     max_points: bounds.Count = Field(400, ge=10)
     kernel_m: bounds.MatchDistance_m = Field(0.05, gt=0.0)
-    max_shift_m: float = Field(0.2, gt=0.0)
-    max_turn_deg: float = Field(3.0, gt=0.0)
+    max_shift_m: bounds.SearchWindow_m = Field(0.2, gt=0.0)
+    max_turn_deg: Annotated[float, bounds.ANGLE_DEG] = Field(3.0, gt=0.0)
     min_inliers: float = Field(0.3, ge=0.0, le=1.0)
     information_scale: bounds.InformationScale = Field(0.1, gt=0.0)
-    weak_length_m: float = Field(5.0, gt=0.0)
+    weak_length_m: bounds.LaserRange_m = Field(5.0, gt=0.0)
     max_sigma_m: bounds.Sigma_m = Field(0.1, gt=0.0)
 
 
@@ -103,15 +103,15 @@ class ConstraintSearchConfig(_Strict):
     constraint (the truth may lie beyond it).
     """
 
-    max_distance_m: float = Field(10.0, gt=0.0)
+    max_distance_m: bounds.SearchWindow_m = Field(10.0, gt=0.0)
     max_per_scan: bounds.Count = Field(3, ge=0)
-    spacing_m: float = Field(1.0, ge=0.0)
-    loop_separation_m: float = Field(20.0, ge=0.0)
+    spacing_m: Annotated[float, bounds.PATH_DELTA_M] = Field(1.0, ge=0.0)
+    loop_separation_m: Annotated[float, bounds.PATH_DELTA_M] = Field(20.0, ge=0.0)
     linear_window_m: bounds.SearchWindow_m = Field(0.3, ge=0.0)
-    linear_window_per_m: float = Field(0.02, ge=0.0)
+    linear_window_per_m: Annotated[float, bounds.DRIFT_PER_M] = Field(0.02, ge=0.0)
     max_linear_window_m: bounds.SearchWindow_m = Field(3.0, ge=0.0)
     angular_window_deg: float = Field(3.0, ge=0.0, le=180.0)
-    angular_window_per_m_deg: float = Field(0.2, ge=0.0)
+    angular_window_per_m_deg: Annotated[float, bounds.TURN_PER_M_DEG] = Field(0.2, ge=0.0)
     max_angular_window_deg: float = Field(30.0, ge=0.0, le=180.0)
     near_min_score: float = Field(0.45, ge=0.0, le=1.0)
     loop_min_score: float = Field(0.55, ge=0.0, le=1.0)
@@ -122,8 +122,8 @@ class ConstraintSearchConfig(_Strict):
     optimise_every: bounds.Count = Field(10, ge=1)
     refine_near: bool = True
     agree: list[Literal["near", "loop"]] = []
-    agree_m: float = Field(0.02, gt=0.0)
-    agree_deg: float = Field(0.3, gt=0.0)
+    agree_m: bounds.SearchWindow_m = Field(0.02, gt=0.0)
+    agree_deg: Annotated[float, bounds.ANGLE_DEG] = Field(0.3, gt=0.0)
     inside: bool = True
 
     @model_validator(mode="after")
@@ -145,8 +145,8 @@ class AmbiguityConfig(_Strict):
 
     enabled: bool = True
     ratio: float = Field(0.9, gt=0.0, le=1.0)
-    exclude_m: float = Field(0.5, gt=0.0)
-    exclude_deg: float = Field(5.0, gt=0.0)
+    exclude_m: bounds.SearchWindow_m = Field(0.5, gt=0.0)
+    exclude_deg: Annotated[float, bounds.ANGLE_DEG] = Field(5.0, gt=0.0)
 
 
 class RecognitionConfig(_Strict):
@@ -173,23 +173,23 @@ class RecognitionConfig(_Strict):
     loop at once."""
 
     enabled: bool = True
-    min_path_m: float = Field(30.0, ge=0.0)
-    spacing_m: float = Field(1.0, gt=0.0)
+    min_path_m: Annotated[float, bounds.PATH_DELTA_M] = Field(30.0, ge=0.0)
+    spacing_m: Annotated[float, bounds.PATH_DELTA_M] = Field(1.0, gt=0.0)
     rings: bounds.Count = Field(20, ge=2)
     sectors: bounds.Count = Field(60, ge=4)
-    max_radius_m: float = Field(20.0, gt=0.0)
+    max_radius_m: bounds.LaserRange_m = Field(20.0, gt=0.0)
     max_distance: float = Field(0.4, gt=0.0, le=1.0)
     candidates: bounds.Count = Field(3, ge=1)
     linear_window_m: bounds.SearchWindow_m = Field(3.0, gt=0.0)
     angular_window_deg: float = Field(12.0, gt=0.0, le=180.0)
     min_score: float = Field(0.6, ge=0.0, le=1.0)
-    max_drift_per_m: float = Field(0.1, ge=0.0)
-    max_turn_per_m_deg: float = Field(1.0, ge=0.0)
-    blind_drift_per_m: float | None = Field(None, ge=0.0)
-    blind_turn_per_m_deg: float | None = Field(None, ge=0.0)
-    confirm_within_m: float = Field(5.0, gt=0.0)
-    agree_m: float = Field(0.3, gt=0.0)
-    agree_deg: float = Field(3.0, gt=0.0)
+    max_drift_per_m: Annotated[float, bounds.DRIFT_PER_M] = Field(0.1, ge=0.0)
+    max_turn_per_m_deg: Annotated[float, bounds.TURN_PER_M_DEG] = Field(1.0, ge=0.0)
+    blind_drift_per_m: Annotated[float, bounds.DRIFT_PER_M] | None = Field(None, ge=0.0)
+    blind_turn_per_m_deg: Annotated[float, bounds.TURN_PER_M_DEG] | None = Field(None, ge=0.0)
+    confirm_within_m: Annotated[float, bounds.PATH_DELTA_M] = Field(5.0, gt=0.0)
+    agree_m: bounds.SearchWindow_m = Field(0.3, gt=0.0)
+    agree_deg: Annotated[float, bounds.ANGLE_DEG] = Field(3.0, gt=0.0)
 
 
 class SubmapsConfig(_Strict):
@@ -206,15 +206,15 @@ class SubmapsConfig(_Strict):
     submaps from every scan and gates only the constraints."""
 
     enabled: bool = False
-    node_spacing_m: float = Field(0.25, ge=0.0)
-    node_turn_deg: float = Field(5.0, ge=0.0)
-    length_m: float = Field(4.0, gt=0.0)
+    node_spacing_m: Annotated[float, bounds.PATH_DELTA_M] = Field(0.25, ge=0.0)
+    node_turn_deg: Annotated[float, bounds.ANGLE_DEG] = Field(5.0, ge=0.0)
+    length_m: Annotated[float, bounds.PATH_DELTA_M] = Field(4.0, gt=0.0)
     max_scans: bounds.Count = Field(60, ge=2)
-    voxel_m: float = Field(0.05, gt=0.0)
+    voxel_m: Annotated[float, bounds.MAP_VOXEL_M] = Field(0.05, gt=0.0)
     min_points: bounds.Count = Field(20, ge=3)
     resolution_m: Annotated[float, bounds.GRID_CELL_M] = Field(0.1, gt=0.0)
     search_depth: bounds.Count = Field(6, ge=0, le=10)
-    tie_tolerance: float = Field(0.01, ge=0.0)
+    tie_tolerance: Annotated[float, bounds.SCORE] = Field(0.01, ge=0.0)
     blamed_scans: Literal["keep", "leave_out"] = "keep"
     local: LocalMatchConfig = LocalMatchConfig()
     refine: RefineConfig = RefineConfig()

@@ -34,6 +34,7 @@ def within(lo: float | None, hi: float | None, unit: str, low: str = "", high: s
             raise ValueError(f"{shown_beside(value, hi)}{u} is above {hi:g}{u}: {high}")
         return value
 
+    check.bounds = (lo, hi)  # for a reader of the schema (tests/test_config_bounds.py asks every number for both)
     return AfterValidator(check)
 
 
@@ -131,6 +132,21 @@ RELATIVE_TOLERANCE = within(1e-15, 1.0, "", "below double precision: the optimis
 SEARCH_WINDOW_M = within(None, 100.0, "m", high="a scan searched for that far from its guess is looked for in "
                          "the whole building, not corrected (and the search grid is padded by the window)")
 """The half-width of a scan matcher's linear search window (m)."""
+ANGLE_DEG = within(None, 360.0, "deg", high="beyond a full turn: a turn in the plane is within one")
+"""An angle searched, skipped, excluded or agreed within, or turned before a
+node (deg)."""
+DRIFT_PER_M = within(None, 10.0, "m per m", high="a dead reckoning that drifts ten times the path it travels "
+                     "places nothing")
+"""How much a position may drift per metre of path (a fraction)."""
+TURN_PER_M_DEG = within(None, 360.0, "deg per m", high="a heading that drifts a full turn per metre of path is no "
+                        "heading")
+"""How much a heading may drift per metre of path (deg per m)."""
+SCORE = within(None, 1.0, "", high="a match's score is a mean likelihood in [0, 1]")
+"""A share of a match's score, in its own units of [0, 1]."""
+LOOP_WEIGHT = within(None, 1e6, "", high="beyond any loop line's weight (slam.readers.librsf refuses more than a "
+                     "million): every line would be dropped")
+"""A libRSF loop line's weight, which multiplies its information."""
+
 MAX_SEARCH_PAD_CELLS = 2000
 """Most cells a search grid is padded by on each axis (twice its widest
 window over its cell size, on both sides): 2000 makes a grid of at least
@@ -149,10 +165,31 @@ CORRELATION_S = within(1e-3, 1e6, "s", "shorter than any sensor's period: indepe
                        "an error alike for eleven days is a bias, not a wander")
 """How long a sensor's error stays alike (s)."""
 PATH_DELTA_M = within(None, 1e6, "m", high="a path of more than 1000 km is no ground robot's run")
-"""A length of path a metric is taken over (m)."""
+"""A length of path a metric, a check or a search is taken over (m): RPE
+deltas, loop separations, submap lengths, spacings along the path."""
 ORACLE_K_SIGMA = within(0.5, 100.0, "sigmas", "it would exclude 62 % of good measurements",
                         "it would exclude nothing a Gaussian error makes")
 """The multiple of sigma beyond which the oracle excludes a measurement."""
+STREAM_RATE = within(-1000.0, 1000.0, "(stream units per s)", "no ground robot turns at 1000 rad/s, drives at "
+                     "1000 m/s or accelerates at 1000 m/s^2", "no ground robot turns at 1000 rad/s, drives at "
+                     "1000 m/s or accelerates at 1000 m/s^2")
+"""A rate of change of a stream (rad/s, m/s, m/s^2): a relation's offset, how
+fast its level may move."""
+GAIN = within(-1000.0, 1000.0, "", "one stream changing by a thousand times the other's (or against it) measures "
+              "another motion", "one stream changing by a thousand times the other's measures another motion")
+"""Stream b's change as a multiple of stream a's, in a residual or offset relation."""
+CUSUM_DRIFT = within(None, 100.0, "sigmas", high="a sum that forgets 100 sigmas a step never grows: no mismatch "
+                     "would be seen")
+"""How much a CUSUM forgets each step (in sigmas of its residual)."""
+MARGIN = within(None, 100.0, "boundaries", high="slopes a hundred boundaries apart would still agree: no turn or "
+                "speed of a ground robot is so far from flat")
+"""How far two trends' slopes may part (in units of their boundaries)."""
+GAP_PERIODS = within(None, 1e4, "periods", high="a stream bridged across ten thousand of its own periods is "
+                     "interpolated, not sampled")
+"""How many of a stream's sample periods a gap may bridge."""
+CLIQUE_STEPS = within(None, 1e9, "steps", high="a search of a billion steps (a microsecond each) runs for "
+                      "a quarter of an hour: a budget no run waits out")
+"""The work budget of the loop observer's maximum-clique search."""
 
 
 # --- simulated sensors and the faults added to a recording ---------------------

@@ -4,9 +4,12 @@ keyframes, and the observer's configuration."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Annotated
 
 import numpy as np
 from pydantic import Field
+
+from validation.base import bounds
 from validation.base.yamlio import StrictFrozen
 
 
@@ -55,9 +58,9 @@ class ObserverConfig(StrictFrozen):
 
     chain_check: bool = True
     chain_scale_from_loops: bool = True
-    min_support: int = Field(1, ge=0)
-    support_path_m: float = Field(20.0, gt=0.0)
+    min_support: bounds.Count = Field(1, ge=0)
+    support_path_m: Annotated[float, bounds.PATH_DELTA_M] = Field(20.0, gt=0.0)
     chain_probability: float = Field(0.999, gt=0.0, lt=1.0)
     pcm: bool = True
     pcm_probability: float = Field(0.99, gt=0.0, lt=1.0)
-    max_clique_steps: int = Field(200_000, ge=1)
+    max_clique_steps: Annotated[int, bounds.CLIQUE_STEPS] = Field(200_000, ge=1)

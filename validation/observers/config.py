@@ -92,21 +92,21 @@ class RelationConfig(StrictFrozen):
     stream_a: str
     stream_b: str
     boundary: Annotated[float, bounds.BOUNDARY] | None = Field(None, gt=0.0)
-    window_s: float = Field(gt=0.0)
-    gain: float = 1.0
-    rate_offset: float = 0.0
+    window_s: bounds.Window_s = Field(gt=0.0)
+    gain: Annotated[float, bounds.GAIN] = 1.0
+    rate_offset: Annotated[float, bounds.STREAM_RATE] = 0.0
     sigma_floor: Annotated[float, bounds.SIGMA_FLOOR] | None = Field(None, gt=0.0)
     sigma_rel: Annotated[float, bounds.SIGMA_REL] = Field(0.0, ge=0.0)
     k_sigma: Annotated[float, bounds.K_SIGMA] = Field(3.0, gt=0.0)
-    cusum_drift: float = Field(0.5, ge=0.0)
-    level_window_s: float | None = Field(60.0, gt=0.0)
-    level_max_rate: float | None = Field(None, gt=0.0)
+    cusum_drift: Annotated[float, bounds.CUSUM_DRIFT] = Field(0.5, ge=0.0)
+    level_window_s: bounds.Window_s | None = Field(60.0, gt=0.0)
+    level_max_rate: Annotated[float, bounds.STREAM_RATE] | None = Field(None, gt=0.0)
     threshold: bounds.Count = Field(ge=0)
     max_counter: bounds.Count | None = Field(None, ge=1)
-    warmup_s: float | None = Field(None, ge=0.0)
+    warmup_s: Annotated[float, bounds.SPAN_S] | None = Field(None, ge=0.0)
     boundary_a: Annotated[float, bounds.BOUNDARY] | None = Field(None, gt=0.0)
     boundary_b: Annotated[float, bounds.BOUNDARY] | None = Field(None, gt=0.0)
-    mismatch_margin: float | None = Field(None, gt=0.0)
+    mismatch_margin: Annotated[float, bounds.MARGIN] | None = Field(None, gt=0.0)
     component_a: Component | None = None
     component_b: Component | None = None
 
@@ -330,7 +330,7 @@ class ObserversConfig(StrictFrozen):
     scan: ScanCheckConfig = ScanCheckConfig()
     scan_ceiling: ScanCeilingConfig = ScanCeilingConfig()
     max_gap_s: bounds.Window_s = Field(0.5, gt=0.0)
-    gap_periods: float | None = Field(3.0, gt=0.0)
+    gap_periods: Annotated[float, bounds.GAP_PERIODS] | None = Field(3.0, gt=0.0)
     stream_max_gap_s: dict[str, Annotated[float, Field(gt=0.0), bounds.WINDOW_S]] = Field(default_factory=lambda: {"gps_speed": 2.5, "gps_sigma": 2.5})
     min_coverage: float = Field(0.25, ge=0.0, le=1.0)
     gps_speed_window_s: bounds.Window_s = Field(5.0, gt=0.0)
