@@ -1951,8 +1951,13 @@ def test_hostile_input_gives_one_clean_error(case: Case, world: World, tmp_path:
     assert checksums(*watched) == before, "an input changed, or something was left behind"
 
 
-@pytest.mark.parametrize("case", WARNINGS, ids=[c.id for c in WARNINGS])
-def test_odd_but_usable_input_is_used_with_one_warning(case: Warned, world: World, tmp_path: Path, capsys, caplog):
+def run_warned(case: Warned, world: World, tmp_path: Path, capsys, caplog,
+               commands: tuple[str, ...] = ("map", "simulate", "inject", "ablate")) -> Path:
+    """Run ``case`` in this process and check what a usable but odd input
+    must give: exit 0, no traceback or leaked warning, one-line warnings of
+    which exactly one says ``case.says``, a result of one of ``commands`` in
+    ``{d}/o`` (its metrics holding ``case.also``), nothing else changed.
+    The case's folder ``d``."""
     d = tmp_path / "case"
     d.mkdir()
     if case.make is not None:
@@ -1968,11 +1973,17 @@ def test_odd_but_usable_input_is_used_with_one_warning(case: Warned, world: Worl
     if case.says:
         assert sum(case.says in s for s in said) == 1, f"expected {case.says!r} once in: {said}"
     out = d / "o"
-    assert json.loads((out / ".gslam-result.json").read_text())["command"] in ("map", "simulate", "inject", "ablate")
+    assert json.loads((out / ".gslam-result.json").read_text())["command"] in commands
     if case.also is not None:
         assert case.also in (out / "metrics.json").read_text()
     after = checksums(d, world.run, world.scenario.parent, CONFIGS)
     assert {k: v for k, v in after.items() if not k.startswith(str(out))} == before
+    return d
+
+
+@pytest.mark.parametrize("case", WARNINGS, ids=[c.id for c in WARNINGS])
+def test_odd_but_usable_input_is_used_with_one_warning(case: Warned, world: World, tmp_path: Path, capsys, caplog):
+    d = run_warned(case, world, tmp_path, capsys, caplog)
     assert not [p for p in d.rglob("*") if ".gslam-tmp-" in p.name]
 
 

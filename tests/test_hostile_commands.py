@@ -28,9 +28,8 @@ from pathlib import Path
 
 import pytest
 
-from slam.cli import main
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
-    Case, World, check_error_output, expand, prepare, scenario, spec, text, time_limit, world,
+    Case, World, run_case, scenario, spec, text, world,
 )
 from tests.test_hostile import checksums
 
@@ -48,20 +47,27 @@ def _map_set(*overrides: str) -> tuple[str, ...]:
     return (*MAP, *QUICK, *(a for kv in overrides for a in ("--set", kv)), "--out", "{d}/o")
 
 
+def _map_cases(*rows: tuple[str, str, str]) -> list[Case]:
+    """A case of ``gslam map`` with one ``--set`` per ``(id, KEY=VALUE, says)``."""
+    return [Case(case_id, _map_set(override), says) for case_id, override, says in rows]
+
+
 def _world(change):
     return scenario(lambda t: change(t["world"]))
 
 
 CASES: list[Case] = [
     # -- a stream's topic set to another stream's, of another message type --
-    Case("scan-topic-is-the-imus", _map_set("input.topics.scan=/imu/data"),
+    *_map_cases(
+        ("scan-topic-is-the-imus", "input.topics.scan=/imu/data",
          "scan topic '/imu/data': type is sensor_msgs/msg/Imu, expected sensor_msgs/msg/LaserScan"),
-    Case("gyro-topic-is-the-lasers", _map_set("input.topics.gyro=/scan"),
+        ("gyro-topic-is-the-lasers", "input.topics.gyro=/scan",
          "gyro topic '/scan': type is sensor_msgs/msg/LaserScan, expected sensor_msgs/msg/Imu"),
-    Case("odometry-topic-is-the-imus", _map_set("input.topics.odometry=/imu/data"),
+        ("odometry-topic-is-the-imus", "input.topics.odometry=/imu/data",
          "odometry topic '/imu/data': type is sensor_msgs/msg/Imu"),
-    Case("compass-topic-is-the-odometrys", _map_set("input.topics.compass=/odom"),
+        ("compass-topic-is-the-odometrys", "input.topics.compass=/odom",
          "compass topic '/odom': type is nav_msgs/msg/Odometry"),
+    ),
     Case("calibrate-scan-topic-is-the-imus", (*CAL, "--set", "input.topics.scan=/imu/data", "--out", "{d}/c.yaml"),
          "scan topic '/imu/data': type is sensor_msgs/msg/Imu"),
     # -- a flag of one value given twice --
@@ -127,43 +133,35 @@ CASES: list[Case] = [
          _world(lambda w: w["regions"].append({"name": "flat", "kind": "indoor", "slip": 0.01,
                                                "polygon": [[0, 0], [1, 1], [2, 2]]}))),
     # -- config numbers without a physical bound --
-    Case("rpe-delta-negative", _map_set("evaluation.rpe_deltas_m=[-5]"),
-         "--set evaluation.rpe_deltas_m=[-5]: evaluation.rpe_deltas_m.0: Input should be greater than 0"),
-    Case("rpe-delta-zero", _map_set("evaluation.rpe_deltas_m=[5, 0]"), "evaluation.rpe_deltas_m.1"),
-    Case("rpe-delta-1e308", _map_set("evaluation.rpe_deltas_m=[1e308]"), "evaluation.rpe_deltas_m.0: 1e+308 m is above"),
     Case("rpe-delta-in-a-config-file", (*MAP[:2], "--config", "{d}/c.yaml", *QUICK, "--out", "{d}/o"),
          "c.yaml: evaluation.rpe_deltas_m.0", text("c.yaml", "evaluation: {rpe_deltas_m: [-1]}\n")),
-    Case("stream-gap-negative", _map_set("validation.observers.stream_max_gap_s.gps_speed=-1"),
+    *_map_cases(
+        ("rpe-delta-negative", "evaluation.rpe_deltas_m=[-5]",
+         "--set evaluation.rpe_deltas_m=[-5]: evaluation.rpe_deltas_m.0: Input should be greater than 0"),
+        ("rpe-delta-zero", "evaluation.rpe_deltas_m=[5, 0]", "evaluation.rpe_deltas_m.1"),
+        ("rpe-delta-1e308", "evaluation.rpe_deltas_m=[1e308]", "evaluation.rpe_deltas_m.0: 1e+308 m is above"),
+        ("stream-gap-negative", "validation.observers.stream_max_gap_s.gps_speed=-1",
          "validation.observers.stream_max_gap_s.gps_speed"),
-    Case("stream-gap-zero", _map_set("validation.observers.stream_max_gap_s.gps_sigma=0"),
+        ("stream-gap-zero", "validation.observers.stream_max_gap_s.gps_sigma=0",
          "validation.observers.stream_max_gap_s.gps_sigma"),
-    Case("stream-gap-1e308", _map_set("validation.observers.stream_max_gap_s.gps_speed=1e308"),
+        ("stream-gap-1e308", "validation.observers.stream_max_gap_s.gps_speed=1e308",
          "validation.observers.stream_max_gap_s.gps_speed"),
-    Case("time-offset-1e308", _map_set("input.time_offsets_s.gps=1e308"), "input.time_offsets_s.gps: 1e+308 s is above"),
-    Case("time-offset-minus-1e300", _map_set("input.time_offsets_s.groundtruth=-1e300"),
+        ("time-offset-1e308", "input.time_offsets_s.gps=1e308", "input.time_offsets_s.gps: 1e+308 s is above"),
+        ("time-offset-minus-1e300", "input.time_offsets_s.groundtruth=-1e300",
          "input.time_offsets_s.groundtruth: -1e+300 s is below"),
-    Case("extra-odometry-offset-1e308", _map_set("input.extra_odometry.vo={{topic: /odom, time_offset_s: 1e308}}"),
+        ("extra-odometry-offset-1e308", "input.extra_odometry.vo={{topic: /odom, time_offset_s: 1e308}}",
          "input.extra_odometry.vo.time_offset_s: 1e+308 s is above"),
-    Case("compass-correlation-1e308", _map_set("backend.factors.compass.correlation_s=1e308"),
+        ("compass-correlation-1e308", "backend.factors.compass.correlation_s=1e308",
          "backend.factors.compass.correlation_s: 1e+308 s is above"),
-    Case("compass-correlation-1e-300", _map_set("backend.factors.compass.correlation_s=1e-300"),
+        ("compass-correlation-1e-300", "backend.factors.compass.correlation_s=1e-300",
          "backend.factors.compass.correlation_s: 1e-300 s is below"),
+    ),
 ]
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_a_misused_command_gives_one_clean_error(case: Case, world: World, tmp_path: Path, capsys):
-    d, watched, before = prepare(case, world, tmp_path, checksums)
-    capsys.readouterr()
-    with time_limit(TIME_LIMIT_S):
-        try:
-            code = main(["-q", *expand(case.argv, d, world)])
-        except SystemExit as e:  # argparse
-            code = e.code
-    out, err = capsys.readouterr()
-    assert code == case.code, f"exit {code}, stdout: {out[-500:]}, stderr: {err[-500:]}"
-    check_error_output(code, err, case)
-    assert checksums(*watched) == before, "an input changed, or something was left behind"
+    run_case(case, world, tmp_path, capsys, checksums, TIME_LIMIT_S)
 
 
 def test_corpus_counts():
