@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from typing import Annotated, Any, Literal, Union
 
 import annotated_types
+import pytest
 from pydantic import AfterValidator, BaseModel
 from pydantic.fields import FieldInfo
 
@@ -130,3 +131,60 @@ def test_the_lists_name_fields_that_exist():
     fields = {field for _, field, _, _ in schema_numbers()}
     assert set(EXEMPT) <= fields and set(BOUNDED_BY_A_VALIDATOR) <= fields
 
+
+# --- the bounds as a user meets them: `gslam map --set KEY=VALUE` -----------------
+
+# Keys that took any number before they were bounded, with a value below
+# their lower bound (0 where 0 is refused, else a negative one).
+NEWLY_BOUNDED = [
+    ("loops.local_map_m", "-1"), ("loops.min_separation_m", "-1"), ("loops.search_radius_m", "-1"),
+    ("loops.search_radius_per_m", "-1"), ("loops.max_search_yaw_deg", "-1"), ("loops.voxel_m", "0"),
+    ("loops.descriptor.max_radius_m", "0"), ("loops.correlative.resolution_m", "0"),
+    ("loops.acceptance.max_rms_m", "0"), ("loops.file.min_weight", "-1"), ("loops.observer.support_path_m", "0"),
+    ("loops.observer.max_clique_steps", "0"), ("loops.observer.min_support", "-1"),
+    ("submaps.length_m", "0"), ("submaps.node_spacing_m", "-1"), ("submaps.node_turn_deg", "-1"),
+    ("submaps.voxel_m", "0"), ("submaps.tie_tolerance", "-1"), ("submaps.constraints.max_distance_m", "0"),
+    ("submaps.constraints.loop_separation_m", "-1"), ("submaps.refine.max_shift_m", "0"),
+    ("submaps.recognition.min_path_m", "-1"), ("submaps.recognition.max_drift_per_m", "-1"),
+    ("submaps.ambiguity.exclude_deg", "0"),
+    ("frontend.voxel_size_m", "0"), ("frontend.min_range_m", "-1"),
+    ("validation.rate_hz", "0"), ("validation.observers.gap_periods", "0"), ("gating.baseline_m", "0"),
+]
+INTEGERS = {"loops.observer.max_clique_steps", "loops.observer.min_support"}
+
+
+def _named(key: str) -> tuple[str, ...]:
+    """How an error may name ``key``: dotted, or as the validation package
+    writes its sections' keys, the section then the key within it
+    (``validation: rate_hz``, ``validation.observers: gap_periods``)."""
+    dots = [i for i, c in enumerate(key) if c == "."]
+    return (key, *(f"{key[:i]}: {key[i + 1:]}" for i in dots))
+
+
+def _refusal(key: str, value: str) -> str:
+    from slam.config import check_given_once, load_config
+    from slam.errors import GslamError
+    from tests.conftest import TELEMAX_CONFIG
+
+    overrides = [f"{key}={value}"]
+    with pytest.raises(GslamError) as e:
+        check_given_once(overrides)  # as gslam map reads its --set
+        load_config(TELEMAX_CONFIG, overrides)
+    message = str(e.value)
+    assert "\n" not in message and "Traceback" not in message, message
+    assert message.startswith(f"--set {key}={value}: "), message
+    assert any(f"{name}:" in message for name in _named(key)), message
+    return message
+
+
+@pytest.mark.parametrize("key", [k for k, _ in NEWLY_BOUNDED])
+def test_a_newly_bounded_key_refuses_a_huge_value_naming_the_key(key: str):
+    huge = "100000000000000000000" if key in INTEGERS else "1e308"
+    message = _refusal(key, huge)
+    assert " is above " in message, message
+
+
+@pytest.mark.parametrize("key, low", NEWLY_BOUNDED)
+def test_a_newly_bounded_key_refuses_a_value_below_its_bound_naming_the_key(key: str, low: str):
+    message = _refusal(key, low)
+    assert "greater than" in message or " is below " in message, message

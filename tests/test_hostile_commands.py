@@ -14,7 +14,8 @@ them, after tests/test_fuzz.py and tests/test_hostile.py:
   obstacle or a region of no area;
 * config numbers without a physical bound: RPE deltas (refused after the
   mapping, naming no key), negative or endless stream gaps, clock offsets
-  no ROS time holds, a compass error correlated for 1e308 s.
+  no ROS time holds, a compass error correlated for 1e308 s, a submap or a
+  loop search of 1e308 m, a validation rate of 1e308 Hz.
 
 Each case runs as tests/test_fuzz.py's do: exit 1 or 2, one error line
 saying what the case expects, no traceback, nothing outside ``--out``
@@ -24,12 +25,16 @@ shipped configs are checksummed before and after), no hang.
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
+from tests.conftest import REPO
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
-    Case, World, run_case, scenario, spec, text, world,
+    Case, World, expand, run_case, scenario, spec, text, world,
 )
 from tests.test_hostile import checksums
 
@@ -155,6 +160,11 @@ CASES: list[Case] = [
          "backend.factors.compass.correlation_s: 1e+308 s is above"),
         ("compass-correlation-1e-300", "backend.factors.compass.correlation_s=1e-300",
          "backend.factors.compass.correlation_s: 1e-300 s is below"),
+        # loops, submaps and the validation sections' numbers, bounded since (tests/test_config_bounds.py)
+        ("submap-length-1e308", "submaps.length_m=1e308", "submaps.length_m: 1e+308 m is above 1e+06 m"),
+        ("loop-separation-1e308", "loops.min_separation_m=1e308", "loops.min_separation_m: 1e+308 m is above"),
+        ("validation-rate-1e308", "validation.rate_hz=1e308", "validation: rate_hz: 1e+308 Hz is above 10000 Hz"),
+        ("gating-baseline-1e308", "gating.baseline_m=1e308", "gating: baseline_m: 1e+308 m is above"),
     ),
 ]
 
@@ -162,6 +172,20 @@ CASES: list[Case] = [
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_a_misused_command_gives_one_clean_error(case: Case, world: World, tmp_path: Path, capsys):
     run_case(case, world, tmp_path, capsys, checksums, TIME_LIMIT_S)
+
+
+def test_a_submap_length_of_1e308_ends_the_process_with_one_line(world: World, tmp_path: Path):
+    """As a user meets it: ``gslam map RUN --set submaps.length_m=1e308``
+    in a process of its own loaded the config in silence and mapped."""
+    d = tmp_path / "case"
+    d.mkdir()
+    argv = expand(_map_set("submaps.length_m=1e308"), d, world)
+    done = subprocess.run([sys.executable, "-m", "slam.cli", *argv], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=TIME_LIMIT_S, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode != 0, done.stderr[-800:]
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
+    assert "submaps.length_m: 1e+308 m is above" in done.stderr, done.stderr
+    assert not (d / "o").exists()
 
 
 def test_corpus_counts():
