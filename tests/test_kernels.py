@@ -235,3 +235,36 @@ def test_the_nearest_point_of_a_tie_or_at_the_reach_is_the_k_d_trees():
     for within in (0.1, 0.125, 0.2):
         dist, want = pmap.tree.query(queries, distance_upper_bound=within)
         np.testing.assert_array_equal(pmap.nearest(queries, within), np.where(np.isfinite(dist), want, -1))
+
+
+def reference_linearise(q, pmap, pose, gate_m):
+    """slam.matching.icp's point-to-line terms as numpy."""
+    from validation.base.geometry import rotation
+
+    rq = q @ rotation(pose[2]).T
+    qw = rq + pose[:2]
+    idx = pmap.nearest(qw, gate_m)
+    ok = idx >= 0
+    idx = idx[ok]
+    n = pmap.normals[idx]
+    res = np.einsum("ij,ij->i", n, qw[ok] - pmap.points[idx])
+    r = rq[ok]
+    jac = np.column_stack([n[:, 0], n[:, 1], n[:, 1] * r[:, 0] - n[:, 0] * r[:, 1]])
+    return ok, res, jac
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_point_to_line_terms_are_the_references_to_the_bit(seed):
+    from slam.matching.icp import _linearise
+
+    rng = np.random.default_rng(200 + seed)
+    pts = room(rng)
+    normals = rng.normal(size=pts.shape)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    pmap = point_map(pts, normals)
+    q = pts[rng.choice(len(pts), 300, replace=False)] + rng.normal(0.0, 0.1, (300, 2))
+    pose = np.array([rng.normal(0, 0.2), rng.normal(0, 0.2), rng.normal(0, 0.1)])
+    for gate in (0.05, 0.3, 1.0):
+        for got, want in zip(_linearise(q, pmap, pose, gate), reference_linearise(q, pmap, pose, gate), strict=True):
+            assert got.dtype == want.dtype and got.shape == want.shape
+            np.testing.assert_array_equal(got, want)

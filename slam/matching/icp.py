@@ -48,13 +48,9 @@ def _linearise(q: np.ndarray, pmap: PointMap, pose: np.ndarray, gate_m: float):
     rq = q @ rotation(pose[2]).T
     qw = rq + pose[:2]
     idx = pmap.nearest(qw, gate_m)
-    ok = idx >= 0
-    idx = idx[ok]
-    n = pmap.normals[idx]
-    res = np.einsum("ij,ij->i", n, qw[ok] - pmap.points[idx])
-    r = rq[ok]
-    jac = np.column_stack([n[:, 0], n[:, 1], n[:, 1] * r[:, 0] - n[:, 0] * r[:, 1]])
-    return ok, res, jac
+    from slam.matching import kernels
+
+    return kernels.line_terms(qw, rq, idx, pmap.points, pmap.normals)
 
 
 def refine(

@@ -3,7 +3,9 @@
 The likelihood field and the branch-and-bound search
 (:mod:`slam.matching.grid`, :mod:`slam.matching.search`) spend their time
 in loops over cells, points and tree nodes; as numpy they were a sequence
-of temporary arrays per tree level, here each is one pass. (The pyramid's
+of temporary arrays per tree level, here each is one pass. The refinement's
+point-to-line terms (:mod:`slam.matching.icp`) were a dozen small numpy
+operations per iteration, here one call. (The pyramid's
 max-pooling stays numpy: its maxima of uint8 rows run wider there.) Every
 kernel computes exactly what the numpy version in ``tests/test_kernels.py``
 computes, bit for bit: the same float32 products and maxima, integer sums
@@ -253,6 +255,37 @@ def nearest_within(queries: np.ndarray, points: np.ndarray, lo: np.ndarray, nx: 
     return idx, unsure
 
 
+@_jit
+def line_terms(qw: np.ndarray, rq: np.ndarray, idx: np.ndarray, points: np.ndarray, normals: np.ndarray):
+    """The point-to-line terms of :func:`slam.matching.icp.refine` for
+    queries ``qw`` (q, 2) (``rq`` (q, 2): the same points turned but not
+    moved) matched to map points ``idx`` (q,) (-1: none): which have a
+    match (q,), and for those the residual along the map point's normal
+    (k,) and its Jacobian (k, 3) in x, y and yaw. The numpy version's
+    arithmetic (products summed left to right, no fused multiply-add)."""
+    ok = idx >= 0
+    k = 0
+    for i in range(len(idx)):
+        if ok[i]:
+            k += 1
+    res = np.empty(k)
+    jac = np.empty((k, 3))
+    k = 0
+    for i in range(len(idx)):
+        j = idx[i]
+        if j < 0:
+            continue
+        n0, n1 = normals[j, 0], normals[j, 1]
+        d0 = qw[i, 0] - points[j, 0]
+        d1 = qw[i, 1] - points[j, 1]
+        res[k] = n0 * d0 + n1 * d1
+        jac[k, 0] = n0
+        jac[k, 1] = n1
+        jac[k, 2] = n1 * rq[i, 0] - n0 * rq[i, 1]
+        k += 1
+    return ok, res, jac
+
+
 def load() -> None:
     """Compile every kernel, or load it from the cache, for the types the
     matching calls it with: the first call of the first kernel sets up
@@ -269,4 +302,5 @@ def load() -> None:
     dive(levels, 4, base, 0, 0, 0, 0.0, 0, 0)
     sweep(levels, 4, base, blocks, blocks, blocks, sc, 0.0, 0, 0, False, np.zeros(1, dtype=np.bool_), 0, 0, 0)
     grid = cell_index(some, 1.0)
-    nearest_within(some, some, *grid[:3], 1.0, *grid[3:], 1.0, 1e-9)
+    idx, _ = nearest_within(some, some, *grid[:3], 1.0, *grid[3:], 1.0, 1e-9)
+    line_terms(some, some, idx, some, some)
