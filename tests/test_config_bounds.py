@@ -40,7 +40,7 @@ ROOTS: dict[str, type[BaseModel]] = {"": PipelineConfig, "validation.": Validati
 SCHEMAS: dict[str, tuple[dict[str, type[BaseModel]], int]] = {
     "config": (ROOTS, 150),
     "scenario": ({"": Scenario}, 55),
-    "ablation spec": ({"": AblationSpec}, 8),
+    "ablation spec": ({"": AblationSpec}, 7),
     "inject --fault": ({f"{kind}@": model for kind, model in KINDS.items()}, 25),
 }
 
@@ -49,6 +49,9 @@ SCHEMAS: dict[str, tuple[dict[str, type[BaseModel]], int]] = {
 BOUNDED_BY_A_VALIDATOR = {
     "SystemModel.priors": "SystemModel._probabilities: in [1e-9, 1)",
     "SystemModel.false_alarm": "SystemModel._references: in [1e-9, 1)",
+    "RobotConfig.waypoints": "RobotConfig._pauses_nonnegative: x, y within 1e6 m, a pause in [0, 4 h], a speed in "
+                             "(0, 50] m/s",
+    "Distribution.integer": "Distribution._int64: within a 64-bit integer, which numpy draws",
 }
 
 # Numbers no physical bound fits. Keep this list short, and say why.
