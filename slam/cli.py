@@ -293,7 +293,10 @@ def _whole(minimum: int, maximum: int | None = None, why: str = ""):
     return parse
 
 
-_positive, _seed = _whole(1), _whole(0)
+_positive = _whole(1)
+# at most validation.base.bounds.MAX_SEED (not imported here: parsing the command line needs no pydantic)
+_seed = _whole(0, 2**64 - 1, "64 bits of seed name more runs than any sweep draws (a scenario's seed is bounded "
+               "alike)")
 _workers = _whole(1, 1024, "more processes than any machine runs at once")
 
 

@@ -5,6 +5,11 @@ whole schema, from :class:`PipelineConfig` and the models of its
 ``validation`` and ``gating`` sections down through every nested model,
 list, mapping and union, so a key added without bounds fails here rather
 than accepting 1e308 or 0 in silence.
+
+The other schemas users write are walked alike: a scenario
+(:class:`slam.sim.scenario.Scenario`), an ablation spec
+(:class:`slam.commands.ablate.spec.AblationSpec`) and the faults of
+``gslam inject --fault`` (:data:`slam.commands.inject.spec.KINDS`).
 """
 
 from __future__ import annotations
@@ -21,17 +26,32 @@ import pytest
 from pydantic import AfterValidator, BaseModel
 from pydantic.fields import FieldInfo
 
+from slam.commands.ablate.spec import AblationSpec
+from slam.commands.inject.spec import KINDS
 from slam.config import PipelineConfig
+from slam.sim.scenario import Scenario
 from validation.config import ValidationConfig
 from validation.gating import GatingConfig
 
 ROOTS: dict[str, type[BaseModel]] = {"": PipelineConfig, "validation.": ValidationConfig, "gating.": GatingConfig}
+
+# Every schema a user writes numbers into: its roots (key prefix -> model)
+# and the fewest numbers a walk of it must reach (it reached the nested models).
+SCHEMAS: dict[str, tuple[dict[str, type[BaseModel]], int]] = {
+    "config": (ROOTS, 150),
+    "scenario": ({"": Scenario}, 55),
+    "ablation spec": ({"": AblationSpec}, 7),
+    "inject --fault": ({f"{kind}@": model for kind, model in KINDS.items()}, 25),
+}
 
 # Numbers a bound elsewhere than on the field holds (a model validator
 # whose one-line message the users already see): "Model.field": where.
 BOUNDED_BY_A_VALIDATOR = {
     "SystemModel.priors": "SystemModel._probabilities: in [1e-9, 1)",
     "SystemModel.false_alarm": "SystemModel._references: in [1e-9, 1)",
+    "RobotConfig.waypoints": "RobotConfig._pauses_nonnegative: x, y within 1e6 m, a pause in [0, 4 h], a speed in "
+                             "(0, 50] m/s",
+    "Distribution.integer": "Distribution._int64: within a 64-bit integer, which numpy draws",
 }
 
 # Numbers no physical bound fits. Keep this list short, and say why.
@@ -96,11 +116,12 @@ def _numbers(tp: Any, metadata: list[Any], where: str) -> Iterator[tuple[str, An
         yield where, tp, metadata
 
 
-def schema_numbers() -> list[tuple[str, str, float | None, float | None]]:
-    """``(key, Model.field, lower, upper)`` for every number of the schema."""
+def schema_numbers(roots: dict[str, type[BaseModel]] = ROOTS) -> list[tuple[str, str, float | None, float | None]]:
+    """``(key, Model.field, lower, upper)`` for every number of the schema
+    of ``roots`` (the pipeline config's by default)."""
     found = []
     seen: set[type[BaseModel]] = set()
-    todo = [(prefix, model) for prefix, model in ROOTS.items()]
+    todo = [(prefix, model) for prefix, model in roots.items()]
     while todo:
         prefix, model = todo.pop()
         if model in seen:
@@ -117,9 +138,11 @@ def schema_numbers() -> list[tuple[str, str, float | None, float | None]]:
     return sorted(set(found))
 
 
-def test_every_number_of_the_config_has_a_lower_and_an_upper_bound():
-    numbers = schema_numbers()
-    assert len(numbers) > 150  # the walk reached the nested sections
+@pytest.mark.parametrize("schema", list(SCHEMAS))
+def test_every_number_of_the_config_has_a_lower_and_an_upper_bound(schema: str):
+    roots, least = SCHEMAS[schema]
+    numbers = schema_numbers(roots)
+    assert len(numbers) > least  # the walk reached the nested sections
     unbounded = [f"{key} ({field}): {'no lower' if lo is None else ''}{' and ' if lo is None and hi is None else ''}"
                  f"{'no upper' if hi is None else ''} bound"
                  for key, field, lo, hi in numbers
@@ -128,7 +151,7 @@ def test_every_number_of_the_config_has_a_lower_and_an_upper_bound():
 
 
 def test_the_lists_name_fields_that_exist():
-    fields = {field for _, field, _, _ in schema_numbers()}
+    fields = {field for roots, _ in SCHEMAS.values() for _, field, _, _ in schema_numbers(roots)}
     assert set(EXEMPT) <= fields and set(BOUNDED_BY_A_VALIDATOR) <= fields
 
 

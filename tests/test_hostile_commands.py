@@ -15,7 +15,10 @@ them, after tests/test_fuzz.py and tests/test_hostile.py:
 * config numbers without a physical bound: RPE deltas (refused after the
   mapping, naming no key), negative or endless stream gaps, clock offsets
   no ROS time holds, a compass error correlated for 1e308 s, a submap or a
-  loop search of 1e308 m, a validation rate of 1e308 Hz.
+  loop search of 1e308 m, a validation rate of 1e308 Hz;
+* scenario, ablation spec and fault numbers without a bound: 1e20 laps, a
+  pause of 1e308 s, a seed beyond 64 bits or below 0, 1e20 seeds or random
+  samples, a random range to 1e308, a fault from 1e308 s or from -1 s.
 
 Each case runs as tests/test_fuzz.py's do: exit 1 or 2, one error line
 saying what the case expects, no traceback, nothing outside ``--out``
@@ -34,7 +37,7 @@ import pytest
 
 from tests.conftest import REPO
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
-    Case, World, expand, run_case, scenario, spec, text, world,
+    Case, World, expand, run_case, scenario, set_in, spec, text, world,
 )
 from tests.test_hostile import checksums
 
@@ -166,6 +169,54 @@ CASES: list[Case] = [
         ("validation-rate-1e308", "validation.rate_hz=1e308", "validation: rate_hz: 1e+308 Hz is above 10000 Hz"),
         ("gating-baseline-1e308", "gating.baseline_m=1e308", "gating: baseline_m: 1e+308 m is above"),
     ),
+    # -- scenario, ablation spec and fault numbers without a bound (tests/test_config_bounds.py walks them since) --
+    Case("scenario-laps-1e20", SIM, "s.yaml: robot.laps: 1e+20 laps is above 1000 laps",
+         scenario(lambda t: t["robot"].update(waypoints=[[0, 0], [5, 0], [5, 5], [0, 0]], laps=10**20))),
+    Case("scenario-laps-0", SIM, "s.yaml: robot.laps: 0 laps is below 1 laps", scenario(set_in("robot", "laps", 0))),
+    Case("scenario-start-pause-1e308", SIM, "s.yaml: robot.start_pause_s: 1e+308 s is above 14400 s",
+         scenario(set_in("robot", "start_pause_s", 1e308))),
+    Case("scenario-end-pause-negative", SIM, "s.yaml: robot.end_pause_s: Input should be greater than or equal to 0",
+         scenario(set_in("robot", "end_pause_s", -1.0))),
+    Case("scenario-waypoint-pause-1e308", SIM,
+         "s.yaml: robot.waypoints: waypoint 1's pause (third value) 1e+308 s is above 14400 s",
+         scenario(lambda t: t["robot"]["waypoints"].__setitem__(1, [*t["robot"]["waypoints"][1][:2], 1e308]))),
+    Case("scenario-seed-beyond-64-bits", SIM, "s.yaml: seed: 18446744073709551616 is above 18446744073709551615",
+         scenario(set_in("seed", 2**64))),
+    Case("scenario-seed-negative", SIM, "s.yaml: seed: -1 is below 0", scenario(set_in("seed", -1))),
+    Case("scenario-laser-min-range-1e308", SIM, "s.yaml: sensors.laser.min_range_m: 1e+308 m is above 1000 m",
+         scenario(lambda t: t.setdefault("sensors", {}).setdefault("laser", {}).update(min_range_m=1e308))),
+    Case("scenario-disturber-direction-1e308", SIM, "s.yaml: world.disturbers.0.direction.0: 1e+308 is above 1e+06",
+         _world(lambda w: w.__setitem__("disturbers", [{"name": "steel", "position": [1.0, 1.0, 0.5],
+                                                          "moment_A_m2": 10.0, "direction": [1e308, 0.0, 0.0]}]))),
+    Case("simulate-seed-flag-beyond-64-bits", ("simulate", "{scen}", "--seed", str(2**64), "--out", "{d}/o"),
+         "argument --seed: expected at most 18446744073709551615", code=2),
+    Case("ablate-seed-list-beyond-64-bits", ABLATE,
+         "spec.yaml: inputs.scenarios.0.seeds.0: 18446744073709551616 is above 18446744073709551615",
+         lambda d, w: spec(inputs={"scenarios": [{"path": str(w.scenario), "seeds": [2**64]}]})(d, w)),
+    Case("ablate-seed-range-past-64-bits", ABLATE,
+         "spec.yaml: inputs.scenarios.0.seeds: the last seed, 18446744073709551616, is above 18446744073709551615",
+         lambda d, w: spec(inputs={"scenarios": [{"path": str(w.scenario), "seeds": {"first": 2**64 - 1,
+                                                                                   "count": 2}}]})(d, w)),
+    Case("ablate-seed-count-1e20", ABLATE, "spec.yaml: inputs.scenarios.0.seeds.count: 1e+20 is above 1e+06",
+         lambda d, w: spec(inputs={"scenarios": [{"path": str(w.scenario), "seeds": {"count": 10**20}}]})(d, w)),
+    Case("ablate-random-samples-1e20", ABLATE, "spec.yaml: sweep.random.samples: 1e+20 is above 1e+06",
+         spec(sweep={"random": {"samples": 10**20, "params": {"gating.inflation": {"uniform": [1, 5]}}}})),
+    Case("ablate-random-samples-0", ABLATE, "spec.yaml: sweep.random.samples: 0 is below 1",
+         spec(sweep={"random": {"samples": 0, "params": {"gating.inflation": {"uniform": [1, 5]}}}})),
+    Case("ablate-random-seed-negative", ABLATE, "spec.yaml: sweep.random.seed: -1 is below 0",
+         spec(sweep={"random": {"samples": 2, "seed": -1, "params": {"gating.inflation": {"uniform": [1, 5]}}}})),
+    Case("ablate-random-uniform-1e308", ABLATE,
+         "spec.yaml: sweep.random.params.gating.inflation.uniform.1: 1e+308 is above 1e+15",
+         spec(sweep={"random": {"samples": 2, "params": {"gating.inflation": {"uniform": [1, 1e308]}}}})),
+    Case("ablate-random-log-uniform-1e308", ABLATE,
+         "spec.yaml: sweep.random.params.gating.inflation.log_uniform.1: 1e+308 is above 1e+15",
+         spec(sweep={"random": {"samples": 2, "params": {"gating.inflation": {"log_uniform": [1, 1e308]}}}})),
+    *(Case(f"inject-{name}", ("inject", "{run}", "--fault", fault, "--out", "{d}/o"), f"--fault {fault}: {says}")
+      for name, fault, says in (
+          ("start-1e308", "gyro_bias@1e308:1e308", "start_s: 1e+308 s is above 4.29497e+09 s"),
+          ("end-1e308", "slip@2:1e308", "end_s: 1e+308 s is above 4.29497e+09 s"),
+          ("dipole-start-negative", "dipole@-1:5", "start_s: -1 s is below 0 s"),
+      )),
 ]
 
 
@@ -186,6 +237,22 @@ def test_a_submap_length_of_1e308_ends_the_process_with_one_line(world: World, t
     assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
     assert "submaps.length_m: 1e+308 m is above" in done.stderr, done.stderr
     assert not (d / "o").exists()
+
+
+def test_a_pause_of_1e308_s_ends_the_process_with_one_line(world: World, tmp_path: Path):
+    """As a user meets it: ``gslam simulate`` of a scenario whose
+    ``robot.start_pause_s`` is 1e308 ended in an OverflowError traceback."""
+    d = tmp_path / "case"
+    d.mkdir()
+    scenario(set_in("robot", "start_pause_s", 1e308))(d, world)
+    before = checksums(d)
+    done = subprocess.run([sys.executable, "-m", "slam.cli", *expand(SIM, d, world)], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=TIME_LIMIT_S,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 1, done.stderr[-800:]
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
+    assert "s.yaml: robot.start_pause_s: 1e+308 s is above 14400 s" in done.stderr, done.stderr
+    assert checksums(d) == before and not (d / "o").exists()
 
 
 def test_corpus_counts():

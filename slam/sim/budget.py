@@ -32,8 +32,9 @@ from validation.base.geometry import wrap_angle
 from slam.sim.route import check_route
 from slam.sim.scenario import RegionKind, RobotConfig, Scenario
 from slam.sim.world import segments_near_count, wall_segments
+from validation.base import bounds
 
-MAX_DURATION_S = 4 * 3600.0
+MAX_DURATION_S = bounds.MAX_MISSION_S
 """Longest mission simulated: 4 h (the 2-hour benchmark run fits twice)."""
 MAX_PATH_M = 100_000.0
 """Longest path: the motion is planned on 5 mm steps along it."""

@@ -75,7 +75,8 @@ class Disturber(Strict):
     name: str
     position: tuple[Coordinate_m, Coordinate_m, Coordinate_m]
     moment_A_m2: bounds.DipoleMoment_A_m2 = Field(gt=0.0)
-    direction: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    direction: tuple[Annotated[float, bounds.AXIS_COMPONENT], Annotated[float, bounds.AXIS_COMPONENT],
+                     Annotated[float, bounds.AXIS_COMPONENT]] = (0.0, 0.0, 1.0)
 
     @field_validator("direction")
     @classmethod
@@ -157,10 +158,10 @@ class RobotConfig(Strict):
     corner_radius_m: Annotated[float, within(None, 1000.0, "m", high="a corner a kilometre round is no corner of "
                                              "a ground robot's route")] = Field(1.0, ge=0.0)
     spot_turn_above_deg: float = Field(100.0, ge=0.0, le=180.0)
-    start_pause_s: float = Field(1.0, ge=0.0)
-    end_pause_s: float = Field(1.0, ge=0.0)
+    start_pause_s: Annotated[float, bounds.PAUSE_S] = Field(1.0, ge=0.0)
+    end_pause_s: Annotated[float, bounds.PAUSE_S] = Field(1.0, ge=0.0)
     truth_rate_hz: bounds.Rate_hz = Field(100.0, ge=100.0)
-    laps: int = Field(1, ge=1)
+    laps: Annotated[int, bounds.LAPS] = 1
 
     @field_validator("waypoints")
     @classmethod
@@ -173,6 +174,10 @@ class RobotConfig(Strict):
             if max(abs(w[0]), abs(w[1])) > MAX_COORDINATE_M:
                 raise ValueError(f"waypoint {i} at ({w[0]:g}, {w[1]:g}) m lies beyond {MAX_COORDINATE_M:g} m of the "
                                  "origin: a scenario's world is a site within 1000 km of its origin")
+            if len(w) >= 3 and w[2] > bounds.MAX_MISSION_S:
+                raise ValueError(f"waypoint {i}'s pause (third value) {bounds.shown_beside(w[2], bounds.MAX_MISSION_S)} s "
+                                 f"is above {bounds.MAX_MISSION_S:g} s: a robot standing still that long outlasts the "
+                                 "longest mission simulated (4 h)")
             if len(w) == 4 and w[3] > MAX_SPEED_M_S:
                 raise ValueError(f"waypoint {i}'s leg speed (fourth value) {bounds.shown_beside(w[3], MAX_SPEED_M_S)} m/s "
                                  f"is above {MAX_SPEED_M_S:g} m/s: no ground robot drives at 180 km/h")
@@ -196,7 +201,7 @@ class LaserConfig(Strict):
     rate_hz: bounds.Rate_hz = Field(10.0, gt=0.0)
     beams: bounds.Count = Field(541, ge=2)
     fov_deg: float = Field(270.0, gt=0.0, le=360.0)
-    min_range_m: float = Field(0.1, ge=0.0)
+    min_range_m: bounds.LaserRange_m = Field(0.1, ge=0.0)
     max_range_m: bounds.LaserRange_m = Field(10.0, gt=0.0)
     # A 2D laser ranges to 1-3 cm; a metre is no laser's noise.
     range_noise_m: Annotated[float, within(None, 1.0, "m", high="no laser ranges that noisily")] = Field(0.01, ge=0.0)
@@ -323,7 +328,7 @@ class Scenario(Strict):
     """Root of a scenario YAML (e.g. ``configs/scenarios/telemax_lab.yaml``)."""
 
     name: str
-    seed: int = Field(0, ge=0)
+    seed: Annotated[int, bounds.SEED] = 0
     world: WorldConfig = WorldConfig()
     robot: RobotConfig
     sensors: SensorsConfig = SensorsConfig()

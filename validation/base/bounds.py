@@ -29,9 +29,9 @@ def within(lo: float | None, hi: float | None, unit: str, low: str = "", high: s
         if value is None:
             return value
         if lo is not None and value < lo:
-            raise ValueError(f"{shown_beside(value, lo)}{u} is below {lo:g}{u}: {low}")
+            raise ValueError(f"{shown_beside(value, lo)}{u} is below {_exact(lo)}{u}: {low}")
         if hi is not None and value > hi:
-            raise ValueError(f"{shown_beside(value, hi)}{u} is above {hi:g}{u}: {high}")
+            raise ValueError(f"{shown_beside(value, hi)}{u} is above {_exact(hi)}{u}: {high}")
         return value
 
     check.bounds = (lo, hi)  # for a reader of the schema (tests/test_config_bounds.py asks every number for both)
@@ -40,9 +40,21 @@ def within(lo: float | None, hi: float | None, unit: str, low: str = "", high: s
 
 def shown_beside(value: float, bound: float) -> str:
     """``value`` as ``{:g}`` writes it, or in full where that would read as
-    the bound it passes (a value a hair past 100 is not '100 is above 100')."""
+    the bound it passes (a value a hair past 100 is not '100 is above 100';
+    a whole number one past 2**64 - 1 in all its digits)."""
     short = f"{value:g}"
-    return short if short != f"{bound:g}" else repr(float(value))
+    if isinstance(value, int) and _exact(bound) != f"{bound:g}":
+        return str(value)  # beside a bound in all its digits
+    if short != _exact(bound):
+        return short
+    return str(value) if isinstance(value, int) else repr(float(value))
+
+
+def _exact(bound: float) -> str:
+    """``bound`` as ``{:g}`` writes it, or in all its digits where that
+    rounds a whole number (2**64 - 1 is not 1.84467e+19)."""
+    short = f"{bound:g}"
+    return str(bound) if isinstance(bound, int) and float(short) != bound else short
 
 
 # --- noise of measurements (sigmas of factors and observers) ---------------
@@ -250,3 +262,37 @@ COUNT = within(None, 1_000_000, "", high="no count of points, candidates, rings,
 Iterations = Annotated[int, ITERATIONS]
 Threads = Annotated[int, THREADS]
 Count = Annotated[int, COUNT]
+
+
+# --- simulated runs, sweeps and the times of injected faults -------------------
+
+MAX_MISSION_S = 4 * 3600.0
+"""Longest mission simulated (s): 4 h, the 2-hour benchmark run fits twice
+(:data:`slam.sim.budget.MAX_DURATION_S`)."""
+PAUSE_S = within(None, MAX_MISSION_S, "s", high="a robot standing still that long outlasts the longest mission "
+                 "simulated (4 h)")
+"""How long a simulated robot waits at a waypoint, at the start or at the end (s)."""
+LAPS = within(1, 1000, "laps", "a run drives its route at least once", "a thousand laps within the longest "
+              "mission simulated (4 h) leave 14 s a lap, and the route's waypoints are listed once per lap")
+"""How often a simulated robot drives its closed route."""
+MAX_SEED = 2**64 - 1
+SEED = within(0, MAX_SEED, "", "numpy's generators take no negative seed", "64 bits of seed name more runs than "
+              "any sweep draws, and truth.json and the job names hold the seed where readers take 64-bit integers")
+"""A random seed (of a scenario, of an ablation's seeds and random sweep)."""
+SAMPLES = within(1, 1_000_000, "", "a sweep of no point or seed runs nothing", "a million jobs of one input is "
+                 "beyond any sweep a machine or cluster runs (gslam ablate refuses more than --max-jobs, 10,000 by "
+                 "default)")
+"""How many seeds or random samples an ablation draws for one input."""
+SWEPT_NUMBER = within(-1e15, 1e15, "", "beyond every bound of a config's or scenario's key (the widest, a clock "
+                      "offset's, is 2**32 s), and a wider range overflows the draw",
+                      "beyond every bound of a config's or scenario's key (the widest, a clock offset's, is 2**32 s), "
+                      "and a wider range overflows the draw")
+"""An end of a range an ablation draws a key's values from."""
+RECORDING_S = within(0.0, 2.0**32, "s", "a fault's times count from the recording's start",
+                     "beyond what a recording spans: its stamps lie within 1901 to 2038, 2**32 s "
+                     "(slam.readers.data_checks)")
+"""A time within a recording, from its start (s): when an injected fault starts or ends."""
+AXIS_COMPONENT = within(-1e6, 1e6, "", "an axis is normalised on load: a component beyond a million says no more "
+                        "than one of a few units", "an axis is normalised on load: a component beyond a million says "
+                        "no more than one of a few units")
+"""A component of a direction normalised on load (a magnetic disturber's moment axis)."""

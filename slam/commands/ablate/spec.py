@@ -28,6 +28,7 @@ from slam.errors import GslamError
 from slam.readers.files import check_exists
 from slam.results.out_checks import resolve_path
 from slam.results.records import PLAIN_NAME, PLAIN_NAME_RULE
+from validation.base import bounds
 from validation.base.yamlio import StrictFrozen, yaml_kind
 
 SCENARIO_PREFIX = "scenario."
@@ -35,14 +36,18 @@ SCENARIO_PREFIX = "scenario."
 
 INT64_MAX = 2**63 - 1
 
+Seed = Annotated[int, bounds.SEED]
+Samples = Annotated[int, bounds.SAMPLES]
+SweptNumber = Annotated[float, bounds.SWEPT_NUMBER]
+
 
 class Distribution(StrictFrozen):
     """One randomly sampled parameter: exactly one of ``uniform: [lo, hi]``,
     ``log_uniform: [lo, hi]``, ``integer: [lo, hi]`` (inclusive) or
     ``choice: [values]``."""
 
-    uniform: tuple[float, float] | None = None
-    log_uniform: tuple[float, float] | None = None
+    uniform: tuple[SweptNumber, SweptNumber] | None = None
+    log_uniform: tuple[SweptNumber, SweptNumber] | None = None
     integer: tuple[int, int] | None = None
     choice: list[Any] | None = Field(None, min_length=1)
 
@@ -72,8 +77,8 @@ class RandomSweep(StrictFrozen):
     """``samples`` points drawn with ``seed`` (the same spec draws the same
     points), each parameter independently."""
 
-    samples: int = Field(ge=1)
-    seed: int = Field(0, ge=0)
+    samples: Samples
+    seed: Seed = 0
     params: dict[str, Distribution] = Field(min_length=1)
 
 
@@ -145,8 +150,15 @@ class SweepSpec(StrictFrozen):
 class SeedRange(StrictFrozen):
     """``count`` consecutive seeds from ``first``."""
 
-    first: int = Field(1, ge=0)
-    count: int = Field(ge=1)
+    first: Seed = 1
+    count: Samples
+
+    @model_validator(mode="after")
+    def _last_seed(self) -> "SeedRange":
+        if self.first + self.count - 1 > bounds.MAX_SEED:
+            raise ValueError(f"the last seed, {self.first + self.count - 1}, is above {bounds.MAX_SEED}: "
+                             "64 bits of seed name more runs than any sweep draws (bounded as a scenario's seed)")
+        return self
 
     def seeds(self) -> list[int]:
         return list(range(self.first, self.first + self.count))
@@ -160,7 +172,7 @@ def _seeds_form(value: Any) -> str:
 # names the key of the form given (seeds.count), not both forms' failures.
 # The tags hold brackets: describe_validation_error leaves them out of keys.
 Seeds = Annotated[
-    Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=1), Tag("[list]")]
+    Annotated[list[Seed], Field(min_length=1, max_length=1_000_000), Tag("[list]")]
     | Annotated[SeedRange, Tag("[range]")],
     Discriminator(_seeds_form),
 ]

@@ -54,8 +54,8 @@ class Fault(StrictFrozen):
     recording's start)."""
 
     kind: str
-    start_s: float = Field(ge=0.0)
-    end_s: float
+    start_s: Annotated[float, bounds.RECORDING_S]
+    end_s: Annotated[float, bounds.RECORDING_S]
 
     @model_validator(mode="after")
     def _ordered(self) -> "Fault":
