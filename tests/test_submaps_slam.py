@@ -310,6 +310,35 @@ def test_the_path_on_dead_reckoning_alone_may_drift_as_the_odometry_does():
     assert feed.finishing == [0] and feed.submaps[0].scans == list(range(6))
 
 
+def test_a_loop_within_what_was_mapped_after_a_blind_stretch_pins_none_of_its_drift():
+    """Nodes 0-9, the steps into 3, 4 and 5 on dead reckoning alone (1 m
+    each). A loop from node 9 to a submap of nodes 6-7 (mapped after the
+    stretch) leaves its 3 m unpinned; one to a submap of nodes 0-2 pins it."""
+    from types import SimpleNamespace
+
+    from slam.submaps.graph import UnpinnedPath
+    from slam.submaps.local import Submap
+
+    blind_path = np.array([0, 0, 0, 1, 2, 3, 3, 3, 3, 3], dtype=float)
+    sizes = [100, 100, 100, 0, 0, 0, 100, 100, 100, 100]
+    points = SimpleNamespace(points=[np.zeros((k, 2)) for k in sizes])
+
+    def submap(scans, blind_too=()):
+        sm = Submap()
+        for k in [*blind_too, *scans]:
+            sm.insert(k, np.zeros(3), 1.0)
+        return sm
+
+    path = UnpinnedPath(blind_path, points, min_points=20)
+    for i in range(10):
+        path.reach(i)
+    assert path.at.tolist() == blind_path.tolist()
+    path.tie(9, submap([6, 7], blind_too=[5]))  # its blind scan 5 holds nothing
+    assert path.at[9] == 3.0
+    path.tie(9, submap([0, 1, 2]))
+    assert path.at[9] == 0.0
+
+
 @pytest.mark.parametrize("constraints", [{}, {"max_distance_m": 1e-3}], ids=["near", "recognised"])
 def test_the_walk_beside_local_slam_gives_the_same_result_to_the_bit(constraints):
     """The walk following local SLAM in a second process reads only what

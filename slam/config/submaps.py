@@ -166,7 +166,9 @@ class RecognitionConfig(_Strict):
     dead reckoning alone (nodes whose scans are too sparse to match, or left
     out by the gating) the run drifts as its odometry does:
     ``blind_drift_per_m`` and ``blind_turn_per_m_deg`` there (None: the
-    rates above). A recognition is a loop
+    rates above), until a loop reaches a submap mapped before that path;
+    while its drift may exceed ``constraints.linear_window_m``, recognition
+    is tried whatever the path since the last loop. A recognition is a loop
     only when a second one, at most ``confirm_within_m`` of path later,
     places the run within ``agree_m`` and ``agree_deg`` of the first; both
     then join the graph without a robust kernel, so the graph closes the

@@ -180,6 +180,30 @@ class LocalFeed:
         return np.array([len(self.poses) if last is None else last for last in self.last_scans], dtype=int)
 
 
+class UnpinnedPath:
+    """The path walked on dead reckoning alone (``blind_path``, (n,) m, of
+    :class:`LocalFeed`) between each node and the part of the map its loops
+    reach, ``at`` (n,) m. A loop to a submap mapped after a blind stretch
+    ties the node to what was mapped since, which is still off from the rest
+    by the stretch's drift: it pins nothing of that stretch. Only a loop to a
+    submap tied to the map before the stretch does."""
+
+    def __init__(self, blind_path: np.ndarray, points: ScanPoints, min_points: int):
+        self.blind_path, self.points, self.min_points = blind_path, points, min_points
+        self.at = np.zeros(len(blind_path))
+
+    def reach(self, i: int) -> None:
+        """Node ``i``, reached from the one before by local SLAM."""
+        if i > 0:
+            self.at[i] = self.at[i - 1] + self.blind_path[i] - self.blind_path[i - 1]
+
+    def tie(self, i: int, submap: Submap) -> None:
+        """Node ``i`` tied to ``submap`` by a loop: the submap is rigid, so
+        it reaches whatever the least pinned of its scans does."""
+        placed = [s for s in submap.scans if len(self.points.points[s]) >= self.min_points] or submap.scans[-1:]
+        self.at[i] = min(self.at[i], float(self.at[placed].min()))
+
+
 class GlobalSlam:
     """See the module docstring. ``local``: local SLAM's result, scan by
     scan. ``steps`` (n, 3) and ``step_cov`` (n, 3, 3): the dead-reckoning
@@ -237,11 +261,12 @@ class GlobalSlam:
         self.chain_robust = gtsam.noiseModel.mEstimator.Cauchy.Create(cc.robust_scale)
         rc = cfg.recognition
         last_loop, last_try = 0.0, -np.inf  # path at the last loop and at the last recognition tried
-        blind_at_loop = 0.0  # dead-reckoned path at the last loop
+        unpinned = UnpinnedPath(self.blind_path, self.points, cfg.min_points)
         recognitions: list[tuple[int, Match, int, np.ndarray]] = []  # (node, match, submap, its global pose)
         for i in range(n):
             local.advance(i)
             est[i] = compose(est[i - 1], between(local.poses[i - 1], local.poses[i])) if i > 0 else local.poses[0]
+            unpinned.reach(i)
             self._add_intra(i)
             if len(self.points.points[i]) < cfg.min_points:
                 continue
@@ -281,18 +306,23 @@ class GlobalSlam:
                 last_tied[sid] = self.path[i]
                 pending += 1
                 if loop:
-                    last_loop, blind_at_loop = self.path[i], self.blind_path[i]
-            if rc.enabled and self.path[i] - last_loop >= rc.min_path_m and self.path[i] - last_try >= rc.spacing_m:
+                    last_loop = self.path[i]
+                    unpinned.tie(i, sm)
+            # Blind path whose drift may exceed what the constraint search covers.
+            unpinned_blind = drift_allowance(rc, 0.0, unpinned.at[i])[0] > cc.linear_window_m
+            if (rc.enabled and (self.path[i] - last_loop >= rc.min_path_m or unpinned_blind)
+                    and self.path[i] - last_try >= rc.spacing_m):
                 # Drift may have carried the estimate beyond the windows: recognise the place.
                 last_try = self.path[i]
-                found, tried = self._recognise(i, est, recognitions, self.path[i] - last_loop,
-                                               self.blind_path[i] - blind_at_loop)
+                found, tried = self._recognise(i, est, recognitions, self.path[i] - last_loop, unpinned.at[i])
                 searches += tried
                 if found:
                     # Without the kernel, so the graph closes the loop; from
                     # then on they are loops like the others, under it.
                     est[: i + 1] = self._optimise(est[: i + 1], i + 1, plain=found)
-                    last_opt, pending, last_loop, blind_at_loop = i, 0, self.path[i], self.blind_path[i]
+                    last_opt, pending, last_loop = i, 0, self.path[i]
+                    for k in found:
+                        unpinned.tie(i, self.local.submaps[self.constraints[k].submap])
                     optimised += 1
             if pending and i - last_opt >= cc.optimise_every:
                 est[: i + 1] = self._incremental(est[: i + 1], i + 1)
