@@ -37,9 +37,9 @@ import yaml
 
 from tests.conftest import CONFIGS, TELEMAX_CONFIG
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
-    Case, World, both, check_error_output, copy_run, expand, prepare, text, world,
+    Case, World, both, copy_run, text, world,
 )
-from tests.test_hostile import CARMEN, LIBRSF, QUICK, Warned, _run, carmen, checksums, librsf_with, run_warned
+from tests.test_hostile import CARMEN, LIBRSF, QUICK, Warned, carmen, librsf_with, run_error, run_warned
 
 pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
 
@@ -339,13 +339,7 @@ WARNINGS: list[Warned] = [
 
 @pytest.mark.parametrize("case", ERRORS, ids=[c.id for c in ERRORS])
 def test_a_hostile_file_read_gives_one_clean_error(case: Case, world: World, tmp_path: Path, capsys):
-    d, watched, before = prepare(case, world, tmp_path, checksums)
-    capsys.readouterr()
-    code, err, leaked = _run(expand(case.argv, d, world), capsys)
-    assert code == case.code, f"exit {code}: {err[-800:]}"
-    check_error_output(code, err, case)
-    assert not leaked, [str(w.message) for w in leaked]
-    assert checksums(*watched) == before, "an input changed, or something was left behind"
+    run_error(case, world, tmp_path, capsys, longest_line=None)
 
 
 @pytest.mark.parametrize("case", WARNINGS, ids=[c.id for c in WARNINGS])
