@@ -39,7 +39,7 @@ from tests.conftest import CONFIGS, TELEMAX_CONFIG
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
     Case, World, both, copy_run, text, world,
 )
-from tests.test_hostile import CARMEN, LIBRSF, QUICK, Warned, carmen, librsf_with, run_error, run_warned
+from tests.test_hostile import CARMEN, LIBRSF, QUICK, Warned, _run, carmen, librsf_with, run_error, run_warned
 
 pytestmark = pytest.mark.slow  # end to end: pytest -m 'not slow' leaves it out
 
