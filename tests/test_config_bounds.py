@@ -179,7 +179,7 @@ INTEGERS = {"loops.observer.max_clique_steps", "loops.observer.min_support"}
 def _named(key: str) -> tuple[str, ...]:
     """How an error may name ``key``: dotted, or as the validation package
     writes its sections' keys, the section then the key within it
-    (``validation: rate_hz``, ``validation.observers: gap_periods``)."""
+    (``validation.rate_hz``, ``validation.observers.gap_periods``)."""
     dots = [i for i, c in enumerate(key) if c == "."]
     return (key, *(f"{key[:i]}: {key[i + 1:]}" for i in dots))
 

@@ -166,8 +166,8 @@ CASES: list[Case] = [
         # loops, submaps and the validation sections' numbers, bounded since (tests/test_config_bounds.py)
         ("submap-length-1e308", "submaps.length_m=1e308", "submaps.length_m: 1e+308 m is above 1e+06 m"),
         ("loop-separation-1e308", "loops.min_separation_m=1e308", "loops.min_separation_m: 1e+308 m is above"),
-        ("validation-rate-1e308", "validation.rate_hz=1e308", "validation: rate_hz: 1e+308 Hz is above 10000 Hz"),
-        ("gating-baseline-1e308", "gating.baseline_m=1e308", "gating: baseline_m: 1e+308 m is above"),
+        ("validation-rate-1e308", "validation.rate_hz=1e308", "validation.rate_hz: 1e+308 Hz is above 10000 Hz"),
+        ("gating-baseline-1e308", "gating.baseline_m=1e308", "gating.baseline_m: 1e+308 m is above"),
     ),
     # -- scenario, ablation spec and fault numbers without a bound (tests/test_config_bounds.py walks them since) --
     Case("scenario-laps-1e20", SIM, "s.yaml: robot.laps: 1e+20 laps is above 1000 laps",

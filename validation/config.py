@@ -90,10 +90,10 @@ def inline_model(section: dict[str, Any], base_dir: Path) -> Path | None:
 def parse_sections(validation: Mapping[str, Any], gating: Mapping[str, Any]) -> tuple[ValidationConfig, GatingConfig]:
     """Validate both sections; one-line ValidationError naming the key."""
     data = dict(validation)
-    observers = observers_config(data.pop("observers", {}) or {}, "validation.observers")
-    cfg = validate_mapping(ValidationConfig, data, "validation")
+    observers = observers_config(data.pop("observers", {}) or {}, "validation.observers", section=True)
+    cfg = validate_mapping(ValidationConfig, data, "validation", section=True)
     cfg = cfg.model_copy(update={"observers": observers})
-    gate = GatingConfig.from_mapping(dict(gating), "gating")
+    gate = GatingConfig.from_mapping(dict(gating), "gating", section=True)
     from validation.base.errors import ValidationError
 
     if cfg.mode.needs_model and cfg.model is None:

@@ -153,9 +153,10 @@ class GatingConfig(StrictFrozen):
         return out
 
     @classmethod
-    def from_mapping(cls, data: Mapping[str, Any], source: str = "gating") -> "GatingConfig":
-        """Validate a config section; errors are one-line :class:`ValidationError` s."""
-        return validate_mapping(cls, dict(data), source)
+    def from_mapping(cls, data: Mapping[str, Any], source: str = "gating", section: bool = False) -> "GatingConfig":
+        """Validate a config section; errors are one-line :class:`ValidationError` s
+        (``section``: see :func:`~validation.base.yamlio.validate_mapping`)."""
+        return validate_mapping(cls, dict(data), source, section)
 
     def components_of(self, factor: str, dof: str) -> list[str]:
         """The components one degree of freedom of a factor type depends on."""

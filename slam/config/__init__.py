@@ -692,8 +692,11 @@ def enabled_factors(config: PipelineConfig) -> list[str]:
 
 def _section_error_key(message: str) -> str:
     """The dotted key a validation-package error is about: its leading
-    ``section.key:`` (``validation: model.priors:`` is
-    ``validation.model.priors``), plus the name of an unknown key."""
+    ``section.key:`` (``validation.model.priors:``; in a file's own terms
+    ``validation: model.priors:``), or the unknown key it names."""
+    unknown = re.match(r"unknown config key '([^']+)'", message)
+    if unknown:
+        return unknown.group(1)
     head, _, rest = message.partition(":")
     key = head.split(" ", 1)[0]
     inner = re.match(r" ([A-Za-z_][\w.]*):", rest)

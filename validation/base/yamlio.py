@@ -319,16 +319,27 @@ class StrictFrozen(Strict):
 _M = TypeVar("_M", bound=BaseModel)
 
 
-def validate_mapping(model_type: type[_M], data: Any, source: str) -> _M:
+def validate_mapping(model_type: type[_M], data: Any, source: str, section: bool = False) -> _M:
     """Validate ``data`` as ``model_type``; bad input raises a one-line
-    :class:`ValidationError` naming ``source`` and the offending key."""
+    :class:`ValidationError` naming ``source`` and the offending key.
+    ``section``: ``source`` is a config section's key path (``gating``), so
+    the key is named by its whole path (``gating.holdoff_s``), as the
+    pipeline config's other sections name theirs."""
     try:
         return model_type.model_validate(data)
     except pydantic.ValidationError as e:
         first = e.errors()[0]
         loc = ".".join(str(p) for p in first["loc"])
         if first["type"] == "extra_forbidden":
-            raise ValidationError(f"{source}: unknown key '{loc}'") from None
+            raise ValidationError(unknown_key(source, loc, section)) from None
         msg = first["msg"].removeprefix("Value error, ")
+        if section:
+            raise ValidationError(f"{source}.{loc}: {msg}" if loc else f"{source}: {msg}") from None
         where = f"{loc}: " if loc else ""
         raise ValidationError(f"{source}: {where}{msg}") from None
+
+
+def unknown_key(source: str, loc: str, section: bool = False) -> str:
+    """The message for key ``loc`` unknown in ``source`` (a file, or with
+    ``section`` a config section's key path)."""
+    return f"unknown config key '{source}.{loc}'" if section else f"{source}: unknown key '{loc}'"

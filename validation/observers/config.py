@@ -24,7 +24,7 @@ from validation.base import bounds
 from validation.base.errors import ValidationError
 from validation.streams import is_stream_name, stream_component
 from validation.trends import Rule, Window
-from validation.base.yamlio import StrictFrozen, load_yaml, validate_mapping
+from validation.base.yamlio import StrictFrozen, load_yaml, unknown_key, validate_mapping
 
 Component = str
 """A component of the system model (checked against the model's list)."""
@@ -365,7 +365,7 @@ def gps_course_limits(config: ObserversConfig) -> tuple[float, float]:
     return config.gps_course_min_speed_mps, math.radians(config.gps_course_max_turn_deg)
 
 
-def observers_config(data: Mapping, source: str = "observers") -> ObserversConfig:
+def observers_config(data: Mapping, source: str = "observers", section: bool = False) -> ObserversConfig:
     """Validate a mapping (e.g. a YAML section) as :class:`ObserversConfig`.
 
     An unknown key is reported before anything else: a misspelt required key
@@ -377,8 +377,8 @@ def observers_config(data: Mapping, source: str = "observers") -> ObserversConfi
         for err in e.errors():
             if err["type"] == "extra_forbidden":
                 loc = ".".join(str(p) for p in err["loc"])
-                raise ValidationError(f"{source}: unknown key '{loc}'") from None
-    return validate_mapping(ObserversConfig, data, source)
+                raise ValidationError(unknown_key(source, loc, section)) from None
+    return validate_mapping(ObserversConfig, data, source, section)
 
 
 def load_observers_config(path: str | Path) -> ObserversConfig:
