@@ -258,7 +258,7 @@ def test_inspect_a_ros1_bag(capsys, tmp_path):
     "extra, expected",
     [
         (["--set", "backend.optimiser=isam2"], "unknown config key 'backend.optimiser'"),
-        (["--set", "validation.observers.typo=1"], "unknown key 'typo'"),
+        (["--set", "validation.observers.typo=1"], "unknown config key 'validation.observers.typo'"),
         (["--set", "input.topics.scan=/nope"], "'/nope'"),
         (["--set", "keyframes.period_s=1000"], "fewer than 2 keyframes"),  # fails after reading
         (["--set", "backend.optimizer"], "--set backend.optimizer: expected KEY=VALUE"),
