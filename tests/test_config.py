@@ -382,6 +382,11 @@ def test_an_unknown_key_names_the_nearest_known_one():
         "backend.optimiser=isam2": "unknown config key 'backend.optimiser'; did you mean 'optimizer'?",
         "keyframe.period_s=1": "unknown config key 'keyframe'; did you mean 'keyframes'?",
         "submaps.constraints.refine_nar=true": "did you mean 'refine_near'?",
+        # the validation and gating sections name their keys the same way
+        "gating.holdof_s=1": "--set gating.holdof_s=1: unknown config key 'gating.holdof_s'; did you mean 'holdoff_s'?",
+        "validation.rate_hx=10": "unknown config key 'validation.rate_hx'; did you mean 'rate_hz'?",
+        "validation.observers.scan.min_return=3":
+            "unknown config key 'validation.observers.scan.min_return'; did you mean 'min_returns'?",
     }
     for override, says in hints.items():
         with pytest.raises(GslamError) as e:
@@ -390,3 +395,15 @@ def test_an_unknown_key_names_the_nearest_known_one():
     with pytest.raises(GslamError) as e:  # nothing near: no guess
         load_config(TELEMAX, ["backend.zzz=1"])
     assert str(e.value).endswith("unknown config key 'backend.zzz'")
+
+
+def test_the_validation_and_gating_sections_name_a_bad_value_by_its_key_path():
+    for override, says in {
+        "validation.rate_hz=-1": "--set validation.rate_hz=-1: validation.rate_hz: Input should be greater than 0",
+        "gating.holdoff_s=-1": "--set gating.holdoff_s=-1: gating.holdoff_s: Input should be greater than or equal to 0",
+        "validation.observers.scan.min_returns=0":
+            "validation.observers.scan.min_returns: Input should be greater than or equal to 1",
+    }.items():
+        with pytest.raises(GslamError) as e:
+            load_config(TELEMAX, [override])
+        assert says in str(e.value)

@@ -29,7 +29,7 @@ from validation.base.errors import InputError
 from slam.config.loops import LoopsConfig
 from slam.config.submaps import SubmapsConfig
 from slam.config.trees import check_finite, non_finite, yaml_number
-from validation.base.yamlio import DuplicateKey, UniqueKeyLoader, load_yaml
+from validation.base.yamlio import DuplicateKey, UniqueKeyLoader, did_you_mean, load_yaml
 from validation.base import bounds
 from validation.base.modes import GatingMode
 from validation.base.yamlio import Strict
@@ -448,33 +448,10 @@ def describe_validation_error(source: str, err: ValidationError, what: str = "co
     first = next((e for e in errors if e["type"] == "extra_forbidden"), errors[0])
     loc = prefix + _loc_text(first["loc"], unknown=first["type"] == "extra_forbidden")
     if first["type"] == "extra_forbidden":
-        hint = _did_you_mean(model, first["loc"]) if model is not None else ""
+        hint = did_you_mean(model, first["loc"]) if model is not None else ""
         return f"{source}: unknown {what} key '{loc}'{hint}{_not_ascii(str(first['loc'][-1]))}"
     msg = first["msg"].removeprefix("Value error, ")
     return f"{source}: {loc}: {msg}" if loc else f"{source}: {msg}"
-
-
-def _did_you_mean(model: type[BaseModel], loc: tuple) -> str:
-    """``; did you mean 'x'?`` for the known key of ``model`` nearest the
-    unknown one at ``loc``, or nothing when none is near."""
-    import difflib
-    import typing
-
-    node: Any = model
-    for part in loc[:-1]:
-        field = node.model_fields.get(part) if isinstance(node, type) and issubclass(node, BaseModel) else None
-        if field is None:
-            return ""
-        kinds = [a for a in (field.annotation, *typing.get_args(field.annotation))
-                 if isinstance(a, type) and issubclass(a, BaseModel)]
-        if not kinds:
-            return ""
-        node = kinds[0]
-    if not (isinstance(node, type) and issubclass(node, BaseModel)):
-        return ""
-    known = [f.alias or name for name, f in node.model_fields.items()]
-    near = difflib.get_close_matches(str(loc[-1]), known, n=1, cutoff=0.6)
-    return f"; did you mean '{near[0]}'?" if near else ""
 
 
 def _not_ascii(key: str) -> str:

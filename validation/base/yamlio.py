@@ -331,7 +331,7 @@ def validate_mapping(model_type: type[_M], data: Any, source: str, section: bool
         first = e.errors()[0]
         loc = ".".join(str(p) for p in first["loc"])
         if first["type"] == "extra_forbidden":
-            raise ValidationError(unknown_key(source, loc, section)) from None
+            raise ValidationError(unknown_key(source, tuple(first["loc"]), section, model_type)) from None
         msg = first["msg"].removeprefix("Value error, ")
         if section:
             raise ValidationError(f"{source}.{loc}: {msg}" if loc else f"{source}: {msg}") from None
@@ -339,7 +339,35 @@ def validate_mapping(model_type: type[_M], data: Any, source: str, section: bool
         raise ValidationError(f"{source}: {where}{msg}") from None
 
 
-def unknown_key(source: str, loc: str, section: bool = False) -> str:
-    """The message for key ``loc`` unknown in ``source`` (a file, or with
-    ``section`` a config section's key path)."""
-    return f"unknown config key '{source}.{loc}'" if section else f"{source}: unknown key '{loc}'"
+def unknown_key(source: str, loc: tuple, section: bool = False, model: type[BaseModel] | None = None) -> str:
+    """The message for key ``loc`` (its path) unknown in ``source`` (a
+    file, or with ``section`` a config section's key path), with the
+    nearest known key of ``model`` at that place."""
+    key = ".".join(str(p) for p in loc)
+    hint = did_you_mean(model, loc) if model is not None else ""
+    return f"unknown config key '{source}.{key}'{hint}" if section else f"{source}: unknown key '{key}'{hint}"
+
+
+def did_you_mean(model: type[BaseModel], loc: tuple) -> str:
+    """``; did you mean 'x'?`` for the known key of ``model`` nearest the
+    unknown one at ``loc``, or nothing when none is near."""
+    import difflib
+    import typing
+
+    node: Any = model
+    for part in loc[:-1]:
+        if isinstance(part, int):  # an item of a list: its model is the list's
+            continue
+        field = node.model_fields.get(part) if isinstance(node, type) and issubclass(node, BaseModel) else None
+        if field is None:
+            return ""
+        kinds = [a for a in (field.annotation, *typing.get_args(field.annotation))
+                 if isinstance(a, type) and issubclass(a, BaseModel)]
+        if not kinds:
+            return ""
+        node = kinds[0]
+    if not (isinstance(node, type) and issubclass(node, BaseModel)):
+        return ""
+    known = [f.alias or name for name, f in node.model_fields.items()]
+    near = difflib.get_close_matches(str(loc[-1]), known, n=1, cutoff=0.6)
+    return f"; did you mean '{near[0]}'?" if near else ""

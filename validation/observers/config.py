@@ -376,8 +376,7 @@ def observers_config(data: Mapping, source: str = "observers", section: bool = F
     except pydantic.ValidationError as e:
         for err in e.errors():
             if err["type"] == "extra_forbidden":
-                loc = ".".join(str(p) for p in err["loc"])
-                raise ValidationError(unknown_key(source, loc, section)) from None
+                raise ValidationError(unknown_key(source, tuple(err["loc"]), section, ObserversConfig)) from None
     return validate_mapping(ObserversConfig, data, source, section)
 
 
