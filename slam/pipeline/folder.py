@@ -279,11 +279,15 @@ def import_next_steps(submaps: bool) -> None:
     """Import what the steps after scan matching need while it runs in the
     second process (gtsam and the validator take a second to load; numba,
     for the ``submaps``' search, half a second, and once here rather than
-    in each of the submaps' two processes)."""
+    in each of the submaps' two processes). The search's compiled kernels
+    are loaded from numba's cache here too: the first search would
+    otherwise spend a third of a second on it after scan matching."""
     import numpy.ma  # noqa: F401 - numpy's median loads it on first use
 
     if submaps:
-        import slam.matching.kernels  # noqa: F401
+        from slam.matching import kernels
+
+        kernels.load()
 
     import slam.gating.odometry_scale  # noqa: F401
     import slam.gating.recheck  # noqa: F401
