@@ -390,9 +390,14 @@ def _read_plain(
         topic = plain.topics.get(stream.topic)
         if topic is not None and topic.msgtype in stream.msgtypes and cdr.supported(topic.msgtype):
             by_topic.setdefault(stream.topic, []).append(stream)
-    for name, group in by_topic.items():
+    names = list(by_topic)
+    fetched: dict[str, list[bytes]] = {}
+    for k, (name, group) in enumerate(by_topic.items()):
+        if name not in fetched:  # the scans alone (handed on once decoded), then the other topics in one pass
+            scans = any(s.name == "scan" for s in group)
+            fetched = plain.raw_many(names[k : k + 1] if scans else names[k:])
         msgtype = plain.topics[name].msgtype
-        raws = plain.raw(name)
+        raws = fetched.pop(name)
         fields = sorted({f for s in group for f in s.bulk_fields()})
         for s in group:
             s.msgtype = msgtype

@@ -7,7 +7,8 @@ metadata. For the common case, a rosbag2 folder of one uncompressed
 raw CDR bytes of a topic are one SQL query away, and :mod:`slam.readers.cdr`
 decodes them in bulk. :func:`open_plain` says whether a bag is that case;
 :meth:`PlainBag.raw` returns a topic's messages in the order rosbags
-gives them (by receive time, ties in the order written).
+gives them (by receive time, ties in the order written), :meth:`PlainBag.raw_many`
+those of several topics in one pass.
 
 A topic qualifies only if its type's RIHS01 hash (REP-2011, stored by
 rosbag2 since ROS 2 Iron) is the hash of the standard definition
@@ -64,17 +65,30 @@ class PlainBag:
         """The CDR bytes of every message on ``topic``, in rosbags' order;
         a message stored as text or a number (a database edited by hand, or
         written by another tool) is refused naming the topic and the row."""
-        query = "SELECT id, data FROM messages WHERE topic_id = ? ORDER BY timestamp, id"
+        return self.raw_many([topic])[topic]
+
+    def raw_many(self, topics: list[str]) -> dict[str, list[bytes]]:
+        """:meth:`raw` of each of ``topics``, read in one pass over the
+        table: a query per topic walks the whole timestamp index each time
+        (six topics of telemax_lab: 0.10-0.15 s against 0.06-0.08 s)."""
+        ids = {self.topics[t].id: t for t in topics}
+        query = (f"SELECT topic_id, id, data FROM messages WHERE topic_id IN ({', '.join('?' * len(ids))}) "
+                 "ORDER BY timestamp, id")
         try:
-            rows = self._conn.execute(query, (self.topics[topic].id,)).fetchall()
+            rows = self._conn.execute(query, tuple(ids)).fetchall()
         except sqlite3.Error as err:
             raise GslamError(f"{self.db}: corrupt bag ({err})") from None
-        for k, (row, data) in enumerate(rows):
-            if not isinstance(data, bytes):
-                raise GslamError(f"{self.db}: corrupt bag: topic '{topic}', message {k} (row {row} of table messages) "
-                                 f"holds {type(data).__name__ if data is not None else 'nothing'}; expected the bytes "
-                                 "of a CDR message")
-        return [data for _, data in rows]
+        by_topic: dict[str, list[tuple[int, int, object]]] = {t: [] for t in topics}
+        for message in rows:
+            by_topic[ids[message[0]]].append(message)
+        for topic, messages in by_topic.items():
+            for k, (_, row, data) in enumerate(messages):
+                if not isinstance(data, bytes):
+                    raise GslamError(
+                        f"{self.db}: corrupt bag: topic '{topic}', message {k} (row {row} of table messages) holds "
+                        f"{type(data).__name__ if data is not None else 'nothing'}; expected the bytes of a CDR message"
+                    )
+        return {topic: [data for _, _, data in messages] for topic, messages in by_topic.items()}
 
     def close(self) -> None:
         self._conn.close()
