@@ -251,8 +251,8 @@ class Mapping:
         self.loop_factors = LoopFactors(obs.accepted, robust_kernel(kernel, param), cfg.gnc, obs.inflation)
         self.timings.loops_s += time.perf_counter() - start
         self.extra_outputs["loops.csv"] = loops_csv(obs, self.measurements.t)
-        if self.validation is not None:
-            self.extra_outputs["validation.csv"] = self.validation.csv_text()
+        if self.validation is not None:  # with the loops' verdicts now; written while the figures are drawn
+            self.extra_outputs["validation.csv"] = self.validation.csv_text
 
     def optimise(self) -> None:
         from slam.graph.backend import optimise
