@@ -16,9 +16,10 @@ def _figure(value, bound, side, samples, unit=""):
     return {"value": value, "bound": bound, "side": side, "unit": unit, "samples": samples, "passed": passed}
 
 
-def metrics(scan, loop, odo, ate=0.1, stamps=None, blame=None, seconds=0.5, n_poses=500):
+def metrics(scan, loop, odo, ate=0.1, stamps=None, blame=None, seconds=0.5, n_poses=500, free=(0.2, 1000)):
     """A metrics.json as gslam map writes it: figures as (value, samples)."""
     figures = {"scan_agreement": _figure(*scan[:1], 0.85, "at_least", scan[1]),
+               "free_space_returns": _figure(*free[:1], 0.5, "at_most", free[1]),
                "loop_residual_m": _figure(*loop[:1], 0.2, "at_most", loop[1], "m"),
                "odometry_disagreement": _figure(*odo[:1], 0.35, "at_most", odo[1])}
     failed = [n for n, f in figures.items() if f["passed"] is False]
@@ -32,21 +33,23 @@ def metrics(scan, loop, odo, ate=0.1, stamps=None, blame=None, seconds=0.5, n_po
 
 def test_a_row_holds_each_figure_with_its_samples_the_verdict_and_the_seconds():
     row = Row("intel", "carmen", metrics((0.9868, 455), (0.02, 524), (0.0077, 909), ate=0.0854, seconds=0.918))
-    assert cells(row) == ["intel", "0.085", "0.9868 (455)", "0.02 (524)", "0.0077 (909)", "no", "pass", "0.92"]
+    assert cells(row) == ["intel", "0.085", "0.9868 (455)", "0.2 (1000)", "0.02 (524)", "0.0077 (909)", "no", "pass",
+                          "0.92"]
     assert len(cells(row)) == len(HEADER)
 
 
 def test_a_figure_that_does_not_apply_is_a_dash_and_a_failed_check_names_its_figure():
-    row = Row("orebro", "carmen", metrics((0.6793, 237), (None, 0), (None, 0), ate=18.441, stamps="all zero"))
-    assert cells(row) == ["orebro", "18.441", "0.6793 (237)", None, None, "yes", "fail", "0.50"]
+    row = Row("orebro", "carmen", metrics((0.6793, 237), (None, 0), (None, 0), ate=18.441, stamps="all zero",
+                                          free=(0.9622, 41921)))
+    assert cells(row) == ["orebro", "18.441", "0.6793 (237)", "0.9622 (41921)", None, None, "yes", "fail", "0.50"]
     text = " ".join(findings([row]))
-    assert "orebro fails on scan_agreement 0.6793 (bound ≥ 0.85)" in text
+    assert "orebro fails on scan_agreement 0.6793 (bound ≥ 0.85), free_space_returns 0.9622 (bound ≤ 0.5)" in text
     assert "loop_residual_m and odometry_disagreement do not apply" in text
 
 
 def test_the_bag_has_no_ate_and_a_result_without_a_check_is_marked():
     assert cells(Row("Husky bag (husky.yaml)", "husky", metrics((None, 0), (None, 0), (0.0, 718), ate=None)))[1] is None
-    assert cells(Row("old", "carmen", {"ate_rmse_m": 1.0}))[6] == "no self-check"
+    assert cells(Row("old", "carmen", {"ate_rmse_m": 1.0}))[HEADER.index("verdict")] == "no self-check"
 
 
 def test_the_findings_are_drawn_from_the_rows():
@@ -62,7 +65,7 @@ def test_the_findings_are_drawn_from_the_rows():
     assert "corridor (0.781 m) passes; orebro (18.441 m) fails" in text
     assert "scan_agreement 0.968 (csail) to 0.99 (intel)" in text
     assert "odometry_disagreement 0.001 (corridor) to 0.1753 (csail)" in text
-    assert "corridor passes at 0.781 m ATE: scan_agreement 0.9856, loop_residual_m 0.0231 m" in text
+    assert "corridor passes at 0.781 m ATE: scan_agreement 0.9856, free_space_returns 0.2, loop_residual_m 0.0231 m" in text
     assert "The demo ungated against gated (4.627 m against 0.034 m ATE)" in text
     assert "odometry_disagreement 0.1927 against 0" in text
     assert "the 370 of its 442 keyframes whose scans hold points (72 see nothing" in text

@@ -13,8 +13,8 @@ import pytest
 from conftest import real_data
 from slam.graph.measurements import BetweenMeasurement
 from slam.outputs.self_check import (
-    SelfCheckBounds, check_map, checked_keyframes, loop_residuals, odometry_disagreement, scan_agreement,
-    scan_points, self_check_table, summary_line, warning_line,
+    SelfCheckBounds, check_map, checked_keyframes, free_space_returns, loop_residuals, odometry_disagreement,
+    scan_agreement, scan_points, self_check_table, summary_line, warning_line,
 )
 from slam.recording import Scans, Trajectory, relative_poses
 from validation.base.geometry import compose
@@ -64,6 +64,43 @@ def agreement(poses: np.ndarray, scans: Scans) -> float:
     value, n, _ = scan_agreement(pts, kf, len(poses), b)
     assert n == len(poses)
     return value
+
+
+# --- returns in free space --------------------------------------------------
+
+
+def torn(poses: np.ndarray, turn_deg: float = 60.0) -> np.ndarray:
+    """The last quarter of the run turned by ``turn_deg`` about the room's
+    centre: two pieces that each hold together, laid across each other."""
+    out = poses.copy()
+    half = len(poses) * 3 // 4
+    centre = np.array([0.5 * (ROOM[0] + ROOM[2]), 0.5 * (ROOM[1] + ROOM[3]), 0.0])
+    turn = np.array([0.0, 0.0, np.radians(turn_deg)])
+    for k in range(half, len(poses)):
+        out[k] = compose(compose(centre, turn), compose(-centre * np.array([1, 1, 0]), poses[k]))
+    return out
+
+
+def in_free_space(poses: np.ndarray, scans: Scans) -> float:
+    value, n = free_space_returns(scans.ranges, scans.angles, LIMITS, trajectory(poses), SelfCheckBounds())
+    assert n == np.isfinite(scans.ranges).sum()
+    return value
+
+
+def test_a_map_torn_into_two_whole_pieces_lays_returns_in_free_space():
+    poses, scans = room_run(24)
+    whole, pieces = in_free_space(poses, scans), in_free_space(torn(poses), scans)
+    assert whole < 0.05
+    assert pieces > 0.2  # the torn quarter's returns, nearly all
+    assert in_free_space(torn(poses, 10.0), scans) > 0.15  # turned by 10 deg only
+
+
+def test_a_map_whose_returns_land_in_free_space_fails():
+    poses, scans = room_run(24)
+    bounds = SelfCheckBounds(free_space_returns_max=0.1)
+    check = check_map(trajectory(torn(poses)), scans, np.arange(len(poses)), LIMITS, bounds=bounds)
+    assert "free_space_returns" in [f.name for f in check.failed]
+    assert check_map(trajectory(poses), scans, np.arange(len(poses)), LIMITS, bounds=bounds).verdict == "pass"
 
 
 # --- scan agreement ----------------------------------------------------------
@@ -166,13 +203,15 @@ def test_a_consistent_map_passes_and_a_scrambled_one_fails_with_one_line_naming_
     idx = np.arange(len(poses))
     good = check_map(trajectory(poses), scans, idx, LIMITS, kept, odometry_of(poses))
     assert good.verdict == "pass" and good.warning() is None
-    assert summary_line(good.as_dict()) == ("self-check: pass (scan_agreement 1 (bound >= 0.85); loop_residual_m 0 m "
-                                            "(bound <= 0.2 m); odometry_disagreement 0 (bound <= 0.35))")
+    assert summary_line(good.as_dict()) == ("self-check: pass (scan_agreement 1 (bound >= 0.85); free_space_returns "
+                                            "0.017 (bound <= 0.5); loop_residual_m 0 m (bound <= 0.2 m); "
+                                            "odometry_disagreement 0 (bound <= 0.35))")
     assert {n: f["passed"] for n, f in good.as_dict()["figures"].items()} == {
-        "scan_agreement": True, "loop_residual_m": True, "odometry_disagreement": True}
+        "scan_agreement": True, "free_space_returns": True, "loop_residual_m": True, "odometry_disagreement": True}
     bad = check_map(trajectory(scrambled(poses)), scans, idx, LIMITS, kept, odometry_of(poses))
     d = bad.as_dict()
-    assert d["verdict"] == "fail" and set(d["failed"]) == {"scan_agreement", "loop_residual_m", "odometry_disagreement"}
+    assert d["verdict"] == "fail" and set(d["failed"]) == {
+        "scan_agreement", "free_space_returns", "loop_residual_m", "odometry_disagreement"}
     line = bad.warning()
     assert "\n" not in line and line.startswith("self-check failed: scan_agreement ")
     assert "loop_residual_m" in line and "(bound <= 0.2 m)" in line
@@ -194,9 +233,10 @@ def test_the_report_table_marks_the_failed_figures():
     checks = {"good": check_map(trajectory(poses), scans, idx, LIMITS).as_dict(),
               "torn": check_map(trajectory(scrambled(poses)), scans, idx, LIMITS).as_dict(), "none": None}
     table = self_check_table(checks)
-    assert list(table.headers) == ["variant", "verdict", "scan_agreement", "loop_residual_m", "odometry_disagreement"]
+    assert list(table.headers) == ["variant", "verdict", "scan_agreement", "free_space_returns", "loop_residual_m",
+                                   "odometry_disagreement"]
     rows = {r[0]: r for r in table.rows}
-    assert rows["good"][1] == "pass" and rows["good"][2] == "1 (\u2265 0.85)" and rows["good"][3] == "\u2013"
+    assert rows["good"][1] == "pass" and rows["good"][2] == "1 (\u2265 0.85)" and rows["good"][4] == "\u2013"
     assert rows["torn"][1] == "fail" and rows["torn"][2].endswith("FAIL")
     assert rows["none"][1] == "\u2013"
     assert warning_line(checks["torn"]).startswith("self-check failed: scan_agreement")
@@ -208,16 +248,18 @@ def test_the_report_table_marks_the_failed_figures():
 @pytest.mark.slow
 def test_orebro_maps_to_a_blob_and_says_so(tmp_path, capsys):
     """orebro (all 237 scans) maps 18 m off its reference; without ground
-    truth, its self-check fails on the scans that do not agree, in one
-    warning line, and the map is written with exit code 0."""
+    truth, its self-check fails on the scans that do not agree and on the
+    returns laid in free space, in one warning line, and the map is written
+    with exit code 0."""
     from slam.cli import main
 
     log = real_data("carmen/orebro-corrected.log.gz")
     out = tmp_path / "orebro"
     assert main(["-q", "map", str(log), "--config", "configs/datasets/carmen.yaml", "--out", str(out)]) == 0
     check = json.loads((out / "metrics.json").read_text())["self_check"]
-    assert check["verdict"] == "fail" and check["failed"] == ["scan_agreement"]
+    assert check["verdict"] == "fail" and check["failed"] == ["scan_agreement", "free_space_returns"]
     assert check["figures"]["scan_agreement"]["value"] < 0.8
+    assert check["figures"]["free_space_returns"]["value"] > 0.9
     assert (out / "trajectory.tum").is_file() and (out / "map.pgm").is_file()
     printed = capsys.readouterr()
     assert "self-check" not in printed.out

@@ -50,11 +50,11 @@ HUSKY = "husky"
 DEMO = "demo"
 DEMO_VARIANTS = ("ungated", "gated", "oracle")
 UNITS = (*CARMEN_LOGS, HUSKY, DEMO)
-FIGURES = ("scan_agreement", "loop_residual_m", "odometry_disagreement")
+FIGURES = ("scan_agreement", "free_space_returns", "loop_residual_m", "odometry_disagreement")
 GOOD_ATE_M = 0.2
 """A CARMEN log mapped within this ATE of its corrected reference counts as mapped well in the page's summary."""
-HEADER = ["log", "ATE m", "scan_agreement", "loop_residual_m", "odometry_disagreement", "stamps synthesised",
-          "verdict", "self-check s"]
+HEADER = ["log", "ATE m", "scan_agreement", "free_space_returns", "loop_residual_m", "odometry_disagreement",
+          "stamps synthesised", "verdict", "self-check s"]
 
 
 @dataclass
@@ -160,7 +160,7 @@ def cells(row: Row) -> list[object]:
     check = row.check
     ate = None if row.ate_m is None else f"{row.ate_m:.3f}"
     if check is None:
-        return [row.label, ate, None, None, None, None, "no self-check", None]
+        return [row.label, ate, *(None for _ in FIGURES), None, "no self-check", None]
     seconds = row.metrics.get("timings_s", {}).get("self_check")
     return [row.label, ate, *(figure_cell(row.figure(n)) for n in FIGURES),
             "no" if check.get("stamps_synthesised") is None else "yes", check["verdict"],

@@ -161,6 +161,23 @@ def crossed_cells(x0: np.ndarray, y0: np.ndarray, dx: np.ndarray, dy: np.ndarray
     return out
 
 
+@dataclass(frozen=True)
+class BeamCounts:
+    """Per cell (rows, cols; laid out as :class:`OccupancyGrid`): how many
+    beams ended in it (``hits``) and how many crossed it (``misses``), and
+    the world position of cell (0, 0)'s lower-left corner (m)."""
+
+    hits: np.ndarray
+    misses: np.ndarray
+    origin: np.ndarray
+    resolution_m: float
+
+    def cells(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(row, col) of world points (m) inside the grid."""
+        return (((y - self.origin[1]) / self.resolution_m).astype(np.int64),
+                ((x - self.origin[0]) / self.resolution_m).astype(np.int64))
+
+
 def build_grid(
     ranges: np.ndarray,
     angles: np.ndarray,
@@ -174,12 +191,34 @@ def build_grid(
     the laser at the pose). Beams shorter than ``min_range_m`` say nothing;
     beams at or beyond ``max_range_m`` (and ``inf``) are no return. None
     when the grid would exceed :data:`MAX_CELLS`."""
-    res = model.resolution_m
+    counts = beam_counts(ranges, angles, poses, min_range_m, max_range_m, model.resolution_m, model.no_return_m)
+    if counts is None:
+        return None
+    hits, misses = counts.hits.ravel(), counts.misses.ravel()
+    log_odds = (hits * logit(model.hit_probability) + misses * logit(model.miss_probability)).astype(np.float32)
+    observed = (hits + misses) > 0
+    return OccupancyGrid(log_odds.reshape(counts.hits.shape), observed.reshape(counts.hits.shape), counts.origin,
+                         counts.resolution_m)
+
+
+def beam_counts(
+    ranges: np.ndarray,
+    angles: np.ndarray,
+    poses: Trajectory,
+    min_range_m: float,
+    max_range_m: float,
+    resolution_m: float,
+    no_return_m: float,
+) -> BeamCounts | None:
+    """The hits and crossings per cell of :func:`build_grid`'s beams (the
+    same arguments; a beam without a return is free for ``no_return_m``).
+    None when the grid would exceed :data:`MAX_CELLS`."""
+    res = resolution_m
     angles = np.asarray(angles, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         hit = np.isfinite(ranges) & (ranges >= min_range_m) & (ranges < max_range_m)
         no_return = (ranges >= max_range_m) | (np.isposinf(ranges))
-    free_len = np.where(hit, ranges, np.where(no_return, min(model.no_return_m, max_range_m), 0.0))
+    free_len = np.where(hit, ranges, np.where(no_return, min(no_return_m, max_range_m), 0.0))
     increment = float(np.median(np.diff(angles))) if len(angles) > 1 else np.pi
     start = free_start(len(angles), increment, res)
 
@@ -221,10 +260,7 @@ def build_grid(
         counted = np.bincount(crossed_cells(x0[sl].ravel(), y - low, cos[sl].ravel(), dy, n, cols))
         misses[low * cols : low * cols + len(counted)] += counted
 
-    # 4. Log-odds: the sum of every update.
-    log_odds = (hits * logit(model.hit_probability) + misses * logit(model.miss_probability)).astype(np.float32)
-    observed = (hits + misses) > 0
-    return OccupancyGrid(log_odds.reshape(rows, cols), observed.reshape(rows, cols), origin, res)
+    return BeamCounts(hits.reshape(rows, cols), misses.reshape(rows, cols), origin, res)
 
 
 def _cells(x: np.ndarray, y: np.ndarray, origin: np.ndarray, res: float, cols: int) -> np.ndarray:

@@ -26,6 +26,14 @@ Judged figures:
   puts a loop's later keyframe from where the loop measured it, in the
   directions the loop pins. A map that kept a loop it could not close is
   torn.
+* ``free_space_returns``: the share of the keyframes' laser returns that
+  land where the map's beams see free space: cast from the optimised poses
+  into a grid of ``free_space_cell_m`` cells (:func:`slam.outputs.occupancy.beam_counts`),
+  a return is in free space when more scans cross its cell than end in it
+  and the cells around it. On a log of more than ``free_space_scans_max``
+  keyframes, evenly spaced ones are cast. A map torn into pieces that each hold together
+  lays the walls of one piece across the rooms another saw empty; the
+  scans' local agreement does not see that.
 * ``odometry_disagreement``: the share of steps where the odometry's
   motion and the map's motion between consecutive keyframes differ by more
   than ``odometry_step_m`` plus ``odometry_step_per_m`` of the step, or by
@@ -68,6 +76,9 @@ class SelfCheckBounds:
     neighbours: int = 16  # first nearest-neighbour query; doubled where a scan's own points fill it
     loop_residual_quantile: float = 0.95
     loop_residual_max_m: float = 0.2  # good logs 0.011-0.025 m: a loop the map did not close
+    free_space_cell_m: float = 0.1  # twice the map's voxel: a wall seen from two sides stays one cell thick
+    free_space_returns_max: float = 0.5  # the CARMEN logs as mapped 0.12-0.29, orebro 0.96
+    free_space_scans_max: int = 1000  # FR079's 4,791 keyframes: every 5th cast, 0.2 s rather than 0.8 s
     odometry_step_m: float = 0.3  # raw odometry is off by up to 0.5 m a step on the thinned logs
     odometry_step_per_m: float = 0.2
     odometry_step_deg: float = 10.0  # and up to 30 deg
@@ -308,6 +319,38 @@ def odometry_disagreement(odometry: BetweenMeasurement | None, poses: np.ndarray
     return float(off[ok].mean()), int(ok.sum())
 
 
+def free_space_returns(ranges: np.ndarray, angles: np.ndarray, beam_limits: tuple[float, float],
+                       poses: Trajectory, bounds: SelfCheckBounds) -> tuple[float | None, int]:
+    """The share of returns of scans ``ranges`` (K, beams) at ``poses`` that
+    land in free space (``free_space_returns`` above), and how many returns
+    there are; None without any or where the grid is too large."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    from slam.outputs.occupancy import GridModel, beam_counts
+
+    lo, hi = beam_limits
+    with np.errstate(invalid="ignore"):
+        hit = np.isfinite(ranges) & (ranges >= lo) & (ranges < hi)
+    if not hit.any():
+        return None, 0
+    counts = beam_counts(ranges, angles, poses, lo, hi, bounds.free_space_cell_m, GridModel().no_return_m)
+    if counts is None:
+        return None, 0
+    k, b = np.nonzero(hit)
+    heading = poses.yaw[k] + np.asarray(angles)[b]
+    row, col = counts.cells(poses.x[k] + ranges[k, b] * np.cos(heading), poses.y[k] + ranges[k, b] * np.sin(heading))
+    # Scans, not beams, on both sides: a scan crosses a cell about once
+    # (beam_counts thins the fan near the laser) but may end several beams
+    # in it; around a return, the most scans that end in one cell.
+    shape = counts.hits.shape
+    cell = row * shape[1] + col
+    seen = np.unique(cell * len(ranges) + k) // len(ranges)
+    scans_ending = np.bincount(seen, minlength=counts.hits.size).reshape(shape)
+    around = sliding_window_view(np.pad(scans_ending, 1), (3, 3)).max(axis=(2, 3))
+    free = counts.misses[row, col] > around[row, col]
+    return float(free.mean()), int(len(free))
+
+
 # -- the check ----------------------------------------------------------------
 
 
@@ -325,10 +368,16 @@ def check_map(trajectory: Trajectory, scans: Scans | None = None, scan_index: np
     b = bounds
     figures = []
     agreement, n_scans = None, 0
+    in_free, n_returns = None, 0
     if scans is not None and scan_index is not None:
         pts, kf = scan_points(scans.ranges[scan_index], scans.angles, beam_limits, trajectory, b.voxel_m)
         agreement, n_scans, _ = scan_agreement(pts, kf, len(scan_index), b)
+        cast = checked_keyframes(len(scan_index), b.free_space_scans_max)
+        in_free, n_returns = free_space_returns(scans.ranges[scan_index[cast]], scans.angles, beam_limits,
+                                                _subset(trajectory, cast), b)
     figures.append(CheckedFigure("scan_agreement", _round(agreement), b.scan_agreement_min, Side.AT_LEAST, n_scans))
+    figures.append(CheckedFigure("free_space_returns", _round(in_free), b.free_space_returns_max, Side.AT_MOST,
+                                 n_returns))
     res = loop_residuals(loops, poses) if len(loops) else np.zeros(0)
     q = float(np.quantile(res, b.loop_residual_quantile)) if len(res) else None
     figures.append(CheckedFigure("loop_residual_m", _round(q), b.loop_residual_max_m, Side.AT_MOST, len(res), "m"))
@@ -337,6 +386,10 @@ def check_map(trajectory: Trajectory, scans: Scans | None = None, scan_index: np
                                  n_steps))
     notes = {"stamps_synthesised": stamps_synthesised, "blame_share": blame_share}
     return SelfCheck(figures, notes, time.perf_counter() - start)
+
+
+def _subset(trajectory: Trajectory, keep: np.ndarray) -> Trajectory:
+    return Trajectory(t=trajectory.t[keep], x=trajectory.x[keep], y=trajectory.y[keep], yaw=trajectory.yaw[keep])
 
 
 def _round(value: float | None) -> float | None:
