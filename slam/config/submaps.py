@@ -205,7 +205,10 @@ class SubmapsConfig(_Strict):
     ``blamed_scans``: ``leave_out`` keeps every scan the gating excluded
     (in any direction) out of the submaps: not matched, not inserted, so no
     submap, constraint or loop rests on it; ``keep`` (the default) builds the
-    submaps from every scan and gates only the constraints."""
+    submaps from every scan and gates only the constraints; ``choose`` maps
+    both ways where the gating excluded a scan and keeps the map that lays
+    fewer laser returns in free space
+    (:meth:`slam.pipeline.core.Mapping.map_back_end`)."""
 
     enabled: bool = False
     node_spacing_m: Annotated[float, bounds.PATH_DELTA_M] = Field(0.25, ge=0.0)
@@ -217,7 +220,7 @@ class SubmapsConfig(_Strict):
     resolution_m: Annotated[float, bounds.GRID_CELL_M] = Field(0.1, gt=0.0)
     search_depth: bounds.Count = Field(6, ge=0, le=10)
     tie_tolerance: Annotated[float, bounds.SCORE] = Field(0.01, ge=0.0)
-    blamed_scans: Literal["keep", "leave_out"] = "keep"
+    blamed_scans: Literal["keep", "leave_out", "choose"] = "keep"
     local: LocalMatchConfig = LocalMatchConfig()
     refine: RefineConfig = RefineConfig()
     constraints: ConstraintSearchConfig = ConstraintSearchConfig()

@@ -376,7 +376,7 @@ def check_map(trajectory: Trajectory, scans: Scans | None = None, scan_index: np
         agreement, n_scans, _ = scan_agreement(pts, kf, len(scan_index), b)
         cast = checked_keyframes(len(scan_index), b.free_space_scans_max)
         in_free, n_returns = free_space_returns(scans.ranges[scan_index[cast]], scans.angles, beam_limits,
-                                                _subset(trajectory, cast), b)
+                                                subset(trajectory, cast), b)
     figures.append(CheckedFigure("scan_agreement", _round(agreement), b.scan_agreement_min, Side.AT_LEAST, n_scans))
     figures.append(CheckedFigure("free_space_returns", _round(in_free), b.free_space_returns_max, Side.AT_MOST,
                                  n_returns))
@@ -390,7 +390,8 @@ def check_map(trajectory: Trajectory, scans: Scans | None = None, scan_index: np
     return SelfCheck(figures, notes, time.perf_counter() - start)
 
 
-def _subset(trajectory: Trajectory, keep: np.ndarray) -> Trajectory:
+def subset(trajectory: Trajectory, keep: np.ndarray) -> Trajectory:
+    """The poses ``keep`` of ``trajectory``."""
     return Trajectory(t=trajectory.t[keep], x=trajectory.x[keep], y=trajectory.y[keep], yaw=trajectory.yaw[keep])
 
 

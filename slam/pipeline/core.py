@@ -98,9 +98,7 @@ class Mapping:
         self.validate()
         self.learn_odometry_scale()
         self.recheck()
-        self.build_submaps()
-        self.judge_loops(self.find_loops())
-        self.optimise()
+        self.map_back_end()
         self.evaluate()
         return self
 
@@ -186,7 +184,71 @@ class Mapping:
         self.extra_metrics.update(result.metrics)
         self.timings.validation_s += time.perf_counter() - t
 
-    def build_submaps(self, before_judging: Callable[[list], list] | None = None) -> None:
+    def map_back_end(self) -> None:
+        """The submaps, the loops and the graph. With ``submaps.blamed_scans:
+        choose`` and scans the gating excluded, twice: with those scans left
+        out of the submaps and with them kept, and the map that lays fewer
+        of its laser returns in free space is kept
+        (:func:`slam.outputs.self_check.free_space_returns`). Leaving a cut
+        laser's scans out hands their stretch to the odometry: right where
+        the odometry holds its heading, wrong where it turns the rest of the
+        run away, which tears the map into pieces that each hold together
+        and lay their walls across each other's rooms."""
+        if self.config.submaps.blamed_scans != "choose" or not self._blames_scans():
+            self.build_submaps()
+            self.judge_loops(self.find_loops())
+            self.optimise()
+            return
+        before = self._back_end_state()
+        in_free = {}
+        for mode in ("keep", "leave_out"):
+            self._restore_back_end(before)
+            self.build_submaps(blamed_mode=mode)
+            self.judge_loops(self.find_loops())
+            self.optimise()
+            in_free[mode] = self._free_space_returns()
+        chosen = "keep" if in_free["keep"] < in_free["leave_out"] else "leave_out"
+        if chosen == "keep":  # the last pass made the state (the validator's loop columns too)
+            self._restore_back_end(before)
+            self.build_submaps(blamed_mode=chosen)
+            self.judge_loops(self.find_loops())
+            self.optimise()
+        self.extra_metrics["blamed_scans"] = {"chosen": chosen,
+                                              "free_space_returns": {m: round(v, 4) for m, v in in_free.items()}}
+
+    def _blames_scans(self) -> bool:
+        return (self.submaps_possible() and self.weights is not None
+                and bool(blamed_scans(self.weights, len(self.measurements)).any()))
+
+    def submaps_possible(self) -> bool:
+        cfg, meas = self.config.submaps, self.measurements
+        return cfg.enabled and self.frontend is not None and meas.scan_index is not None
+
+    def _back_end_state(self) -> dict[str, Any]:
+        """What :meth:`build_submaps`, :meth:`judge_loops` and :meth:`optimise` set."""
+        names = ("constraints", "submaps", "loop_search", "loop_observation", "loop_factors", "backend")
+        return {**{n: getattr(self, n) for n in names},
+                "extra_metrics": dict(self.extra_metrics), "extra_outputs": dict(self.extra_outputs)}
+
+    def _restore_back_end(self, state: dict[str, Any]) -> None:
+        for name, value in state.items():
+            setattr(self, name, dict(value) if isinstance(value, dict) else value)
+
+    def _free_space_returns(self) -> float:
+        """:func:`slam.outputs.self_check.free_space_returns` of the current
+        estimate, on the keyframes the self-check casts."""
+        from slam.outputs.pointcloud import beam_limits
+        from slam.outputs.self_check import SelfCheckBounds, checked_keyframes, free_space_returns, subset
+
+        rec, idx, b = self.recording, self.measurements.scan_index, SelfCheckBounds()
+        cast = checked_keyframes(len(idx), b.free_space_scans_max)
+        value, _ = free_space_returns(rec.scans.ranges[idx[cast]], rec.scans.angles,
+                                      beam_limits(self.config.frontend, rec.scans),
+                                      subset(self.backend.trajectory, cast), b)
+        return np.inf if value is None else value
+
+    def build_submaps(self, before_judging: Callable[[list], list] | None = None,
+                      blamed_mode: str | None = None) -> None:
         """Scan-to-submap constraints (:mod:`slam.submaps`) over the
         keyframes' scans, searched around the dead-reckoning chain (with the
         gating's weights); with ``submaps.blamed_scans: leave_out`` a scan
@@ -196,20 +258,21 @@ class Mapping:
         graph's constraints before its GNC judges them, returns more to judge
         (a bench's wrong loops)."""
         cfg, meas = self.config.submaps, self.measurements
-        if not cfg.enabled or self.frontend is None or meas.scan_index is None:
+        if not self.submaps_possible():
             return
         from slam.loops.chain import fuse_steps
         from slam.submaps.build import build_submap_constraints
 
         t = time.perf_counter()
         steps, step_cov = fuse_steps(meas, self.weights)
-        blamed = blamed_scans(self.weights, len(meas)) if cfg.blamed_scans == "leave_out" else None
+        mode = blamed_mode or cfg.blamed_scans
+        blamed = blamed_scans(self.weights, len(meas)) if mode == "leave_out" else None
         self.submaps = build_submap_constraints(
             self.recording.scans, meas.scan_index, steps, step_cov, self.config.frontend, cfg, before_judging, blamed,
             self.progress, self.concurrent,
         )
         self.constraints = [*self.constraints, *submap_factors(self.submaps, self.weights, len(meas), blamed)]
-        self.timings.submaps_s = time.perf_counter() - t
+        self.timings.submaps_s += time.perf_counter() - t
 
     def find_loops(self):
         """The loops of this run before they are checked (:mod:`slam.loops.search`);
@@ -221,7 +284,7 @@ class Mapping:
         t = time.perf_counter()
         search = find_loops(self.recording, self.measurements, self.weights, self.config, self.initial_pose(),
                             self.submaps)
-        self.timings.loops_s = time.perf_counter() - t
+        self.timings.loops_s += time.perf_counter() - t
         return search
 
     def judge_loops(self, search) -> None:
@@ -279,8 +342,8 @@ class Mapping:
             self.measurements, pose0, self.config.backend, self.weights, progress=progress,
             constraints=self.constraints, loops=self.loop_factors, initial_poses=start,
         )
-        self.timings.graph_build_s = self.backend.build_time_s
-        self.timings.optimise_s = self.backend.optimise_time_s
+        self.timings.graph_build_s += self.backend.build_time_s
+        self.timings.optimise_s += self.backend.optimise_time_s
 
     def evaluate(self) -> None:
         """The metrics: against ground truth where there is one, the graph's
