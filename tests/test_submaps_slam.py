@@ -364,3 +364,51 @@ def test_the_walk_beside_local_slam_gives_the_same_result_to_the_bit(constraints
         assert [(c.submap, c.anchor, c.scan, c.kind, c.score) for c in a] == [(c.submap, c.anchor, c.scan, c.kind, c.score) for c in b]
         assert all(x.delta.tobytes() == y.delta.tobytes() and x.information.tobytes() == y.information.tobytes()
                    for x, y in zip(a, b))
+
+
+def _blamed_core(short_run, blamed_scans: str, monkeypatch=None, in_free=None):
+    """The short run up to its back end, the scan matching of every fourth
+    keyframe (from the tenth) excluded; ``in_free``: the free-space figure
+    each pass reports, by the mode it was mapped with."""
+    from slam.config import load_config
+    from slam.pipeline.core import Mapping
+    from slam.readers.read import read_recording
+    from tests.conftest import TELEMAX_CONFIG
+
+    config = load_config(TELEMAX_CONFIG, ["output.plots=false", f"submaps.blamed_scans={blamed_scans}"])
+    core = Mapping(read_recording(short_run.run_dir, config.input), config, source=short_run.run_dir)
+    core.match_scans()
+    core.build_measurements()
+    core.validate()
+    sm = np.array(core.weights["scan_matching"], dtype=float)
+    sm[10::4] = np.inf
+    core.weights["scan_matching"] = sm
+    if in_free is not None:
+        passes = []
+        build = core.build_submaps
+
+        def build_and_note(before_judging=None, blamed_mode=None):
+            passes.append(blamed_mode)
+            build(before_judging, blamed_mode)
+
+        monkeypatch.setattr(core, "build_submaps", build_and_note)
+        monkeypatch.setattr(core, "_free_space_returns", lambda: in_free[passes[-1]])
+        core.passes = passes
+    core.map_back_end()
+    return core
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("better", ["keep", "leave_out"])
+def test_choose_keeps_the_map_that_lays_fewer_returns_in_free_space(short_run, monkeypatch, better):
+    """``submaps.blamed_scans: choose`` maps both ways and ends with the
+    map, loops and metrics of the one whose returns lie less in free space:
+    the same estimate to the bit as that mode alone."""
+    in_free = {"keep": 0.2, "leave_out": 0.3} if better == "keep" else {"keep": 0.3, "leave_out": 0.2}
+    chosen = _blamed_core(short_run, "choose", monkeypatch, in_free)
+    assert set(chosen.passes) == {"keep", "leave_out"} and chosen.passes[-1] == better
+    assert chosen.extra_metrics["blamed_scans"] == {"chosen": better, "free_space_returns": in_free}
+    alone = _blamed_core(short_run, better)
+    assert np.array_equal(chosen.backend.trajectory.x, alone.backend.trajectory.x)
+    assert np.array_equal(chosen.backend.trajectory.yaw, alone.backend.trajectory.yaw)
+    assert len(chosen.constraints) == len(alone.constraints)
