@@ -182,9 +182,11 @@ def check_fields(rec: Recording, source: object) -> None:
 
 # --- stamps ------------------------------------------------------------------------
 
-MIN_STAMP_S, MAX_STAMP_S = -(2**31), 2**31 - 1
-"""The seconds a ROS 2 time holds (its ``sec`` is an int32: 1901-12-13 to
-2038-01-19), which ``run.mcap`` and the bags gslam writes carry."""
+MIN_STAMP_S, MAX_STAMP_S = 0, 2**31 - 1
+"""The seconds since 1970 a result can carry: a ROS 2 time's ``sec`` is an
+int32 (up to 2038-01-19), and the log time of every message of ``run.mcap``
+(and of a ROS 1 bag) is unsigned, so nothing before 1970. A stamp before
+1970 was read, mapped, and then failed the writing of ``run.mcap``."""
 
 
 def check_absolute_stamps(t: np.ndarray, where: str) -> None:
@@ -195,7 +197,8 @@ def check_absolute_stamps(t: np.ndarray, where: str) -> None:
     if len(bad):
         i = int(bad[0])
         raise GslamError(f"{where} stamp {i} is {t[i]:.6g} s since 1970; expected {MIN_STAMP_S} to {MAX_STAMP_S} s "
-                         "(1901 to 2038, what a ROS 2 time holds): a stamp in another unit, or a corrupt log?")
+                         "(1970 to 2038, what a ROS 2 time holds and a bag's log time, which starts in 1970): a stamp "
+                         "in another unit, or a corrupt log?")
 
 
 

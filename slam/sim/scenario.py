@@ -303,9 +303,10 @@ class EnvironmentConfig(Strict):
                                              "a declination is at most half a turn east")] = 3.0
     datum_lat_deg: float = Field(49.0, ge=-90.0, le=90.0)
     datum_lon_deg: float = Field(8.4, ge=-180.0, le=180.0)
-    t0_s: float = Field(1_700_000_000.0, ge=-2_000_000_000.0, le=2_000_000_000.0)
-    """Seconds since 1970, within +-2e9 (1906 to 2033), so that the mission's
-    stamps stay within what a ROS 2 time holds (1901 to 2038)."""
+    t0_s: float = Field(1_700_000_000.0, ge=0.0, le=2_000_000_000.0)
+    """Seconds since 1970, within 0 to 2e9 (1970 to 2033), so that the
+    mission's stamps stay within what a ROS 2 time and a bag's log time hold
+    (1970 to 2038; see :data:`slam.readers.data_checks.MIN_STAMP_S`)."""
 
 
 class FaultsConfig(Strict):
