@@ -170,10 +170,35 @@ class UniqueKeyLoader(SAFE_LOADER):  # type: ignore[misc, valid-type]
             raise yaml.constructor.ConstructorError(
                 None, None, f"an integer of {digits:,} digits; no setting needs more than {MAX_INT_DIGITS}",
                 node.start_mark)
-        return super().construct_yaml_int(node)
+        value = super().construct_yaml_int(node)
+        _refuse_yaml11_only_number(str(node.value), value, node)
+        return value
+
+    def construct_yaml_float(self, node):
+        value = super().construct_yaml_float(node)
+        _refuse_yaml11_only_number(str(node.value), value, node)
+        return value
+
+
+def _refuse_yaml11_only_number(text: str, value: int | float, node: yaml.Node) -> None:
+    """Refuse a number PyYAML reads by YAML 1.1's rules as another value than
+    the digits written say, to YAML 1.2 and to a reader of the file: a
+    leading 0 (``010`` is octal 8, not 10: a zero-padded count) and numbers
+    in base 60 (``1:30`` is 90, ``1:30:00`` 5400: a period written as a
+    clock time). Both were read in silence, even under ``%YAML 1.2``."""
+    plain = text.replace("_", "").lstrip("+-")
+    if ":" in plain:
+        raise yaml.constructor.ConstructorError(
+            None, None, f"{text} is a base-60 number to YAML 1.1 ({value:g}), text to YAML 1.2; write the number "
+            f"({value:g}) or quote the text", node.start_mark)
+    if isinstance(value, int) and len(plain) > 1 and plain[0] == "0" and plain.isdigit() and int(plain, 10) != abs(value):
+        raise yaml.constructor.ConstructorError(
+            None, None, f"{text} is octal {value} to YAML 1.1 (a leading 0), {int(text.replace('_', ''), 10)} to YAML "
+            "1.2; write it without the leading 0", node.start_mark)
 
 
 UniqueKeyLoader.add_constructor("tag:yaml.org,2002:int", UniqueKeyLoader.construct_yaml_int)
+UniqueKeyLoader.add_constructor("tag:yaml.org,2002:float", UniqueKeyLoader.construct_yaml_float)
 
 
 class DuplicateKey(yaml.YAMLError):
