@@ -243,7 +243,14 @@ def _cmd_ablate(args: argparse.Namespace) -> int:
           f"{len(res.failed)} failed ({res.wall_s:.1f} s); wrote {res.out_dir}" + _report_hint(res.out_dir))
     for job_id, error in res.failed.items():
         print(f"  failed {job_id}: {error}")
-    return 1 if res.failed else 0
+    if res.failed:  # exit 1 says so on standard error too, as every refused command does
+        first, n = next(iter(res.failed)), len(res.failed)
+        others = len(res.jobs) - n
+        print(f"gslam: error: {n} of {len(res.jobs)} jobs failed ({'the first, ' if n > 1 else ''}{first}: "
+              f"{_shortened(_one_line(res.failed[first]))}); errors in {res.out_dir / 'failed'}"
+              f"{f', the other {others} written' if others else ''}; run the command again to retry", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _warn_self_checks(results: dict) -> None:
