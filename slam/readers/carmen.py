@@ -277,6 +277,10 @@ def _parse(path: Path) -> _Log:
         elif kind == "PARAM":
             if len(parts) < 3:
                 raise GslamError(f"{where}: expected PARAM name value ...")
+            if parts[1] == "robot_front_laser_max" and parts[2].lower().lstrip("+-") == "nan":
+                # as a LaserScan's range_max NaN: no limit is inf; NaN dropped every scan as "returns nothing"
+                raise GslamError(f"{where}: PARAM robot_front_laser_max {parts[2]}: expected the laser's maximum "
+                                 "range in metres (inf: no limit)")
             d.params[parts[1]] = parts[2]
     return d
 
