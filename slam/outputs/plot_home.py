@@ -9,7 +9,9 @@ folder that cannot be written), it created the missing folders wherever
 own in the temporary folder (gslam ends without the exit handler that
 removes it). gslam then gives it a temporary folder of its own, removed
 when the command ends; a home that holds or can hold them is used as every
-matplotlib program uses it, and ``MPLCONFIGDIR`` set by the user is kept.
+matplotlib program uses it, and ``MPLCONFIGDIR`` set by the user is kept
+where it can hold them (the temporary folder stands in for one that names a
+file, a folder beneath a file, or a folder that cannot be written).
 """
 
 from __future__ import annotations
@@ -54,13 +56,20 @@ def plot_home() -> Iterator[None]:
     """While the command runs (and its worker processes, which inherit the
     environment), matplotlib's folders are the user's if they can be, else
     a temporary folder removed at the end."""
-    if os.environ.get("MPLCONFIGDIR") or _defaults_usable():
+    given = os.environ.get("MPLCONFIGDIR")
+    if (_can_make(Path(given)) if given else _defaults_usable()):
         yield
         return
+    # A home, or an MPLCONFIGDIR, that cannot hold them (a file, beneath a
+    # file, read-only): matplotlib said so in two lines and left a folder in
+    # the temporary folder.
     folder = tempfile.mkdtemp(prefix="gslam-matplotlib-")
     os.environ["MPLCONFIGDIR"] = folder
     try:
         yield
     finally:
-        del os.environ["MPLCONFIGDIR"]
+        if given:
+            os.environ["MPLCONFIGDIR"] = given
+        else:
+            del os.environ["MPLCONFIGDIR"]
         shutil.rmtree(folder, ignore_errors=True)
