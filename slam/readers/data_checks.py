@@ -208,15 +208,15 @@ def check_stamps(rec: Recording, source: object, offsets: dict[str, float]) -> N
         t = np.asarray(s.t, dtype=np.float64)
         if not np.all(np.isfinite(t)):
             raise GslamError(f"{source}: {name} stamp {int(np.argmin(np.isfinite(t)))} is not a finite time")
-        check_absolute_stamps(rec.t0 + t, f"{source}: {name}")
-        if len(t) < 2:
-            continue
         steps = np.diff(t)
-        if steps.min() < 0:
+        if len(steps) and steps.min() < 0:  # first: a clock reset may also reach before 1970
             i = int(np.argmin(steps)) + 1
             raise GslamError(f"{source}: {name} time goes back by {-steps[i - 1]:.6g} s at sample {i} "
                              f"(t = {t[i]:.3f} s after {t[i - 1]:.3f} s): two recordings in one, or a clock reset? "
                              "Expected increasing stamps")
+        check_absolute_stamps(rec.t0 + t, f"{source}: {name}")
+        if len(t) < 2:
+            continue
         i = int(np.argmax(steps))
         jump, rest = float(steps[i]), float(t[-1] - t[0] - steps[i])
         if jump > MIN_JUMP_S and jump > rest:
