@@ -289,7 +289,7 @@ SWEPT_NUMBER = within(-1e15, 1e15, "", "beyond every bound of a config's or scen
                       "and a wider range overflows the draw")
 """An end of a range an ablation draws a key's values from."""
 RECORDING_S = within(0.0, 2.0**32, "s", "a fault's times count from the recording's start",
-                     "beyond what a recording spans: its stamps lie within 1901 to 2038, 2**32 s "
+                     "beyond what a recording spans: its stamps lie within 1970 to 2038 "
                      "(slam.readers.data_checks)")
 """A time within a recording, from its start (s): when an injected fault starts or ends."""
 AXIS_COMPONENT = within(-1e6, 1e6, "", "an axis is normalised on load: a component beyond a million says no more "
