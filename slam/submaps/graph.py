@@ -537,7 +537,7 @@ class GlobalSlam:
         if self._chain_graph.size() != n:
             return None
         kept = self._in_graph
-        if len(kept) > len(self.constraints) or any(a is not b for a, b in zip(kept, self.constraints)):
+        if not self._still_leads(kept):
             # Constraints were taken back (a recognition unconfirmed, the
             # outliers after GNC): start the constraints' graph again.
             self._constraint_graph, self._in_graph, self._last_scan = gtsam.NonlinearFactorGraph(), [], -1
@@ -551,6 +551,16 @@ class GlobalSlam:
         g.push_back(self._chain_graph)
         g.push_back(self._constraint_graph)
         return g
+
+    def _still_leads(self, kept: list[Constraint]) -> bool:
+        """Whether ``kept``, the constraints a graph was built from, still
+        lead :attr:`constraints`. Constraints are only ever appended or taken
+        out (a recognition unconfirmed, the outliers after GNC), never moved
+        or added twice, so the prefix is intact exactly when the last of
+        ``kept`` is still in its place: a check that costs the same however
+        many constraints the run has made."""
+        n = len(kept)
+        return n == 0 or (n <= len(self.constraints) and self.constraints[n - 1] is kept[-1])
 
     def _chain_factor(self, i: int):
         """The dead-reckoning step into node ``i``."""
@@ -610,8 +620,7 @@ class GlobalSlam:
 
         self._extend_chain(n)
         kept = self._isam_constraints
-        if (self._isam is None or len(kept) > len(self.constraints)
-                or any(a is not b for a, b in zip(kept, self.constraints))):
+        if self._isam is None or not self._still_leads(kept):
             params = gtsam.ISAM2Params()
             params.setRelinearizeThreshold(0.01)
             params.relinearizeSkip = 1
