@@ -39,3 +39,13 @@ def test_equal_distances_keep_the_order_added():
     index = NearSubmaps(2.0)
     index.place([7, 3, 5], np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0]]))
     assert index.within(np.zeros(2), 1.0)[0].tolist() == [7, 3, 5]
+
+
+def test_adding_after_placing_none_finds_each():
+    index = NearSubmaps(3.0)
+    index.place([], np.zeros((0, 2)))
+    assert len(index.within(np.zeros(2), 3.0)[0]) == 0
+    for sid in range(40):  # past the first room made
+        index.add(sid, np.array([0.1 * sid, 0.0]))
+    ids, dist = index.within(np.zeros(2), 1.0)
+    assert ids.tolist() == list(range(11)) and np.allclose(dist, 0.1 * np.arange(11))

@@ -11,12 +11,17 @@ import numpy as np
 class NearSubmaps:
     """The world centres (x, y) of the finished submaps, in square cells of
     ``cell_m``. :meth:`add` one as it finishes; :meth:`place` all again when
-    the estimate they hang on moves (after an optimisation)."""
+    the estimate they hang on moves (after an optimisation).
+
+    The centres and ids are kept in arrays (rows in the order added; room is
+    doubled when full, so adding one costs the same however many there are),
+    and each cell lists its rows: a query reads only its cells' rows."""
 
     def __init__(self, cell_m: float):
         self.cell_m = cell_m
-        self.ids: list[int] = []
-        self.xy: list[tuple[float, float]] = []
+        self._ids = np.zeros(0, dtype=int)
+        self._xy = np.zeros((0, 2))
+        self._count = 0
         self._cells: dict[tuple[int, int], list[int]] = {}
 
     def _cell(self, x: float, y: float) -> tuple[int, int]:
@@ -24,15 +29,25 @@ class NearSubmaps:
 
     def place(self, ids: list[int], xy: np.ndarray) -> None:
         """Every finished submap ``ids`` at its centre ``xy`` (k, 2), replacing what was there."""
-        self.ids, self.xy, self._cells = [], [], {}
-        for sid, centre in zip(ids, xy):
-            self.add(sid, centre)
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        self._ids, self._xy, self._count = np.asarray(ids, dtype=int).reshape(-1), xy.copy(), len(xy)
+        # The cells of all at once; each cell's rows in the order added.
+        cells = np.floor(xy / self.cell_m).astype(int)
+        keys, first, inverse = np.unique(cells, axis=0, return_index=True, return_inverse=True)
+        rows = np.argsort(inverse.reshape(-1), kind="stable")
+        bounds = np.cumsum(np.bincount(inverse.reshape(-1), minlength=len(keys)))[:-1]
+        self._cells = {(int(cx), int(cy)): part.tolist() for (cx, cy), part in zip(keys, np.split(rows, bounds))}
 
     def add(self, sid: int, xy: np.ndarray) -> None:
         x, y = float(xy[0]), float(xy[1])
-        self._cells.setdefault(self._cell(x, y), []).append(len(self.ids))
-        self.ids.append(sid)
-        self.xy.append((x, y))
+        row = self._count
+        if row == len(self._ids):  # full: twice the room
+            ids, xy = np.zeros(max(2 * row, 16), dtype=int), np.zeros((max(2 * row, 16), 2))
+            ids[:row], xy[:row] = self._ids[:row], self._xy[:row]
+            self._ids, self._xy = ids, xy
+        self._ids[row], self._xy[row] = sid, (x, y)
+        self._count += 1
+        self._cells.setdefault(self._cell(x, y), []).append(row)
 
     def within(self, p: np.ndarray, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
         """The submaps whose centre is within ``radius_m`` of ``p`` (x, y),
@@ -41,11 +56,11 @@ class NearSubmaps:
         cx0, cy0 = self._cell(p[0] - radius_m, p[1] - radius_m)
         cx1, cy1 = self._cell(p[0] + radius_m, p[1] + radius_m)
         rows = [r for cx in range(cx0, cx1 + 1) for cy in range(cy0, cy1 + 1) for r in self._cells.get((cx, cy), ())]
-        rows = np.array(sorted(rows), dtype=int)
+        rows = np.sort(np.array(rows, dtype=int))
         if len(rows) == 0:
             return rows, np.zeros(0)
-        dist = np.hypot(*(np.array([self.xy[r] for r in rows]) - p[:2]).T)
+        dist = np.hypot(*(self._xy[rows] - p[:2]).T)
         keep = dist <= radius_m
         rows, dist = rows[keep], dist[keep]
         order = np.argsort(dist, kind="stable")
-        return np.array([self.ids[r] for r in rows[order]], dtype=int), dist[order]
+        return self._ids[rows[order]], dist[order]
