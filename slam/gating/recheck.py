@@ -126,15 +126,21 @@ def recheck(
         rows = np.flatnonzero(mask.any(axis=1) & np.isfinite(residuals[factor]).any(axis=1))
         counts = dict.fromkeys(FACTOR_DOFS[factor], 0)
         res, sig, info = residuals[factor], sigmas[factor], shared[factor]
+        finite = np.isfinite(res).all(axis=1)
+        t = meas.t
         for k in rows:
             if k == 0 and factor in (*BETWEEN, "gyro"):
                 continue
             est = _estimate_sigmas(factor, k, first.marginals, values)
             z = res[k] / np.sqrt(sig[k] ** 2 + est**2)
-            near = (np.abs(meas.t - meas.t[k]) <= half) & np.isfinite(res).all(axis=1)
+            # The neighbours within half a window, looked for only among the
+            # keyframes within a whole one (the times increase), so a row
+            # costs the same however long the run.
+            lo, hi = np.searchsorted(t, t[k] - 2.0 * half), np.searchsorted(t, t[k] + 2.0 * half, side="right")
+            near = (np.abs(t[lo:hi] - t[k]) <= half) & finite[lo:hi]
             n = int(near.sum())
-            mean = res[near].mean(axis=0)
-            z_mean = mean / np.sqrt((info[near] ** 2).mean(axis=0) / n + est**2)
+            mean = res[lo:hi][near].mean(axis=0)
+            z_mean = mean / np.sqrt((info[lo:hi][near] ** 2).mean(axis=0) / n + est**2)
             agree = mask[k] & (np.abs(z) <= k_sigma) & (np.abs(z_mean) <= k_sigma)
             weights[factor][k, agree] = 1.0
             for d in np.flatnonzero(agree):
