@@ -149,6 +149,10 @@ def recheck(
 
     # 2. Baselines of the between factors still excluded step by step.
     constraints, tried = [], 0
+    # The estimate's covariance over each stretch, asked of GTSAM once: where
+    # several degrees of freedom are excluded together, their baselines span
+    # the same keyframes, and each query walks the Bayes tree.
+    relative_cov: dict[tuple[int, int], np.ndarray] = {}
     for factor in gating.baseline_factors:
         m = meas.get(factor)
         if factor not in BETWEEN or m is None:
@@ -156,7 +160,9 @@ def recheck(
         for d, dof in enumerate(FACTOR_DOFS[factor]):
             for c in _baselines(meas, factor, d, weights[factor], gating.baseline_m):
                 tried += 1
-                est = _relative_cov(first.marginals, values, c.i, c.j)
+                if (c.i, c.j) not in relative_cov:
+                    relative_cov[c.i, c.j] = _relative_cov(first.marginals, values, c.i, c.j)
+                est = relative_cov[c.i, c.j]
                 traj = first.trajectory
                 ref = relative_poses(
                     np.array([[traj.x[c.i], traj.y[c.i], traj.yaw[c.i]]]),
