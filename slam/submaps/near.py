@@ -31,12 +31,14 @@ class NearSubmaps:
         """Every finished submap ``ids`` at its centre ``xy`` (k, 2), replacing what was there."""
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
         self._ids, self._xy, self._count = np.asarray(ids, dtype=int).reshape(-1), xy.copy(), len(xy)
-        # The cells of all at once; each cell's rows in the order added.
+        # The cells of all at once, the rows sorted by cell (stably: each
+        # cell's rows in the order added), cut where the cell changes.
         cells = np.floor(xy / self.cell_m).astype(int)
-        keys, first, inverse = np.unique(cells, axis=0, return_index=True, return_inverse=True)
-        rows = np.argsort(inverse.reshape(-1), kind="stable")
-        bounds = np.cumsum(np.bincount(inverse.reshape(-1), minlength=len(keys)))[:-1]
-        self._cells = {(int(cx), int(cy)): part.tolist() for (cx, cy), part in zip(keys, np.split(rows, bounds))}
+        rows = np.lexsort((cells[:, 1], cells[:, 0]))
+        sorted_cells = cells[rows]
+        cuts = np.flatnonzero(np.any(sorted_cells[1:] != sorted_cells[:-1], axis=1)) + 1
+        firsts = sorted_cells[np.concatenate([[0], cuts])] if len(rows) else sorted_cells
+        self._cells = {(cx, cy): part.tolist() for (cx, cy), part in zip(firsts.tolist(), np.split(rows, cuts))}
 
     def add(self, sid: int, xy: np.ndarray) -> None:
         x, y = float(xy[0]), float(xy[1])
