@@ -44,9 +44,10 @@ class NearSubmaps:
         x, y = float(xy[0]), float(xy[1])
         row = self._count
         if row == len(self._ids):  # full: twice the room
-            ids, xy = np.zeros(max(2 * row, 16), dtype=int), np.zeros((max(2 * row, 16), 2))
-            ids[:row], xy[:row] = self._ids[:row], self._xy[:row]
-            self._ids, self._xy = ids, xy
+            room = max(2 * row, 16)
+            grown_ids, grown_xy = np.zeros(room, dtype=int), np.zeros((room, 2))
+            grown_ids[:row], grown_xy[:row] = self._ids[:row], self._xy[:row]
+            self._ids, self._xy = grown_ids, grown_xy
         self._ids[row], self._xy[row] = sid, (x, y)
         self._count += 1
         self._cells.setdefault(self._cell(x, y), []).append(row)
