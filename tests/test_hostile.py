@@ -2208,10 +2208,19 @@ def test_a_home_matplotlib_cannot_use_is_left_as_it_is(home: str, world: World, 
     two warning lines, and a matplotlib-* folder left in the temporary
     folder. Now nothing is made outside --out, nothing is left and nothing
     but gslam's own lines is said."""
+    map_beside_a_file(world, tmp_path, HOME=str(tmp_path / home / "me"))
+
+
+def map_beside_a_file(world: World, tmp_path: Path, **settings: str) -> None:
+    """``gslam map`` of ``world``'s run into ``tmp_path/o``, with the
+    environment ``settings`` (they may name ``tmp_path/a-file``, a file
+    holding "mine") and its own empty TMPDIR: it maps, says nothing of
+    matplotlib, and leaves nothing but a-file (unchanged), o and an empty
+    tmp."""
     (tmp_path / "tmp").mkdir()
     (tmp_path / "a-file").write_text("mine\n")
     env = {k: v for k, v in os.environ.items() if not k.startswith(("XDG_", "MPL"))}
-    env.update(HOME=str(tmp_path / home / "me"), TMPDIR=str(tmp_path / "tmp"), PYTHONPATH=str(REPO))
+    env.update(settings, TMPDIR=str(tmp_path / "tmp"), PYTHONPATH=str(REPO))
     done = subprocess.run([sys.executable, "-m", "slam.cli", "-q", "map", str(world.run), "--config", str(TELEMAX_CONFIG),
                            "--out", str(tmp_path / "o")], cwd=tmp_path, capture_output=True, text=True,
                           timeout=TIME_LIMIT_S, env=env)

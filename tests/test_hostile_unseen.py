@@ -24,22 +24,20 @@ odd types and tags, ``--set`` values in YAML syntax.
 from __future__ import annotations
 
 import gzip
-import os
 import struct
-import subprocess
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.conftest import CONFIGS, REPO, TELEMAX_CONFIG
+from tests.conftest import CONFIGS
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
-    Case, World, both, broad_mat, check_error_output, data, scenario, set_in, text, world,
+    Case, World, broad_mat, check_error_output, data, scenario, set_in, text, world,
 )
 from tests.test_hostile import (
-    BAG, CARMEN, MAP, QUICK, TIME_LIMIT_S, _run, bag, carmen, librsf_with, restamp, run_error, spec_text,
+    BAG, CARMEN, MAP, QUICK, _run, bag, carmen, librsf_with, map_beside_a_file, restamp, run_error,
+    spec_text,
 )
 from tests.bagfactory import driving_bag
 
@@ -219,18 +217,8 @@ def test_an_mplconfigdir_matplotlib_cannot_use_is_left_as_it_is(where: str, worl
     """MPLCONFIGDIR naming a file: matplotlib said so in two warning lines
     and left a matplotlib-* folder in the temporary folder; now gslam's own
     temporary folder stands in, removed at the end."""
-    (tmp_path / "tmp").mkdir()
-    (tmp_path / "a-file").write_text("mine\n")
     given = tmp_path / "a-file" if where == "a-file" else tmp_path / "a-file" / "mpl"
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("XDG_", "MPL"))}
-    env.update(MPLCONFIGDIR=str(given), TMPDIR=str(tmp_path / "tmp"), PYTHONPATH=str(REPO))
-    done = subprocess.run([sys.executable, "-m", "slam.cli", "-q", "map", str(world.run), "--config", str(TELEMAX_CONFIG),
-                           "--out", str(tmp_path / "o")], cwd=tmp_path, capture_output=True, text=True,
-                          timeout=TIME_LIMIT_S, env=env)
-    assert done.returncode == 0, done.stderr[-800:]
-    assert "matplotlib" not in done.stderr, done.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file", "o", "tmp"]
-    assert list((tmp_path / "tmp").iterdir()) == [] and (tmp_path / "a-file").read_text() == "mine\n"
+    map_beside_a_file(world, tmp_path, MPLCONFIGDIR=str(given))
     assert (tmp_path / "o" / "trajectory.png").is_file()
 
 
