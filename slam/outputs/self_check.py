@@ -374,9 +374,7 @@ def check_map(trajectory: Trajectory, scans: Scans | None = None, scan_index: np
     if scans is not None and scan_index is not None:
         pts, kf = scan_points(scans.ranges[scan_index], scans.angles, beam_limits, trajectory, b.voxel_m)
         agreement, n_scans, _ = scan_agreement(pts, kf, len(scan_index), b)
-        cast = checked_keyframes(len(scan_index), b.free_space_scans_max)
-        in_free, n_returns = free_space_returns(scans.ranges[scan_index[cast]], scans.angles, beam_limits,
-                                                subset(trajectory, cast), b)
+        in_free, n_returns = map_free_space_returns(trajectory, scans, scan_index, beam_limits, b)
     figures.append(CheckedFigure("scan_agreement", _round(agreement), b.scan_agreement_min, Side.AT_LEAST, n_scans))
     figures.append(CheckedFigure("free_space_returns", _round(in_free), b.free_space_returns_max, Side.AT_MOST,
                                  n_returns))
@@ -390,9 +388,15 @@ def check_map(trajectory: Trajectory, scans: Scans | None = None, scan_index: np
     return SelfCheck(figures, notes, time.perf_counter() - start)
 
 
-def subset(trajectory: Trajectory, keep: np.ndarray) -> Trajectory:
-    """The poses ``keep`` of ``trajectory``."""
-    return Trajectory(t=trajectory.t[keep], x=trajectory.x[keep], y=trajectory.y[keep], yaw=trajectory.yaw[keep])
+def map_free_space_returns(trajectory: Trajectory, scans: Scans, scan_index: np.ndarray,
+                           beam_limits: tuple[float, float], bounds: SelfCheckBounds = SelfCheckBounds()
+                           ) -> tuple[float | None, int]:
+    """:func:`free_space_returns` of the keyframes' scans
+    ``scans.ranges[scan_index]`` at their poses ``trajectory``, every one
+    of them or evenly spaced ones beyond ``bounds.free_space_scans_max``."""
+    cast = checked_keyframes(len(scan_index), bounds.free_space_scans_max)
+    poses = Trajectory(t=trajectory.t[cast], x=trajectory.x[cast], y=trajectory.y[cast], yaw=trajectory.yaw[cast])
+    return free_space_returns(scans.ranges[scan_index[cast]], scans.angles, beam_limits, poses, bounds)
 
 
 def _round(value: float | None) -> float | None:

@@ -235,16 +235,14 @@ class Mapping:
             setattr(self, name, dict(value) if isinstance(value, dict) else value)
 
     def _free_space_returns(self) -> float:
-        """:func:`slam.outputs.self_check.free_space_returns` of the current
-        estimate, on the keyframes the self-check casts."""
+        """The self-check's ``free_space_returns`` of the current estimate
+        (:func:`slam.outputs.self_check.map_free_space_returns`)."""
         from slam.outputs.pointcloud import beam_limits
-        from slam.outputs.self_check import SelfCheckBounds, checked_keyframes, free_space_returns, subset
+        from slam.outputs.self_check import map_free_space_returns
 
-        rec, idx, b = self.recording, self.measurements.scan_index, SelfCheckBounds()
-        cast = checked_keyframes(len(idx), b.free_space_scans_max)
-        value, _ = free_space_returns(rec.scans.ranges[idx[cast]], rec.scans.angles,
-                                      beam_limits(self.config.frontend, rec.scans),
-                                      subset(self.backend.trajectory, cast), b)
+        rec = self.recording
+        value, _ = map_free_space_returns(self.backend.trajectory, rec.scans, self.measurements.scan_index,
+                                          beam_limits(self.config.frontend, rec.scans))
         return np.inf if value is None else value
 
     def build_submaps(self, before_judging: Callable[[list], list] | None = None,
