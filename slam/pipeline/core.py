@@ -195,26 +195,25 @@ class Mapping:
         run away, which tears the map into pieces that each hold together
         and lay their walls across each other's rooms."""
         if self.config.submaps.blamed_scans != "choose" or not self._blames_scans():
-            self.build_submaps()
-            self.judge_loops(self.find_loops())
-            self.optimise()
+            self._back_end_pass()
             return
         before = self._back_end_state()
         in_free = {}
         for mode in ("keep", "leave_out"):
             self._restore_back_end(before)
-            self.build_submaps(blamed_mode=mode)
-            self.judge_loops(self.find_loops())
-            self.optimise()
+            self._back_end_pass(mode)
             in_free[mode] = self._free_space_returns()
         chosen = "keep" if in_free["keep"] < in_free["leave_out"] else "leave_out"
         if chosen == "keep":  # the last pass made the state (the validator's loop columns too)
             self._restore_back_end(before)
-            self.build_submaps(blamed_mode=chosen)
-            self.judge_loops(self.find_loops())
-            self.optimise()
+            self._back_end_pass(chosen)
         self.extra_metrics["blamed_scans"] = {"chosen": chosen,
                                               "free_space_returns": {m: round(v, 4) for m, v in in_free.items()}}
+
+    def _back_end_pass(self, blamed_mode: str | None = None) -> None:
+        self.build_submaps(blamed_mode=blamed_mode)
+        self.judge_loops(self.find_loops())
+        self.optimise()
 
     def _blames_scans(self) -> bool:
         return (self.submaps_possible() and self.weights is not None
