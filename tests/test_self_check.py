@@ -14,6 +14,7 @@ from conftest import real_data
 from slam.graph.measurements import BetweenMeasurement
 from slam.outputs.self_check import (
     SelfCheckBounds, check_map, checked_keyframes, free_space_returns, loop_residuals, odometry_disagreement,
+    return_cells,
     scan_agreement, scan_points, self_check_table, summary_line, warning_line,
 )
 from slam.recording import Scans, Trajectory, relative_poses
@@ -101,6 +102,24 @@ def test_a_map_whose_returns_land_in_free_space_fails():
     check = check_map(trajectory(torn(poses)), scans, np.arange(len(poses)), LIMITS, bounds=bounds)
     assert "free_space_returns" in [f.name for f in check.failed]
     assert check_map(trajectory(poses), scans, np.arange(len(poses)), LIMITS, bounds=bounds).verdict == "pass"
+
+
+def cells(poses: np.ndarray, scans: Scans) -> int:
+    return return_cells(scans.ranges, scans.angles, LIMITS, trajectory(poses), SelfCheckBounds().free_space_cell_m)
+
+
+def test_a_torn_map_lays_its_walls_on_more_cells_whether_its_pieces_cross_or_lie_apart():
+    """Laid across each other, the pieces put returns in free space; laid
+    apart, nothing contradicts them, but the walls they share are counted
+    twice. The count of cells the returns land in sees both."""
+    poses, scans = room_run(24)
+    apart = poses.copy()
+    apart[len(poses) * 3 // 4:, 0] += 30.0
+    assert in_free_space(apart, scans) < 0.05  # as whole as the whole map
+    whole = cells(poses, scans)
+    assert cells(apart, scans) > 1.2 * whole
+    assert cells(torn(poses), scans) > 1.2 * whole
+    assert cells(poses[:, :] + [5.0, -3.0, 0.0], scans) == pytest.approx(whole, rel=0.02)  # moved whole
 
 
 # --- scan agreement ----------------------------------------------------------

@@ -366,10 +366,10 @@ def test_the_walk_beside_local_slam_gives_the_same_result_to_the_bit(constraints
                    for x, y in zip(a, b))
 
 
-def _blamed_core(short_run, blamed_scans: str, monkeypatch=None, in_free=None):
+def _blamed_core(short_run, blamed_scans: str, monkeypatch=None, figures=None):
     """The short run up to its back end, the scan matching of every fourth
-    keyframe (from the tenth) excluded; ``in_free``: the free-space figure
-    each pass reports, by the mode it was mapped with."""
+    keyframe (from the tenth) excluded; ``figures``: the return cells and
+    free-space figure each pass reports, by the mode it was mapped with."""
     from slam.config import load_config
     from slam.pipeline.core import Mapping
     from slam.readers.read import read_recording
@@ -383,7 +383,7 @@ def _blamed_core(short_run, blamed_scans: str, monkeypatch=None, in_free=None):
     sm = np.array(core.weights["scan_matching"], dtype=float)
     sm[10::4] = np.inf
     core.weights["scan_matching"] = sm
-    if in_free is not None:
+    if figures is not None:
         passes = []
         build = core.build_submaps
 
@@ -392,7 +392,7 @@ def _blamed_core(short_run, blamed_scans: str, monkeypatch=None, in_free=None):
             build(before_judging, blamed_mode)
 
         monkeypatch.setattr(core, "build_submaps", build_and_note)
-        monkeypatch.setattr(core, "_free_space_returns", lambda: in_free[passes[-1]])
+        monkeypatch.setattr(core, "_map_figures", lambda: figures[passes[-1]])
         core.passes = passes
     core.map_back_end()
     return core
@@ -400,14 +400,18 @@ def _blamed_core(short_run, blamed_scans: str, monkeypatch=None, in_free=None):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("better", ["keep", "leave_out"])
-def test_choose_keeps_the_map_that_lays_fewer_returns_in_free_space(short_run, monkeypatch, better):
+def test_choose_keeps_the_map_whose_returns_take_fewer_cells(short_run, monkeypatch, better):
     """``submaps.blamed_scans: choose`` maps both ways and ends with the
-    map, loops and metrics of the one whose returns lie less in free space:
-    the same estimate to the bit as that mode alone."""
-    in_free = {"keep": 0.2, "leave_out": 0.3} if better == "keep" else {"keep": 0.3, "leave_out": 0.2}
-    chosen = _blamed_core(short_run, "choose", monkeypatch, in_free)
+    map, loops and metrics of the one whose returns land in fewer cells,
+    whatever the free-space figure says: the same estimate to the bit as
+    that mode alone."""
+    other = "leave_out" if better == "keep" else "keep"
+    figures = {better: (1000, 0.3), other: (1001, 0.2)}
+    chosen = _blamed_core(short_run, "choose", monkeypatch, figures)
     assert set(chosen.passes) == {"keep", "leave_out"} and chosen.passes[-1] == better
-    assert chosen.extra_metrics["blamed_scans"] == {"chosen": better, "free_space_returns": in_free}
+    assert chosen.extra_metrics["blamed_scans"] == {
+        "chosen": better, "return_cells": {better: 1000, other: 1001},
+        "free_space_returns": {better: 0.3, other: 0.2}}
     alone = _blamed_core(short_run, better)
     assert np.array_equal(chosen.backend.trajectory.x, alone.backend.trajectory.x)
     assert np.array_equal(chosen.backend.trajectory.yaw, alone.backend.trajectory.yaw)

@@ -206,8 +206,8 @@ class SubmapsConfig(_Strict):
     (in any direction) out of the submaps: not matched, not inserted, so no
     submap, constraint or loop rests on it; ``keep`` (the default) builds the
     submaps from every scan and gates only the constraints; ``choose`` maps
-    both ways where the gating excluded a scan and keeps the map that lays
-    fewer laser returns in free space
+    both ways where the gating excluded a scan and keeps the map whose
+    laser returns land in fewer cells
     (:meth:`slam.pipeline.core.Mapping.map_back_end`)."""
 
     enabled: bool = False

@@ -388,15 +388,46 @@ def check_map(trajectory: Trajectory, scans: Scans | None = None, scan_index: np
     return SelfCheck(figures, notes, time.perf_counter() - start)
 
 
+def return_cells(ranges: np.ndarray, angles: np.ndarray, beam_limits: tuple[float, float], poses: Trajectory,
+                 cell_m: float) -> int:
+    """How many ``cell_m`` cells the returns of scans ``ranges`` (K, beams)
+    at ``poses`` land in: the area of the map's walls. A map that holds
+    together lays a wall seen again on the cells it was seen on before; a
+    torn map lays it again elsewhere, across a room another piece saw empty
+    (:func:`free_space_returns`) or apart from the rest, where nothing
+    contradicts it but its walls take twice the cells. Only comparable
+    between estimates of the same scans."""
+    from slam.frontend.kiss import ScanProjector
+
+    pts, _ = ScanProjector(angles, *beam_limits).world_points(ranges, poses)
+    if len(pts) == 0:
+        return 0
+    return len(np.unique(np.floor(pts / cell_m).astype(np.int64), axis=0))
+
+
 def map_free_space_returns(trajectory: Trajectory, scans: Scans, scan_index: np.ndarray,
                            beam_limits: tuple[float, float], bounds: SelfCheckBounds = SelfCheckBounds()
                            ) -> tuple[float | None, int]:
     """:func:`free_space_returns` of the keyframes' scans
     ``scans.ranges[scan_index]`` at their poses ``trajectory``, every one
     of them or evenly spaced ones beyond ``bounds.free_space_scans_max``."""
+    ranges, poses = _cast_keyframes(trajectory, scans, scan_index, bounds)
+    return free_space_returns(ranges, scans.angles, beam_limits, poses, bounds)
+
+
+def map_return_cells(trajectory: Trajectory, scans: Scans, scan_index: np.ndarray,
+                     beam_limits: tuple[float, float], bounds: SelfCheckBounds = SelfCheckBounds()) -> int:
+    """:func:`return_cells` of the keyframes cast by
+    :func:`map_free_space_returns`, in its cells."""
+    ranges, poses = _cast_keyframes(trajectory, scans, scan_index, bounds)
+    return return_cells(ranges, scans.angles, beam_limits, poses, bounds.free_space_cell_m)
+
+
+def _cast_keyframes(trajectory: Trajectory, scans: Scans, scan_index: np.ndarray,
+                    bounds: SelfCheckBounds) -> tuple[np.ndarray, Trajectory]:
     cast = checked_keyframes(len(scan_index), bounds.free_space_scans_max)
     poses = Trajectory(t=trajectory.t[cast], x=trajectory.x[cast], y=trajectory.y[cast], yaw=trajectory.yaw[cast])
-    return free_space_returns(scans.ranges[scan_index[cast]], scans.angles, beam_limits, poses, bounds)
+    return scans.ranges[scan_index[cast]], poses
 
 
 def _round(value: float | None) -> float | None:

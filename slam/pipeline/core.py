@@ -187,27 +187,29 @@ class Mapping:
     def map_back_end(self) -> None:
         """The submaps, the loops and the graph. With ``submaps.blamed_scans:
         choose`` and scans the gating excluded, twice: with those scans left
-        out of the submaps and with them kept, and the map that lays fewer
-        of its laser returns in free space is kept
-        (:func:`slam.outputs.self_check.free_space_returns`). Leaving a cut
-        laser's scans out hands their stretch to the odometry: right where
-        the odometry holds its heading, wrong where it turns the rest of the
-        run away, which tears the map into pieces that each hold together
-        and lay their walls across each other's rooms."""
+        out of the submaps and with them kept, and the map whose laser
+        returns land in fewer cells is kept
+        (:func:`slam.outputs.self_check.return_cells`; a tie keeps them
+        out). Leaving a cut laser's scans out hands their stretch to the
+        odometry: right where the odometry holds its heading, wrong where it
+        turns the rest of the run away. Keeping them lets their weak matches
+        bend the run. Either way the map tears into pieces that each hold
+        together, and a torn map lays the walls it sees again on other cells
+        than before."""
         if self.config.submaps.blamed_scans != "choose" or not self._blames_scans():
             self._back_end_pass()
             return
         before = self._back_end_state()
-        in_free = {}
+        cells, in_free = {}, {}
         for mode in ("keep", "leave_out"):
             self._restore_back_end(before)
             self._back_end_pass(mode)
-            in_free[mode] = self._free_space_returns()
-        chosen = "keep" if in_free["keep"] < in_free["leave_out"] else "leave_out"
+            cells[mode], in_free[mode] = self._map_figures()
+        chosen = "keep" if cells["keep"] < cells["leave_out"] else "leave_out"
         if chosen == "keep":  # the last pass made the state (the validator's loop columns too)
             self._restore_back_end(before)
             self._back_end_pass(chosen)
-        self.extra_metrics["blamed_scans"] = {"chosen": chosen,
+        self.extra_metrics["blamed_scans"] = {"chosen": chosen, "return_cells": cells,
                                               "free_space_returns": {m: round(v, 4) for m, v in in_free.items()}}
 
     def _back_end_pass(self, blamed_mode: str | None = None) -> None:
@@ -233,16 +235,17 @@ class Mapping:
         for name, value in state.items():
             setattr(self, name, dict(value) if isinstance(value, dict) else value)
 
-    def _free_space_returns(self) -> float:
-        """The self-check's ``free_space_returns`` of the current estimate
-        (:func:`slam.outputs.self_check.map_free_space_returns`)."""
+    def _map_figures(self) -> tuple[int, float]:
+        """The current estimate's :func:`slam.outputs.self_check.map_return_cells`
+        and the self-check's ``free_space_returns`` (recorded, not chosen by)."""
         from slam.outputs.pointcloud import beam_limits
-        from slam.outputs.self_check import map_free_space_returns
+        from slam.outputs.self_check import map_free_space_returns, map_return_cells
 
-        rec = self.recording
-        value, _ = map_free_space_returns(self.backend.trajectory, rec.scans, self.measurements.scan_index,
-                                          beam_limits(self.config.frontend, rec.scans))
-        return np.inf if value is None else value
+        rec, limits = self.recording, beam_limits(self.config.frontend, self.recording.scans)
+        trajectory, scan_index = self.backend.trajectory, self.measurements.scan_index
+        in_free, _ = map_free_space_returns(trajectory, rec.scans, scan_index, limits)
+        return (map_return_cells(trajectory, rec.scans, scan_index, limits),
+                np.inf if in_free is None else in_free)
 
     def build_submaps(self, before_judging: Callable[[list], list] | None = None,
                       blamed_mode: str | None = None) -> None:
