@@ -4,6 +4,7 @@ library; every command is a library function returning a result object."""
 from __future__ import annotations
 
 import argparse
+import atexit
 import codecs
 import json
 import logging
@@ -544,6 +545,21 @@ codecs.register_error(_TERMINAL_ERRORS, _as_given_or_escaped)
 
 
 def main(argv: list[str] | None = None) -> int:
+    received: list[int] = []
+    try:
+        # From the first line: a Ctrl-C while the arguments are read, or
+        # the result reported, ends the command as one during its work does.
+        with as_interrupt(received):
+            return _command(argv, received)
+    except Terminated as e:
+        return _stopped(e.signum)
+    except KeyboardInterrupt:  # raised by a library, or before the handlers were set
+        return _stopped(signal.SIGINT)
+
+
+def _command(argv: list[str] | None, received: list[int]) -> int:
+    """The command of ``argv`` run, its errors as one line each; ``received``:
+    the signals that came while it ran (see :func:`main`)."""
     args = build_parser().parse_args(argv)
     args.command_line = shlex.join(["gslam", *(sys.argv[1:] if argv is None else argv)])  # as results name it
     stderr = logging.StreamHandler()
@@ -556,14 +572,19 @@ def main(argv: list[str] | None = None) -> int:
     for stream in (sys.stdout, sys.stderr):  # a Latin-1 terminal cannot encode a path named in Greek
         if hasattr(stream, "reconfigure"):
             stream.reconfigure(errors=_TERMINAL_ERRORS)
-    received: list[int] = []
     if sys.stdout is not None and not isinstance(sys.stdout, _WatchedStdout):
         sys.stdout = _WatchedStdout(sys.stdout)
     try:
-        with as_interrupt(received), plot_home():
-            code = args.func(args)
+        try:
+            with plot_home():
+                code = args.func(args)
+        except Exception:
+            if received:  # the signal's exception turned into another on its way (an import it interrupted)
+                return _stopped(received[0])
+            raise
         # A signal whose exception was swallowed where Python cannot raise
-        # (a destructor, a callback) stopped nothing: the command finished.
+        # (a destructor, a callback) and came again too late stopped
+        # nothing: the command finished.
         return _stopped(received[0]) if received else code
     except InputError as e:
         print(f"gslam: error: {_shortened(_one_line(str(e)))}", file=sys.stderr)
@@ -584,14 +605,6 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError as e:
         print(f"gslam: error: not enough memory ({_one_line(str(e)) or 'MemoryError'})", file=sys.stderr)
         return 1
-    except Terminated as e:
-        return _stopped(e.signum)
-    except KeyboardInterrupt:
-        return _stopped(signal.SIGINT)
-    except Exception:
-        if received:  # the signal's exception turned into another on its way (an import it interrupted)
-            return _stopped(received[0])
-        raise
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -700,12 +713,16 @@ def run() -> None:
     command has written, closed and renamed its results and reaped its
     processes; what a normal exit adds is tearing down every module and
     object (a tenth of a second after ``gslam map``), which ending the
-    process does at once. An interrupted command ends normally instead:
-    what it stopped (a sweep's process pool) is torn down by the exit
-    handlers."""
+    process does at once. An interrupted command runs the exit handlers
+    first: what it stopped (a sweep's process pool, a Ray instance) ends
+    with them. The teardown is left out for it too: a library whose import
+    the signal cut short could crash in it (a double free) or change the
+    exit code; a second Ctrl-C meanwhile is ignored, as it would only cut
+    the exit handlers short with a traceback."""
     code = main()
     if code in INTERRUPTED:
-        sys.exit(code)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        atexit._run_exitfuncs()
     logging.shutdown()
     for stream in (sys.stdout, sys.stderr):
         try:

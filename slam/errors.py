@@ -14,10 +14,15 @@ input, bad config, missing data."""
 
 
 class Terminated(KeyboardInterrupt):
-    """A signal that ends a process (SIGTERM, SIGHUP, SIGQUIT, ...:
-    ``slam.processes.signals.STOPS``), raised where Ctrl-C raises
-    KeyboardInterrupt so that a terminated command cleans up as an
-    interrupted one does."""
+    """A signal that ends a process (Ctrl-C's SIGINT, SIGTERM, SIGHUP,
+    SIGQUIT, ...: ``slam.processes.signals.STOPS``), a KeyboardInterrupt so
+    that a terminated command cleans up as an interrupted one does.
+
+    Ctrl-C raises it too, not KeyboardInterrupt itself: CPython ends a
+    process run with ``python -m`` by SIGINT at its exit once a
+    KeyboardInterrupt of that exact type has passed through code it ran with
+    ``exec`` (a namedtuple's, a library's at import), even one gslam caught;
+    the exit code 130 gslam returns would be lost."""
 
     def __init__(self, signum: int):
         super().__init__(signum)

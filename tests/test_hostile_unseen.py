@@ -24,20 +24,28 @@ odd types and tags, ``--set`` values in YAML syntax.
 from __future__ import annotations
 
 import gzip
+import json
+import os
+import signal
 import struct
+import subprocess
+import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.conftest import CONFIGS
+from slam.errors import Terminated
+from slam.processes.signals import as_interrupt
+from tests.conftest import CONFIGS, REPO, TELEMAX_CONFIG
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
     Case, World, broad_mat, check_error_output, data, scenario, set_in, text, world,
 )
 from tests.test_hostile import (
-    BAG, CARMEN, MAP, QUICK, _run, bag, carmen, librsf_with, map_beside_a_file, restamp, run_error,
-    spec_text,
+    BAG, CARMEN, MAP, QUICK, _gslam, _run, _said, _temps, _wait_for, bag, carmen, librsf_with, map_beside_a_file,
+    restamp, run_error, spec_text,
 )
 from tests.bagfactory import driving_bag
 
@@ -225,3 +233,71 @@ def test_an_mplconfigdir_matplotlib_cannot_use_is_left_as_it_is(where: str, worl
 def test_corpus_counts():
     assert len(ERRORS) >= 40
     assert len({c.id for c in ERRORS}) == len(ERRORS)
+
+
+# --- Ctrl-C while a command starts ---------------------------------------------------
+
+
+def _loaded(proc: subprocess.Popen, library: str) -> bool:
+    """``library`` (a shared object's path holds it) is loaded in ``proc``."""
+    try:
+        return library in Path(f"/proc/{proc.pid}/maps").read_text()
+    except OSError:  # ended, or no /proc
+        return proc.poll() is not None
+
+
+@pytest.mark.skipif(not Path("/proc/self/maps").is_file(), reason="needs /proc to see the command's imports begin")
+@pytest.mark.parametrize("delay_s", [0.0, 0.2, 0.4, 0.6, 0.9])
+def test_ctrl_c_while_a_map_starts_is_one_line_and_code_130(delay_s: float, world: World, tmp_path: Path):
+    """Ctrl-C during the imports of a starting ``gslam map`` (``delay_s``
+    after numpy is loaded): the process died by SIGINT after saying
+    "interrupted" (CPython's own exit, see slam.errors.Terminated) or by
+    a double free in its teardown, or a traceback came from a callback of
+    numba's compiler and the map ran on to its end."""
+    out = tmp_path / "o"
+    proc = _gslam(["map", world.run, "--config", TELEMAX_CONFIG, *QUICK, "--out", out], tmp_path)
+    _wait_for(lambda: _loaded(proc, "numpy"), proc)
+    time.sleep(delay_s)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    if proc.returncode == 0:  # the map was done first
+        assert "Traceback" not in err and json.loads((out / ".gslam-result.json").read_text())["command"] == "map"
+        return
+    assert proc.returncode == 130 and _said(err) == "gslam: interrupted\n", (proc.returncode, err)
+    assert not _temps(tmp_path) and (not out.exists() or (out / ".gslam-result.json").is_file())
+
+
+def test_ctrl_c_inside_code_run_by_exec_keeps_the_exit_code(tmp_path: Path):
+    """A KeyboardInterrupt that went through ``exec`` (a namedtuple's, an
+    import's) made CPython end a ``python -m`` process by SIGINT, though it
+    was caught and the code 130 returned."""
+    (tmp_path / "stopped.py").write_text(
+        "import signal, sys\n"
+        "from slam.processes.signals import as_interrupt\n"
+        "try:\n"
+        "    with as_interrupt([]):\n"
+        "        exec('import signal; signal.raise_signal(signal.SIGINT); sum(range(10))')\n"
+        "except KeyboardInterrupt:\n"
+        "    sys.exit(130)\n")
+    done = subprocess.run([sys.executable, "-m", "stopped"], cwd=tmp_path, capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{REPO}"})
+    assert done.returncode == 130, (done.returncode, done.stderr)
+
+
+def test_ctrl_c_swallowed_by_a_callback_comes_again(capsys):
+    """Ctrl-C landing in code Python cannot raise from (a callback from C,
+    here a destructor) was printed as "Exception ignored ... Traceback" and
+    lost: the command ran on to its end."""
+
+    class Cut:
+        def __del__(self):
+            signal.raise_signal(signal.SIGINT)
+            sum(range(10))  # Python code: where the handler runs
+
+    received: list[int] = []
+    start = time.monotonic()
+    with pytest.raises(Terminated), as_interrupt(received):
+        Cut()
+        time.sleep(10)
+    assert time.monotonic() - start < 5 and received[0] == signal.SIGINT
+    assert "Traceback" not in capsys.readouterr().err
