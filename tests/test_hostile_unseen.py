@@ -301,3 +301,33 @@ def test_ctrl_c_swallowed_by_a_callback_comes_again(capsys):
         time.sleep(10)
     assert time.monotonic() - start < 5 and received[0] == signal.SIGINT
     assert "Traceback" not in capsys.readouterr().err
+
+
+# --- the environment numba reads ------------------------------------------------------
+
+
+def _map_with(world: World, tmp_path: Path, **settings: str) -> subprocess.CompletedProcess:
+    """``gslam map`` of ``world``'s run into ``tmp_path/o`` as a process (numba
+    reads its environment once, when it is imported), with ``settings``."""
+    return subprocess.run([sys.executable, "-m", "slam.cli", "-q", "map", str(world.run), "--config",
+                           str(TELEMAX_CONFIG), *QUICK, "--out", str(tmp_path / "o")], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120,
+                          env={**os.environ, **settings, "PYTHONPATH": str(REPO)})
+
+
+@pytest.mark.parametrize("threads", ["abc", "0", "-3", "1.5", ""])
+def test_a_numba_thread_count_that_is_none_is_one_line(threads: str, world: World, tmp_path: Path):
+    """NUMBA_NUM_THREADS=abc: numba's warning quoted a whole traceback; 0
+    or below: numba's import ended gslam with a traceback."""
+    done = _map_with(world, tmp_path, NUMBA_NUM_THREADS=threads)
+    check_error_output(done.returncode, done.stderr, Case(
+        "numba-threads", (), f"environment variable NUMBA_NUM_THREADS={threads!r}: expected a positive whole number"))
+    assert done.returncode == 1 and not (tmp_path / "o").exists()
+
+
+def test_a_numba_setting_numba_cannot_read_is_one_warning_line(world: World, tmp_path: Path):
+    done = _map_with(world, tmp_path, NUMBA_OPT="fast", NUMBA_NUM_THREADS="2")
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
+    said = [line for line in done.stderr.splitlines() if "NUMBA_OPT" in line]
+    assert len(said) == 1 and "NUMBA_OPT='fast': numba cannot read it" in said[0], done.stderr
+    assert (tmp_path / "o" / ".gslam-result.json").is_file()

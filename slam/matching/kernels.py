@@ -21,8 +21,11 @@ neither can be written, each process compiles once (about 3 s) instead.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from slam.matching.jit import import_numba
+
+numba = import_numba()
 
 SCALE = 1.0 / 255
 """A level's value in 255ths to a field value (:data:`slam.matching.grid.LEVELS`)."""
