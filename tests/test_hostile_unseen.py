@@ -121,6 +121,18 @@ def scenario_text(old: str, new: str) -> Callable[[Path, World], None]:
     return make
 
 
+def robotlaser_max_range(value: str, scan: int) -> Callable[[Path, World], None]:
+    """The CARMEN log of ROBOTLASER1 lines (max_range 50) whose line of
+    scan ``scan`` gives ``value`` as its max_range."""
+
+    def encoded(log: str) -> bytes:
+        head, *scans = log.split("ROBOTLASER1 ")
+        scans[scan] = scans[scan].replace(" 50 0.01 0 181 ", f" {value} 0.01 0 181 ", 1)
+        return "ROBOTLASER1 ".join([head, *scans]).encode()
+
+    return carmen(robotlaser=(-1.5707963, 3.1415927, 0.0174533), encoding=encoded)
+
+
 def _every_topic_before_1970(b) -> None:
     for topic in {t for (_, _, t, _, _) in b._messages}:
         restamp(topic, lambda k: -1.8e9)(b)
@@ -160,6 +172,14 @@ ERRORS = [
     *(Case(f"carmen-param-laser-max-{name}", CARMEN, f"c.log:1: PARAM robot_front_laser_max {value}: expected the "
            "laser's maximum range in metres", carmen(head=f"PARAM robot_front_laser_max {value}"))
       for name, value in (("nan", "nan"), ("NaN", "NaN"), ("minus-nan", "-nan"))),
+    # -- a CARMEN range limit of 0 or below: every scan left out with a warning --
+    *(Case(f"carmen-param-laser-max-{name}", CARMEN, f"c.log:1: PARAM robot_front_laser_max {value}: expected the "
+           "laser's maximum range in metres, above 0", carmen(head=f"PARAM robot_front_laser_max {value}"))
+      for name, value in (("zero", "0"), ("minus-zero", "-0.0"), ("negative", "-30"), ("minus-inf", "-inf"))),
+    Case("carmen-robotlaser-max-range-zero", CARMEN, "c.log:1: ROBOTLASER1 max_range 0: expected the laser's maximum "
+         "range in metres, above 0", robotlaser_max_range("0", scan=0)),
+    Case("carmen-robotlaser-max-range-negative-later", CARMEN, "c.log:7: ROBOTLASER1 max_range -50: expected",
+         robotlaser_max_range("-50", scan=2)),
     # -- kinds already answered in one line, kept so that none regresses --
     Case("carmen-gz-corrupted-mid-stream", GZ, "c.log.gz: not a valid gzip file", gzipped_carmen(_flipped_mid_stream)),
     Case("carmen-gz-wrong-crc", GZ, "c.log.gz: not a valid gzip file (CRC check failed",

@@ -24,7 +24,8 @@ What becomes of them:
   the log (1 % less), because these logs encode "no return" as the
   scanner's saturation value (81.91, 81.83, 50.0, 51.1 or 32.767 m
   depending on the log), and the front-end drops beams at or beyond
-  ``range_max``.
+  ``range_max``. A range limit no laser has (NaN, 0 or below, in the
+  PARAM or a ROBOTLASER1 line) is an error naming the line.
 * **Reference.** In "corrected" logs the pose on a scan line is the
   SLAM-corrected laser pose: it becomes ``Recording.groundtruth`` (a good
   SLAM result, not an independent ground truth).
@@ -58,6 +59,7 @@ from __future__ import annotations
 
 import gzip
 import logging
+import math
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -248,6 +250,7 @@ def _parse_robotlaser(d: _Log, parts: list[str], where: str) -> None:
         raise GslamError(f"{where}: expected {_ROBOTLASER1} ({tail + 14} fields, got {len(parts)})"
                          + _more(parts, tail + 14, "n or m"))
     start, _fov, res, max_range, _accuracy = head
+    _check_range_limit(parts[5], where, "ROBOTLASER1 max_range")
     angles = start + res * np.arange(n)
     _add_scan(d, where, ranges, angles, (rest[0], rest[1], rest[2]), rest[11], float(max_range))
 
@@ -259,6 +262,19 @@ def _parse_odom(d: _Log, parts: list[str], where: str) -> None:
     if d.poses:
         d.last_odom[-1] = (x, y, theta)
         d.raw_readings[-1] += 1
+
+
+def _check_range_limit(given: str, where: str, name: str) -> None:
+    """A laser's range limit no laser has (NaN, 0 or below) is an error, as
+    a LaserScan's is: it left every scan out as "returns nothing". Text
+    that is no number is left to :func:`_range_max`, which ignores it."""
+    try:
+        limit = float(given)
+    except ValueError:
+        return
+    if math.isnan(limit) or (plain(given) and limit <= 0.0):
+        raise GslamError(f"{where}: {name} {given}: expected the laser's maximum range in metres, above 0 "
+                         "(inf: no limit)")
 
 
 def _parse(path: Path) -> _Log:
@@ -277,10 +293,8 @@ def _parse(path: Path) -> _Log:
         elif kind == "PARAM":
             if len(parts) < 3:
                 raise GslamError(f"{where}: expected PARAM name value ...")
-            if parts[1] == "robot_front_laser_max" and parts[2].lower().lstrip("+-") == "nan":
-                # as a LaserScan's range_max NaN: no limit is inf; NaN dropped every scan as "returns nothing"
-                raise GslamError(f"{where}: PARAM robot_front_laser_max {parts[2]}: expected the laser's maximum "
-                                 "range in metres (inf: no limit)")
+            if parts[1] == "robot_front_laser_max":
+                _check_range_limit(parts[2], where, "PARAM robot_front_laser_max")
             d.params[parts[1]] = parts[2]
     return d
 
