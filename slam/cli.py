@@ -325,7 +325,22 @@ def _out_path(text: str) -> str:
     if text == "-":  # the shell's word for standard output, which gslam writes no result to
         raise argparse.ArgumentTypeError("'-' would be a file or folder named '-', not standard output, which gslam "
                                          "writes no result to; give a path (./- for one named '-')")
+    if text.startswith("~"):
+        return _home_expanded(text)
     return text
+
+
+def _home_expanded(text: str) -> str:
+    """An output path starting with '~' as the shell would have written it
+    had it expanded it (``--out=~/runs/x``, a quoted path: not expanded),
+    where a folder named '~' beside the user's would be made instead; one
+    of a user the shell does not know (which it leaves as it is) refused."""
+    expanded = os.path.expanduser(text)
+    if expanded.startswith("~"):
+        user = text.split("/", 1)[0]
+        raise argparse.ArgumentTypeError(f"'{text}': cannot expand '{user}' (no such user or no home folder); give "
+                                         f"the folder spelled out (./{text} for one named '{user}')")
+    return expanded
 
 
 class _Once(argparse.Action):

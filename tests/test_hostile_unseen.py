@@ -41,7 +41,7 @@ from slam.errors import Terminated
 from slam.processes.signals import as_interrupt
 from tests.conftest import CONFIGS, REPO, TELEMAX_CONFIG
 from tests.test_fuzz import (  # noqa: F401 - world is a fixture
-    Case, World, broad_mat, check_error_output, data, scenario, set_in, text, world,
+    Case, World, broad_mat, check_error_output, data, expand, scenario, set_in, text, world,
 )
 from tests.test_hostile import (
     BAG, CARMEN, MAP, QUICK, _gslam, _run, _said, _temps, _wait_for, bag, carmen, librsf_with, map_beside_a_file,
@@ -180,6 +180,19 @@ ERRORS = [
          "range in metres, above 0", robotlaser_max_range("0", scan=0)),
     Case("carmen-robotlaser-max-range-negative-later", CARMEN, "c.log:7: ROBOTLASER1 max_range -50: expected",
          robotlaser_max_range("-50", scan=2)),
+    # -- an output path of a user that does not exist: a folder '~nouser' made in the working folder --
+    *(Case(f"{name}-out-of-no-user", (*argv, flag, "~gslam-no-such-user/o"), f"argument {flag}: "
+           "'~gslam-no-such-user/o': cannot expand '~gslam-no-such-user' (no such user or no home folder)", code=2)
+      for name, argv, flag in (
+          ("map", (*MAP, *QUICK), "--out"),
+          ("simulate", ("simulate", "{scen}"), "--out"),
+          ("compare", ("compare", "{run}", "--config", "{cfg}", "--only", "ungated"), "--out"),
+          ("inject", ("inject", "{run}", "--fault", "gyro_bias@2:4"), "--out"),
+          ("ablate", ("ablate", "{spec}"), "--out"),
+          ("calibrate", ("calibrate", "{run}", "--config", "{cfg}"), "--out"),
+          ("demo", ("demo",), "--out"),
+          ("inspect", ("inspect", "{run}"), "--config-out"),
+      )),
     # -- kinds already answered in one line, kept so that none regresses --
     Case("carmen-gz-corrupted-mid-stream", GZ, "c.log.gz: not a valid gzip file", gzipped_carmen(_flipped_mid_stream)),
     Case("carmen-gz-wrong-crc", GZ, "c.log.gz: not a valid gzip file (CRC check failed",
@@ -351,3 +364,17 @@ def test_a_numba_setting_numba_cannot_read_is_one_warning_line(world: World, tmp
     said = [line for line in done.stderr.splitlines() if "NUMBA_OPT" in line]
     assert len(said) == 1 and "NUMBA_OPT='fast': numba cannot read it" in said[0], done.stderr
     assert (tmp_path / "o" / ".gslam-result.json").is_file()
+
+
+@pytest.mark.parametrize("command", ["map", "calibrate"])
+def test_an_out_the_shell_left_with_its_tilde_is_in_the_home_folder(command: str, world: World, tmp_path: Path,
+                                                                     capsys, monkeypatch):
+    """``--out=~/o`` (the shell expands no '~' after '='): a folder named '~'
+    was made in the working folder, beside the user's home."""
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "home").mkdir()
+    argv = {"map": [*MAP, *QUICK, "--out=~/o"], "calibrate": ["calibrate", "{run}", "--config", "{cfg}", "--out=~/o"]}
+    code, err, _ = _run(expand(tuple(argv[command]), tmp_path, world), capsys)
+    assert code == 0, err[-800:]
+    assert [p.name for p in tmp_path.iterdir()] == ["home"] and (tmp_path / "home" / "o").exists()
