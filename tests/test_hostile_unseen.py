@@ -193,6 +193,16 @@ ERRORS = [
           ("demo", ("demo",), "--out"),
           ("inspect", ("inspect", "{run}"), "--config-out"),
       )),
+    # -- null for the observers' section: every observer reset to its default in silence --
+    *(Case(f"set-observers-{name}", set_(f"validation.observers={value}"), f"--set validation.observers={value}: "
+           "validation.observers: expected a mapping of the observers' settings, got null")
+      for name, value in (("null", "null"), ("tilde", "~"), ("empty", ""))),
+    Case("set-observers-a-list", set_("validation.observers=[1]"), "validation.observers: expected a mapping of the "
+         "observers' settings, got a list"),
+    Case("config-observers-empty", CONFIG, "c.yaml: validation.observers: expected a mapping of the observers' "
+         "settings, got null", text("c.yaml", "validation:\n  observers:\n")),
+    Case("variant-observers-null", VARIANTS, "validation.observers: expected a mapping",
+         text("v.yaml", "a: {validation.observers: null}\n")),
     # -- kinds already answered in one line, kept so that none regresses --
     Case("carmen-gz-corrupted-mid-stream", GZ, "c.log.gz: not a valid gzip file", gzipped_carmen(_flipped_mid_stream)),
     Case("carmen-gz-wrong-crc", GZ, "c.log.gz: not a valid gzip file (CRC check failed",

@@ -38,7 +38,7 @@ from validation.observers.config import ObserversConfig, observers_config
 from validation.trends import Window
 from validation.base import bounds
 from validation.base.modes import GatingMode
-from validation.base.yamlio import StrictFrozen, load_yaml, validate_mapping
+from validation.base.yamlio import StrictFrozen, load_yaml, validate_mapping, yaml_kind
 
 Pass = Literal["offline", "causal"]
 
@@ -90,7 +90,13 @@ def inline_model(section: dict[str, Any], base_dir: Path) -> Path | None:
 def parse_sections(validation: Mapping[str, Any], gating: Mapping[str, Any]) -> tuple[ValidationConfig, GatingConfig]:
     """Validate both sections; one-line ValidationError naming the key."""
     data = dict(validation)
-    observers = observers_config(data.pop("observers", {}) or {}, "validation.observers", section=True)
+    observers = data.pop("observers", {})
+    if not isinstance(observers, Mapping):  # null too: it is not "every default"
+        from validation.base.errors import ValidationError
+
+        raise ValidationError(f"validation.observers: expected a mapping of the observers' settings, got "
+                              f"{yaml_kind(observers)}")
+    observers = observers_config(observers, "validation.observers", section=True)
     cfg = validate_mapping(ValidationConfig, data, "validation", section=True)
     cfg = cfg.model_copy(update={"observers": observers})
     gate = GatingConfig.from_mapping(dict(gating), "gating", section=True)
