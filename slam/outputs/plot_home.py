@@ -55,7 +55,20 @@ def _defaults_usable() -> bool:
 def plot_home() -> Iterator[None]:
     """While the command runs (and its worker processes, which inherit the
     environment), matplotlib's folders are the user's if they can be, else
-    a temporary folder removed at the end."""
+    a temporary folder removed at the end; and ``MPLBACKEND`` is unset:
+    gslam draws its figures into files, never in a window, and a backend
+    matplotlib does not know (a typo) ended its import with a traceback."""
+    backend = os.environ.pop("MPLBACKEND", None)
+    try:
+        with _settings_folder():
+            yield
+    finally:
+        if backend is not None:
+            os.environ["MPLBACKEND"] = backend
+
+
+@contextmanager
+def _settings_folder() -> Iterator[None]:
     given = os.environ.get("MPLCONFIGDIR")
     if (_can_make(Path(given)) if given else _defaults_usable()):
         yield
