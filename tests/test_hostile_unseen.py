@@ -13,12 +13,27 @@ tests/test_hostile_commands.py) did not hold, run by their runners:
   warning where a LaserScan's NaN range_max is an error;
 * an ``MPLCONFIGDIR`` that is a file: matplotlib's two warning lines and a
   folder of its own left in the temporary folder;
+* Ctrl-C while a command starts: the process ended by SIGINT after saying
+  "interrupted", or its teardown crashed, or a callback from numba's
+  compiler swallowed it (a traceback, and the map ran on);
+* the environment of the libraries: ``NUMBA_NUM_THREADS=abc`` (a warning
+  quoting a traceback) or ``0`` (a traceback), ``MPLBACKEND=bogus`` (two);
+* a CARMEN range limit of 0 or below (every scan left out with a warning);
+* ``--out ~nouser/o`` and ``--out=~/o``: a folder named '~...' made in the
+  working folder;
+* ``validation.observers: null`` (every observer reset to its default);
+* a YAML input named as another kind (``cannot read config`` for a
+  variants file or a spec, ``found a int``);
 
 and, kept so that none regresses, kinds already answered in one line: a
 gzip'd log corrupted or cut inside its stream, a ROS 1 bag whose index
 points past its end or into a chunk, BROAD fields of disagreeing lengths or
 MATLAB v7.3, libRSF stamps given twice or swapped, YAML keys and values of
-odd types and tags, ``--set`` values in YAML syntax.
+odd types and tags, ``--set`` values in YAML syntax, sections of the wrong
+type deep in a config, a spec or a variants file, a YAML 2.0 directive,
+and an odd environment of the libraries (``PYTHONWARNINGS=error``, a
+``TMPDIR`` or ``NUMBA_CACHE_DIR`` that is no folder, an unknown locale,
+nonsense BLAS thread counts).
 """
 
 from __future__ import annotations
@@ -203,7 +218,40 @@ ERRORS = [
          "settings, got null", text("c.yaml", "validation:\n  observers:\n")),
     Case("variant-observers-null", VARIANTS, "validation.observers: expected a mapping",
          text("v.yaml", "a: {validation.observers: null}\n")),
+    # -- a YAML input that is no mapping, or not a file, named as another kind ("found a int", "cannot read config") --
+    Case("config-top-level-a-number", CONFIG, "c.yaml: expected a YAML mapping of keys at the top level, found a "
+         "number", text("c.yaml", "5\n")),
+    Case("config-top-level-text", CONFIG, "c.yaml: expected a YAML mapping of keys at the top level, found text",
+         text("c.yaml", "backend\n")),
+    Case("variants-a-folder", VARIANTS, "v.yaml: cannot read variants file (a folder; expected a file)",
+         lambda d, w: (d / "v.yaml").mkdir()),
+    Case("spec-a-folder", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "spec.yaml: cannot read ablation spec (a "
+         "folder; expected a file)", lambda d, w: (d / "spec.yaml").mkdir()),
+    Case("variants-utf16", VARIANTS, "v.yaml: UTF-16 text; expected a YAML variants file in UTF-8",
+         data("v.yaml", "a: {validation.mode: 'off'}\n".encode("utf-16"))),
+    Case("spec-utf16", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "spec.yaml: UTF-16 text; expected a YAML "
+         "ablation spec in UTF-8", data("spec.yaml", "name: x\n".encode("utf-16"))),
     # -- kinds already answered in one line, kept so that none regresses --
+    Case("config-yaml-2.0-directive", CONFIG, "c.yaml: line 1: invalid YAML (found incompatible YAML document)",
+         text("c.yaml", "%YAML 2.0\n---\nbackend: {}\n")),
+    Case("config-factor-a-number", CONFIG, "c.yaml: backend.factors.odometry: Input should be a valid dictionary",
+         text("c.yaml", "backend: {factors: {odometry: 5}}\n")),
+    Case("config-topics-a-list", CONFIG, "c.yaml: input.topics: Input should be a valid dictionary",
+         text("c.yaml", "input: {topics: [/scan, /imu]}\n")),
+    Case("config-loops-enabled-a-word", CONFIG, "c.yaml: loops.enabled: Input should be a valid boolean",
+         text("c.yaml", "loops: {enabled: maybe}\n")),
+    Case("config-voxel-size-a-list", CONFIG, "c.yaml: frontend.voxel_size_m: Input should be a valid number",
+         text("c.yaml", "frontend: {voxel_size_m: [0.1]}\n")),
+    Case("spec-variants-a-list", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "spec.yaml: variants: Input should be a valid dictionary", spec_text("variants: [a, b]\n")),
+    Case("spec-variant-null", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"),
+         "spec.yaml: variants.a: Input should be a valid dictionary", spec_text("variants: {a: null}\n")),
+    Case("variants-variant-null", VARIANTS, "v.yaml: variant 'a': expected a mapping of dotted.key: value",
+         text("v.yaml", "a: null\n")),
+    Case("set-value-starting-with-an-equals-sign", set_("backend.max_iterations==5"),
+         "--set backend.max_iterations==5: backend.max_iterations: Input should be a valid integer"),
+    Case("set-binary-tag", set_("backend.max_iterations=!!binary AAAA"),
+         "--set backend.max_iterations=!!binary AAAA: backend.max_iterations: Input should be a valid integer"),
     Case("carmen-gz-corrupted-mid-stream", GZ, "c.log.gz: not a valid gzip file", gzipped_carmen(_flipped_mid_stream)),
     Case("carmen-gz-wrong-crc", GZ, "c.log.gz: not a valid gzip file (CRC check failed",
          gzipped_carmen(lambda gz, log: gz[:-8] + bytes([gz[-8] ^ 1]) + gz[-7:])),
@@ -388,3 +436,32 @@ def test_an_out_the_shell_left_with_its_tilde_is_in_the_home_folder(command: str
     code, err, _ = _run(expand(tuple(argv[command]), tmp_path, world), capsys)
     assert code == 0, err[-800:]
     assert [p.name for p in tmp_path.iterdir()] == ["home"] and (tmp_path / "home" / "o").exists()
+
+
+
+# --- the environment of the libraries gslam loads ----------------------------------------
+
+
+@pytest.mark.parametrize("backend", ["bogus", "TkAgg"])
+def test_a_matplotlib_backend_in_the_environment_is_left_aside(backend: str, world: World, tmp_path: Path):
+    """MPLBACKEND=bogus ended matplotlib's import, and the map, with two
+    tracebacks; gslam draws into files, whatever the backend (TkAgg
+    without a display)."""
+    map_beside_a_file(world, tmp_path, MPLBACKEND=backend, DISPLAY="")
+    assert (tmp_path / "o" / "trajectory.png").is_file()
+
+
+@pytest.mark.parametrize("setting", [
+    {"PYTHONWARNINGS": "error"},  # every Python warning an exception
+    {"TMPDIR": "/nonexistent/tmp"},
+    {"TMPDIR": "/etc/hostname"},  # a file
+    {"NUMBA_CACHE_DIR": "/etc/hostname"},
+    {"LC_ALL": "xx_YY.bogus"},
+    {"OMP_NUM_THREADS": "abc", "OPENBLAS_NUM_THREADS": "0"},
+], ids=["pythonwarnings-error", "tmpdir-missing", "tmpdir-a-file", "numba-cache-a-file", "locale-unknown",
+        "blas-threads-nonsense"])
+def test_an_odd_environment_of_the_libraries_still_maps_without_a_traceback(setting: dict[str, str], world: World,
+                                                                             tmp_path: Path):
+    done = _map_with(world, tmp_path, **setting)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr[-800:]
+    assert json.loads((tmp_path / "o" / ".gslam-result.json").read_text())["command"] == "map"

@@ -106,7 +106,7 @@ def _csv_keys() -> list[str]:
 
 def load_variants(path: str | Path, only: list[str] | None = None) -> dict[str, list[str]]:
     """Variants from YAML: name -> mapping of dotted overrides."""
-    data = load_yaml(path, "config")
+    data = load_yaml(path, "variants file")
     variants: dict[str, list[str]] = {}
     folded: dict[str, str] = {}
     reserved = {f.casefold() for f in COMPARE_FILES}

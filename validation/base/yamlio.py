@@ -249,7 +249,7 @@ def load_yaml(path: str | Path, what: str = "YAML file") -> dict[str, Any]:
     if data is None:
         return {}
     if not isinstance(data, dict):
-        raise ValidationError(f"{path}: expected a YAML mapping of keys at the top level, found a {type(data).__name__}")
+        raise ValidationError(f"{path}: expected a YAML mapping of keys at the top level, found {yaml_kind(data)}")
     return data
 
 
@@ -261,6 +261,8 @@ def yaml_kind(value: Any) -> str:
         return "null (as it reads ~, null and an empty key)"
     if isinstance(value, (int, float)):
         return "a number"
+    if isinstance(value, str):
+        return "text"
     return f"a {type(value).__name__}"
 
 

@@ -393,7 +393,7 @@ def load_spec(path: str | Path, max_seeds: int | None = None, max_jobs: int | No
     any is listed. Bad input raises :class:`GslamError` naming the file and
     the key."""
     path = Path(path)
-    tree = load_yaml(path, "config")
+    tree = load_yaml(path, "ablation spec")
     try:
         spec = AblationSpec.model_validate(tree)
     except ValidationError as e:
