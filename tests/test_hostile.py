@@ -1172,9 +1172,9 @@ ERRORS: list[Case] = [
       for name, argv, file, says in (
           ("config", (*MAP[:2], "--config", "{d}/c.yaml", "--out", "{d}/o"), "c.yaml", " config (Input/output error)"),
           ("scenario", ("simulate", "{d}/s.yaml", "--out", "{d}/o"), "s.yaml", " scenario (Input/output error)"),
-          ("spec", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "spec.yaml", " config (Input/output error)"),
+          ("spec", ("ablate", "{d}/spec.yaml", "--out", "{d}/o"), "spec.yaml", " ablation spec (Input/output error)"),
           ("variants", ("compare", "{run}", "--config", "{cfg}", "--variants", "{d}/v.yaml", "--out", "{d}/o"), "v.yaml",
-           " config (Input/output error)"),
+           " variants file (Input/output error)"),
           ("carmen-log", CARMEN, "c.log", " (Input/output error)"),
           ("librsf-log", LIBRSF, "X_Input.txt", " (Input/output error)"),
           ("ros1-bag", ("map", "{d}/r.bag", "--config", "{cfg}", "--out", "{d}/o"), "r.bag", " (Input/output error)"),
