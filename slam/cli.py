@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import gc
 import codecs
 import json
 import logging
@@ -738,6 +739,7 @@ def run() -> None:
     if code in INTERRUPTED:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         atexit._run_exitfuncs()
+        gc.collect()  # what only its collection cleans up (a pool's semaphores), as a normal exit would
     logging.shutdown()
     for stream in (sys.stdout, sys.stderr):
         try:
