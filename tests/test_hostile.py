@@ -1695,11 +1695,11 @@ ERRORS: list[Case] = [
          both(librsf_with("loop 9.0 1.0 1"), _rewritten("X_Input.txt", lambda b: b.replace(b"\nodom2", b"\n\0odom2", 1)))),
     Case("carmen-unicode-minus", CARMEN, "c.log:3: expected ODOM x y theta tv rv accel ts host logger_ts",
          carmen(encoding=lambda s: s.replace("ODOM 0.100 0", "ODOM \u22120.100 0", 1).encode())),
-    Case("carmen-a-line-of-30-million-values", CARMEN, "c.log:121: expected FLASER n r_1..r_n x y theta odom_x odom_y "
-         "odom_theta ts host logger_ts (14 fields, got 30000002)",
+    Case("carmen-a-line-of-30-million-values", CARMEN, "c.log:121: a line of over 1 MB; no CARMEN text log record is "
+         "that long",
          both(carmen(), _rewritten("c.log", lambda b: b + b"FLASER 3 " + b"1 " * 30_000_000 + b"\n"))),
-    Case("librsf-a-line-of-30-million-values", LIBRSF, "X_Input.txt:102: expected odom2 t vx vy wz var_vx var_vy var_wz "
-         "(7 values, got 30000000)",
+    Case("librsf-a-line-of-30-million-values", LIBRSF, "X_Input.txt:102: a line of over 1 MB; no libRSF text file "
+         "record is that long",
          both(librsf_with("loop 9.0 1.0 1"), _rewritten("X_Input.txt", lambda b: b + b"odom2 " + b"1 " * 30_000_000 + b"\n"))),
     Case("map-input-a-dash", ("map", "-", "--config", "{cfg}", "--out", "{d}/o"), "-: no such file or directory"),
     Case("map-config-a-dash", ("map", "{run}", "--config", "-", "--out", "{d}/o"), "-: cannot read config (No such file"),

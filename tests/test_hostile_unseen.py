@@ -465,3 +465,57 @@ def test_an_odd_environment_of_the_libraries_still_maps_without_a_traceback(sett
     done = _map_with(world, tmp_path, **setting)
     assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr[-800:]
     assert json.loads((tmp_path / "o" / ".gslam-result.json").read_text())["command"] == "map"
+
+
+# --- text logs read a megabyte at a time ----------------------------------------------
+
+
+JUNK_LINE_BYTES = 64 << 20
+"""A line no record is (a damaged or foreign file): read whole, it took
+three times its size in memory before anything looked at it."""
+
+
+def _with_a_junk_line(name: str, make: Callable[[Path, World], None], d: Path, world: World) -> Path:
+    """The log ``make`` writes at ``d/name`` followed by one line of
+    :data:`JUNK_LINE_BYTES` digits; gzip'd where ``name`` ends in ``.gz``."""
+    make(d, world)
+    plain_name = name.removesuffix(".gz")
+    body = (d / plain_name).read_bytes() + b"7" * JUNK_LINE_BYTES + b"\n"
+    (d / plain_name).unlink()
+    (d / name).write_bytes(gzip.compress(body, compresslevel=1) if name.endswith(".gz") else body)
+    return d / name
+
+
+@pytest.mark.parametrize("name,config", [("c.log", "carmen.yaml"), ("c.log.gz", "carmen.yaml"),
+                                         ("X_Input.txt", "librsf_corridor.yaml")])
+def test_a_line_no_record_is_refused_at_its_number_without_taking_its_size_in_memory(
+        name: str, config: str, world: World, tmp_path: Path):
+    make = carmen() if name.startswith("c.log") else librsf_with("loop 9.0 1.0 1")
+    path = _with_a_junk_line(name, make, tmp_path, world)
+    lines = sum(1 for _ in (gzip.open if name.endswith(".gz") else open)(path, "rb"))
+    # VmHWM, not ru_maxrss: Linux carries ru_maxrss over from the forking test process.
+    probe = ("import sys\nfrom slam.cli import main\n"
+             f"code = main(['-q', 'map', {str(path)!r}, '--config', {str(CONFIGS / 'datasets' / config)!r}, "
+             f"'--out', {str(tmp_path / 'o')!r}])\n"
+             "peak = [l for l in open('/proc/self/status') if l.startswith('VmHWM')][0].split()[1]\n"
+             "print('peak_kb', peak, file=sys.stderr)\n"
+             "sys.exit(code)\n")
+    proc = subprocess.run([sys.executable, "-c", probe], cwd=REPO, capture_output=True, text=True, timeout=120)
+    said = [line for line in proc.stderr.splitlines() if not line.startswith("peak_kb")]
+    assert proc.returncode == 1 and said == [f"gslam: error: {path}:{lines}: a line of over 1 MB; no "
+                                             f"{'CARMEN text log' if name.startswith('c.') else 'libRSF text file'} "
+                                             "record is that long (a damaged or foreign file?)"], proc.stderr
+    peak_mb = int(proc.stderr.split("peak_kb ")[1].split()[0]) / 1024
+    assert peak_mb < JUNK_LINE_BYTES / (1 << 20) + 100, proc.stderr  # the interpreter and libraries; not the line
+
+
+def _nul_beyond_the_first_megabyte(d: Path, world: World) -> None:
+    carmen()(d, world)
+    log = d / "c.log"
+    log.write_bytes(log.read_bytes() + (b"# " + b"x" * 62 + b"\n") * (2 << 20 >> 6) + b"ODOM 1 2 \0 3\n")
+
+
+def test_a_nul_byte_beyond_the_first_megabyte_is_still_binary_content(world: World, tmp_path: Path, capsys):
+    run_error(Case("carmen-nul-beyond-the-first-megabyte", CARMEN,
+                   "c.log: cannot read: not a CARMEN text log (binary content)", _nul_beyond_the_first_megabyte),
+              world, tmp_path, capsys)

@@ -57,11 +57,9 @@ field.
 
 from __future__ import annotations
 
-import gzip
 import logging
 import math
-import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -71,7 +69,7 @@ from slam.config import InputConfig
 from slam.errors import GslamError
 from validation.base.geometry import wrap_angle
 from slam.readers.data_checks import MAX_RANGE_M
-from slam.readers.files import NOT_PLAIN, SNIFF_BYTES, decode_log, plain, sniff_log, unplain_number
+from slam.readers.files import NOT_PLAIN, log_lines, plain, unplain_number
 from validation.base.yamlio import check_regular_file
 from slam.recording import relative_poses
 from slam.recording import Recording, Scans, Trajectory
@@ -115,24 +113,9 @@ class _Log:
     range_max: float | None = None
 
 
-def _open_lines(path: Path) -> list[str]:
+def _open_lines(path: Path) -> Iterator[str]:
     check_regular_file(path, "CARMEN log")
-    try:
-        opener = gzip.open if path.name.lower().endswith(".gz") else open
-        with opener(path, "rb") as f:
-            head = f.read(SNIFF_BYTES)
-            sniff_log(head, path, "CARMEN text log")
-            data = head + f.read()
-    except FileNotFoundError:
-        raise GslamError(f"{path}: no such file") from None
-    except EOFError:
-        raise GslamError(f"{path}: truncated gzip file: it ends before its end-of-stream marker "
-                         "(an incomplete download or copy?)") from None
-    except (gzip.BadGzipFile, zlib.error) as e:
-        raise GslamError(f"{path}: not a valid gzip file ({e})") from None
-    except OSError as e:
-        raise GslamError(f"{path}: cannot read ({e.strerror or e})") from None
-    return decode_log(data, path, "CARMEN text log").splitlines()
+    return log_lines(path, "CARMEN text log")
 
 
 def _floats(parts: list[str], where: str, expected: str, names: Callable[[int], str]) -> np.ndarray:

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import codecs
 import errno
+import gzip
 import logging
 import os
 import re
+import zlib
+from collections.abc import Iterator
 from pathlib import Path
 
 from slam.errors import GslamError
@@ -17,8 +21,16 @@ SNIFF_BYTES = 1 << 20
 """How much of a text log is looked at before the whole is read: a binary
 file (a disk image, a sparse file of zeros) is refused on its first
 megabyte, not after gigabytes are in memory."""
+MAX_LINE_BYTES = 1 << 20
+"""The longest line a text log may hold. The longest line of the nine
+CARMEN logs in the data folder has 2,144 characters (freiburg-101), of the
+libRSF files 126; a laser line of a few thousand beams with their
+remissions stays within tens of kB. A line of megabytes is not a record
+but a damaged or foreign file, and reading it would only take memory."""
 BOM = "\ufeff"
 _NOT_UTF8 = re.compile("[\udc80-\udcff]")
+_LINE_ENDS = "\r\n\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"
+"""What ``str.splitlines`` ends a line at."""
 
 
 NOT_PLAIN = "not a plain number (ASCII digits, no '_')"
@@ -78,6 +90,68 @@ def decode_log(data: bytes, source: str | Path, what: str) -> str:
                     f", and {marks - 1} more after it" if marks > 1 else "")
         text = text.replace(BOM, "")
     return text
+
+
+def log_lines(path: Path, what: str) -> Iterator[str]:
+    """The lines of the text log ``path`` (gzip'd where its name ends in
+    ``.gz``), read a megabyte at a time rather than whole, checked and
+    decoded as :func:`decode_log` does the whole text, and split as
+    ``str.splitlines`` splits it; a line over :data:`MAX_LINE_BYTES` is
+    refused at its number. A byte-order mark inside is warned about once
+    the log is read."""
+    opener = gzip.open if path.name.lower().endswith(".gz") else open
+    decoder = codecs.getincrementaldecoder("utf-8")(errors="surrogateescape")
+    pending, lineno, marks, first_mark = "", 0, 0, 0
+    try:
+        with opener(path, "rb") as f:
+            chunk = f.read(SNIFF_BYTES)
+            if chunk.startswith(b"\xef\xbb\xbf"):
+                chunk = chunk[3:]
+            wide = wide_encoding(chunk)
+            if wide is not None:
+                raise GslamError(f"{path}: cannot read: {wide} text; expected a {what} in ASCII or UTF-8 "
+                                 "(save it as UTF-8)")
+            while True:
+                text = decoder.decode(chunk)
+                if "\0" in text or len(_NOT_UTF8.findall(text)) > 0.1 * max(len(text), 1):
+                    raise GslamError(f"{path}: cannot read: not a {what} (binary content)")
+                lines = (pending + text).splitlines(keepends=True)
+                # The last piece may go on in the next chunk (a "\r" too, whose "\n" may follow).
+                pending = lines.pop() if lines and (not lines[-1].endswith(("\n", "\r")) or
+                                                    lines[-1].endswith("\r")) else ""
+                for line in lines:
+                    lineno += 1
+                    if BOM in line:
+                        marks += line.count(BOM)
+                        first_mark = first_mark or lineno
+                        line = line.replace(BOM, "")
+                    yield line.rstrip(_LINE_ENDS)
+                if len(pending) > MAX_LINE_BYTES:
+                    raise GslamError(f"{path}:{lineno + 1}: a line of over {MAX_LINE_BYTES >> 20} MB; no {what} "
+                                     "record is that long (a damaged or foreign file?)")
+                chunk = f.read(SNIFF_BYTES)
+                if not chunk:
+                    break
+            pending += decoder.decode(b"", final=True)
+    except FileNotFoundError:
+        raise GslamError(f"{path}: no such file") from None
+    except EOFError:
+        raise GslamError(f"{path}: truncated gzip file: it ends before its end-of-stream marker "
+                         "(an incomplete download or copy?)") from None
+    except (gzip.BadGzipFile, zlib.error) as e:
+        raise GslamError(f"{path}: not a valid gzip file ({e})") from None
+    except OSError as e:
+        raise GslamError(f"{path}: cannot read ({e.strerror or e})") from None
+    for line in pending.splitlines():
+        lineno += 1
+        if BOM in line:
+            marks += line.count(BOM)
+            first_mark = first_mark or lineno
+            line = line.replace(BOM, "")
+        yield line
+    if marks:
+        log.warning("%s:%d: a byte-order mark inside the %s (files joined?)%s; read past it", path, first_mark, what,
+                    f", and {marks - 1} more after it" if marks > 1 else "")
 
 
 def _text(data: bytes, source: str | Path, what: str) -> str:

@@ -40,7 +40,7 @@ from slam.errors import GslamError
 from validation.base.bounds import shown_beside
 from validation.base.geometry import wrap_angle
 from slam.readers.carmen import chain_steps
-from slam.readers.files import NOT_PLAIN, SNIFF_BYTES, check_exists, decode_log, sniff_log, unplain_number
+from slam.readers.files import NOT_PLAIN, check_exists, log_lines, unplain_number
 from validation.base.yamlio import check_regular_file
 from slam.recording import Gyro, PlaceMatches, Recording, Trajectory
 
@@ -100,14 +100,7 @@ def _read_rows(path: Path, wanted: dict[str, tuple[int, str]]) -> dict[str, np.n
     (number of numeric fields used, description for errors)."""
     rows: dict[str, list[list[float]]] = {kind: [] for kind in wanted}
     check_regular_file(path, "libRSF file")
-    try:
-        with open(path, "rb") as f:
-            head = f.read(SNIFF_BYTES)
-            sniff_log(head, path, "libRSF text file")
-            text = decode_log(head + f.read(), path, "libRSF text file")
-    except OSError as e:
-        raise GslamError(f"{path}: cannot read ({e.strerror or e})") from None
-    for lineno, line in enumerate(text.splitlines(), start=1):
+    for lineno, line in enumerate(log_lines(path, "libRSF text file"), start=1):
         parts = line.split()
         if not parts or parts[0] not in wanted:
             continue
