@@ -18,9 +18,9 @@ from validation.base.yamlio import wide_encoding
 log = logging.getLogger(__name__)
 
 SNIFF_BYTES = 1 << 20
-"""How much of a text log is looked at before the whole is read: a binary
-file (a disk image, a sparse file of zeros) is refused on its first
-megabyte, not after gigabytes are in memory."""
+"""How much of a text log is read at a time: a binary file (a disk image,
+a sparse file of zeros) is refused on its first megabyte, not after
+gigabytes are in memory."""
 MAX_LINE_BYTES = 1 << 20
 """The longest line a text log may hold. The longest line of the nine
 CARMEN logs in the data folder has 2,144 characters (freiburg-101), of the
@@ -69,39 +69,37 @@ def check_exists(path: Path) -> None:
     raise GslamError(f"{path}: no such file or directory")
 
 
-def sniff_log(head: bytes, source: str | Path, what: str) -> None:
-    """Refuse a log whose first bytes ``head`` are binary (as :func:`decode_log`)."""
-    _text(head, source, what)
-
-
-def decode_log(data: bytes, source: str | Path, what: str) -> str:
-    """The text of a log whose fields are ASCII numbers and words (CARMEN,
-    libRSF): a byte-order mark dropped, a stray byte that is not UTF-8 (a
-    Latin-1 host name or comment) kept as it is, so that only a field that
-    is read can fail, at its line. NUL bytes, or mostly undecodable bytes,
-    are binary content. A byte-order mark further on (two files joined by
-    ``cat``) hid its line's record type, which was then skipped as unknown:
-    it is dropped too, with one warning naming the first line that had one."""
-    text = _text(data, source, what)
-    marks = text.count(BOM)
-    if marks:
-        line = len((text[: text.index(BOM)] + ".").splitlines())
-        log.warning("%s:%d: a byte-order mark inside the %s (files joined?)%s; read past it", source, line, what,
-                    f", and {marks - 1} more after it" if marks > 1 else "")
-        text = text.replace(BOM, "")
-    return text
-
-
 def log_lines(path: Path, what: str) -> Iterator[str]:
     """The lines of the text log ``path`` (gzip'd where its name ends in
-    ``.gz``), read a megabyte at a time rather than whole, checked and
-    decoded as :func:`decode_log` does the whole text, and split as
-    ``str.splitlines`` splits it; a line over :data:`MAX_LINE_BYTES` is
-    refused at its number. A byte-order mark inside is warned about once
-    the log is read."""
+    ``.gz``), whose fields are ASCII numbers and words (CARMEN, libRSF), as
+    ``str.splitlines`` splits its text. It is read :data:`SNIFF_BYTES` at a
+    time, so memory holds a line and a chunk, never the file.
+
+    A leading byte-order mark is dropped. A stray byte that is not UTF-8 (a
+    Latin-1 host name or comment) is kept as it is, so that only a field
+    that is read can fail, at its line. UTF-16 text, NUL bytes or mostly
+    undecodable bytes are refused as binary content, and a line over
+    :data:`MAX_LINE_BYTES` at its number. A byte-order mark further on
+    (two files joined by ``cat``) hid its line's record type, which was
+    then skipped as unknown: it is dropped too, with one warning naming the
+    first line that had one once the log is read."""
+    marks, first = 0, 0
+    for lineno, line in enumerate(_decoded_lines(path, what), start=1):
+        if BOM in line:
+            marks, first = marks + line.count(BOM), first or lineno
+            line = line.replace(BOM, "")
+        yield line
+    if marks:
+        log.warning("%s:%d: a byte-order mark inside the %s (files joined?)%s; read past it", path, first, what,
+                    f", and {marks - 1} more after it" if marks > 1 else "")
+
+
+def _decoded_lines(path: Path, what: str) -> Iterator[str]:
     opener = gzip.open if path.name.lower().endswith(".gz") else open
+    # A byte that is not UTF-8 is kept as Python keeps a path's (a lone
+    # surrogate), so that gslam inject writes the log back byte for byte.
     decoder = codecs.getincrementaldecoder("utf-8")(errors="surrogateescape")
-    pending, lineno, marks, first_mark = "", 0, 0, 0
+    pending, lineno = "", 0
     try:
         with opener(path, "rb") as f:
             chunk = f.read(SNIFF_BYTES)
@@ -116,16 +114,11 @@ def log_lines(path: Path, what: str) -> Iterator[str]:
                 if "\0" in text or len(_NOT_UTF8.findall(text)) > 0.1 * max(len(text), 1):
                     raise GslamError(f"{path}: cannot read: not a {what} (binary content)")
                 lines = (pending + text).splitlines(keepends=True)
-                # The last piece may go on in the next chunk (a "\r" too, whose "\n" may follow).
-                pending = lines.pop() if lines and (not lines[-1].endswith(("\n", "\r")) or
-                                                    lines[-1].endswith("\r")) else ""
-                for line in lines:
-                    lineno += 1
-                    if BOM in line:
-                        marks += line.count(BOM)
-                        first_mark = first_mark or lineno
-                        line = line.replace(BOM, "")
-                    yield line.rstrip(_LINE_ENDS)
+                # The last piece may go on in the next chunk (a "\r" too: its "\n" may follow).
+                last_open = lines and (lines[-1].endswith("\r") or not lines[-1].endswith(("\n", "\r")))
+                pending = lines.pop() if last_open else ""
+                lineno += len(lines)
+                yield from (line.rstrip(_LINE_ENDS) for line in lines)
                 if len(pending) > MAX_LINE_BYTES:
                     raise GslamError(f"{path}:{lineno + 1}: a line of over {MAX_LINE_BYTES >> 20} MB; no {what} "
                                      "record is that long (a damaged or foreign file?)")
@@ -142,27 +135,4 @@ def log_lines(path: Path, what: str) -> Iterator[str]:
         raise GslamError(f"{path}: not a valid gzip file ({e})") from None
     except OSError as e:
         raise GslamError(f"{path}: cannot read ({e.strerror or e})") from None
-    for line in pending.splitlines():
-        lineno += 1
-        if BOM in line:
-            marks += line.count(BOM)
-            first_mark = first_mark or lineno
-            line = line.replace(BOM, "")
-        yield line
-    if marks:
-        log.warning("%s:%d: a byte-order mark inside the %s (files joined?)%s; read past it", path, first_mark, what,
-                    f", and {marks - 1} more after it" if marks > 1 else "")
-
-
-def _text(data: bytes, source: str | Path, what: str) -> str:
-    if data.startswith(b"\xef\xbb\xbf"):
-        data = data[3:]
-    wide = wide_encoding(data)
-    if wide is not None:
-        raise GslamError(f"{source}: cannot read: {wide} text; expected a {what} in ASCII or UTF-8 (save it as UTF-8)")
-    # A byte that is not UTF-8 is kept as Python keeps a path's (a lone
-    # surrogate), so that gslam inject writes the log back byte for byte.
-    text = data.decode("utf-8", errors="surrogateescape")
-    if "\0" in text or len(_NOT_UTF8.findall(text)) > 0.1 * max(len(text), 1):
-        raise GslamError(f"{source}: cannot read: not a {what} (binary content)")
-    return text
+    yield from pending.splitlines()
