@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import gzip
 import json
+import logging
 import os
 import signal
 import struct
@@ -519,3 +520,24 @@ def test_a_nul_byte_beyond_the_first_megabyte_is_still_binary_content(world: Wor
     run_error(Case("carmen-nul-beyond-the-first-megabyte", CARMEN,
                    "c.log: cannot read: not a CARMEN text log (binary content)", _nul_beyond_the_first_megabyte),
               world, tmp_path, capsys)
+
+
+@pytest.mark.parametrize("end", ["\n", "\r\n", "\r"])
+def test_lines_read_a_megabyte_at_a_time_are_the_lines_of_the_whole(end: str, tmp_path: Path, caplog):
+    """Line ends, a UTF-8 character, a byte that is not UTF-8 and a
+    byte-order mark where one megabyte ends and the next begins: the lines
+    are those of ``str.splitlines`` on the whole text, the mark's line the
+    one its warning names."""
+    from slam.readers.files import SNIFF_BYTES, log_lines
+
+    body = "ODOM 1 2 3\n".replace("\n", end) * (SNIFF_BYTES // (10 + len(end)))
+    # The first megabyte ends inside the \r\n, or else inside the é after the line end.
+    edge = SNIFF_BYTES - len(body.encode()) - (1 if end == "\r\n" else 2)
+    tail = f"{'x' * edge}{end}é".encode() + b"\xf4" + f"\ufeffODOM 4{end}{end}last".encode()
+    path = tmp_path / "c.log"
+    path.write_bytes(body.encode() + tail)
+    expected = path.read_bytes().decode("utf-8", errors="surrogateescape").replace("\ufeff", "").splitlines()
+    with caplog.at_level(logging.WARNING):
+        assert list(log_lines(path, "CARMEN text log")) == expected
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{path}:{body.count(end) + 2}: a byte-order mark inside the CARMEN text log (files joined?); read past it"]
