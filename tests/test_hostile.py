@@ -2085,13 +2085,18 @@ def test_corpus_counts():
 # --- as real processes: signals, killed runs, full disks ----------------------------
 
 
+def signals_as_a_user_has_them() -> None:
+    """A child process's stop signals at their defaults, as a user's gslam
+    has them, not the test runner's: under nohup (SIGHUP ignored) or as a
+    background job of a script (SIGINT ignored), which gslam keeps ignored,
+    the signal cases would test nothing (a ``preexec_fn``)."""
+    for s in STOPS:
+        signal.signal(s, signal.SIG_DFL)
+
+
 def _gslam(argv: list, cwd: Path, limit_bytes: int | None = None) -> subprocess.Popen:
     def limit() -> None:
-        # A user's gslam, not the test runner's: under nohup (SIGHUP ignored)
-        # or as a background job of a script (SIGINT ignored), which gslam
-        # keeps ignored, the signal cases would test nothing.
-        for s in STOPS:
-            signal.signal(s, signal.SIG_DFL)
+        signals_as_a_user_has_them()
         if limit_bytes is not None:
             resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
 

@@ -61,7 +61,7 @@ from tests.test_fuzz import (  # noqa: F401 - world is a fixture
 )
 from tests.test_hostile import (
     BAG, CARMEN, MAP, QUICK, _gslam, _run, _said, _temps, _wait_for, bag, carmen, librsf_with, map_beside_a_file,
-    restamp, run_error, spec_text,
+    restamp, run_error, signals_as_a_user_has_them, spec_text,
 )
 from tests.bagfactory import driving_bag
 
@@ -372,7 +372,8 @@ def test_ctrl_c_inside_code_run_by_exec_keeps_the_exit_code(tmp_path: Path):
         "except KeyboardInterrupt:\n"
         "    sys.exit(130)\n")
     done = subprocess.run([sys.executable, "-m", "stopped"], cwd=tmp_path, capture_output=True, text=True, timeout=60,
-                          env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{REPO}"})
+                          env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{REPO}"},
+                          preexec_fn=signals_as_a_user_has_them)
     assert done.returncode == 130, (done.returncode, done.stderr)
 
 
@@ -388,9 +389,14 @@ def test_ctrl_c_swallowed_by_a_callback_comes_again(capsys):
 
     received: list[int] = []
     start = time.monotonic()
-    with pytest.raises(Terminated), as_interrupt(received):
-        Cut()
-        time.sleep(10)
+    # Ctrl-C as a terminal delivers it, though the tests may run where it is ignored (a script's background job).
+    given = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(Terminated), as_interrupt(received):
+            Cut()
+            time.sleep(10)
+    finally:
+        signal.signal(signal.SIGINT, given)
     assert time.monotonic() - start < 5 and received[0] == signal.SIGINT
     assert "Traceback" not in capsys.readouterr().err
 
