@@ -32,6 +32,7 @@ def test_the_summary_holds_gated_against_the_best_kernel_and_the_interval_oracle
              {"log": "a", "fault": "none", "method": "gated", "ate_m": 0.11, "alarm_fraction": 0.03}]
     text, f = summarise(rows)
     assert f["gated / best kernel, worst"] == pytest.approx(2.0)
+    assert f["gated / best kernel, worst set"] == pytest.approx(2.0)  # one set: the worst row's
     assert f["gated / best kernel, geometric mean"] == pytest.approx((0.5 / 0.8 * 2.0) ** 0.5)
     assert f["gated / interval oracle, geometric mean"] == pytest.approx((2.0 * 1.0) ** 0.5)
     assert f["labelled intervals detected"] == pytest.approx(4 / 6)
@@ -215,6 +216,7 @@ def test_placement_sets_are_summarised_by_medians_of_the_ratios_set_by_set():
     text, f = summarise(first + second + third)
     # gated against each set's best kernel: 1/1 (a kernel at 1.0 by default), 3/1, 2/1; the median is 2
     assert f["gated / best kernel, worst"] == pytest.approx(2.0)
+    assert f["gated / best kernel, worst set"] == pytest.approx(3.0)  # the second set's, beside the median
     # against the interval oracle set by set: 1, 1.5, 0.5
     assert f["gated / interval oracle, geometric mean"] == pytest.approx(1.0)
     assert f["labelled intervals detected"] == pytest.approx(6 / 9)
