@@ -223,3 +223,10 @@ def test_placement_sets_are_summarised_by_medians_of_the_ratios_set_by_set():
     assert f["injected stretches found"] == pytest.approx(6 / 9)
     assert "| a | cut3 (3 sets) | 1.000 | 2.000 |" in text  # ungated and gated: the medians over the sets
     assert "| 0.200 |" in text and "| 6/9 | 6/9 |" in text and "3 sets of placements" in text
+
+
+def test_every_default_placement_set_ends_its_last_stretch_inside_the_log():
+    from scripts.bench.real_faults import PLACEMENT_SETS
+
+    assert len(PLACEMENT_SETS) == 3 and len(set(PLACEMENT_SETS)) == 3
+    assert all(0.0 <= p and p + 0.1 < 1.0 for ps in PLACEMENT_SETS for p in ps)

@@ -151,9 +151,10 @@ METHODS = ("ungated", *GATED, *KERNELS, *ORACLES)
 STRETCH_ORACLE = ["validation.mode=interval_oracle", "evaluation.sm_output_faults=false"]
 """The stretch oracle: the interval oracle on the injected stretches alone
 (:func:`stretch_faults`), not on the labels or the scan matcher's errors."""
-PLACEMENT_SETS = ((0.2, 0.5, 0.8), (0.1, 0.4, 0.7), (0.3, 0.6, 0.9))
+PLACEMENT_SETS = ((0.2, 0.5, 0.8), (0.1, 0.4, 0.7), (0.15, 0.45, 0.75))
 """The default sets of placements: shares of a log's duration where its
-three stretches start, each a tenth of it long."""
+three stretches start, each a tenth of it long (the last ending before
+the log does, or it is not injected)."""
 
 TARGETS = {"gated / best kernel, worst": 1.0, "gated / best kernel, worst set": 1.0,
            "gated / best kernel, geometric mean": 0.6,
