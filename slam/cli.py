@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import argparse
 import atexit
-import gc
 import codecs
+import gc
 import json
 import logging
 import math

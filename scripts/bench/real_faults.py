@@ -407,12 +407,7 @@ def vs_best_kernel(m: dict[str, dict]) -> tuple[str, float]:
     """The robust kernel of the lowest (median) error among methods ``m``,
     and gated against the best kernel: of a single run, or the median over
     the placement sets of gated against that set's best kernel."""
-    best = min(KERNELS, key=lambda k: error(m[k]))
-    g = m["gated"]
-    sets = [s for s in g.get("set_errors", {}) if all(s in m[k].get("set_errors", {}) for k in KERNELS)]
-    if len(sets) <= 1:
-        return best, error(g) / error(m[best])
-    return best, statistics.median([g["set_errors"][s] / min(m[k]["set_errors"][s] for k in KERNELS) for s in sets])
+    return min(KERNELS, key=lambda k: error(m[k])), statistics.median(vs_best_kernel_sets(m))
 
 
 def figures(by: dict[tuple[str, str], dict[str, dict]]) -> dict[str, float | None]:
