@@ -317,6 +317,8 @@ def test_batch_and_online_agree(rule):
         RelationConfig(name="held", kind="offset", stream_a="gyro_yaw", stream_b="compass_yaw", window_s=2.0,
                        sigma_floor=0.02, level_window_s=20.0, level_max_rate=0.002, threshold=3, max_counter=10),
         DEFAULT_RELATIONS[0].model_copy(update={"name": "margin", "mismatch_margin": 1.0, "threshold": 3}),
+        RelationConfig(name="travel", kind="residual", stream_a="gyro_yaw", stream_b="compass_yaw", window_s=30.0,
+                       window_travel=0.3, sigma_floor=0.03, threshold=3, max_counter=10),
     ]
     checks = [MagnetometerCheck("mag", "IMU_YAW", ref.strength_T, ref.dip_rad, 5e-6, 0.1, 1.0)]
 
@@ -334,7 +336,7 @@ def test_batch_and_online_agree(rule):
     assert log.relations["capped"].no_match.any() and log.unary["mag"].implausible.any()
     assert log.relations["res"].no_match.any() and log.relations["off"].no_match.any()
     assert log.relations["cus"].no_match.any() and log.relations["held"].no_match.any()
-    assert log.relations["margin"].no_match.any()
+    assert log.relations["margin"].no_match.any() and log.relations["travel"].no_match.any()
     cols = log.columns()
     assert cols["capped.counter"] is log.relations["capped"].counter and len(cols["t"]) == len(steps.t)
 
@@ -407,6 +409,39 @@ def test_residual_observer_sees_a_wrong_size_that_trends_miss():
     assert log.relations["res"].no_match[(t > 20.5) & (t < 39.5)].all()
     z = log.relations["res"].z
     assert np.all(np.abs(z[(t > 3) & (t < 18)]) < 1e-9)  # exact agreement outside
+
+
+def test_travel_window_sees_a_slip_at_every_speed():
+    """Wheels that slip (the odometry 1.5 times the motion) from 60 to 120 s,
+    the robot crawling at 0.05 m/s, then driving at 1 m/s, with stops between.
+    A window of 2 s sees the crawl's error of 5 cm no better than its noise
+    floor; a window of 2 m of travel sees the same 33 % at both speeds, and
+    nothing where the robot stands or the odometry is right."""
+    t = np.arange(0.0, 180.0, 0.1)
+    speed = np.select([t < 20, t < 40, t < 60, t < 90, t < 100, t < 120, t < 140], [0.5, 0.0, 0.05, 0.05, 0.0, 1.0, 0.05], 0.5)
+    true = np.concatenate(([0.0], np.cumsum(speed[:-1] * 0.1)))
+    slip = (t >= 60) & (t < 120)
+    odo = np.concatenate(([0.0], np.cumsum(np.where(slip, 1.5, 1.0)[:-1] * speed[:-1] * 0.1)))
+    streams = {"odo_distance": Stream(t, odo), "sm_distance": Stream(t, true)}
+    common = dict(kind="residual", stream_a="odo_distance", stream_b="sm_distance", sigma_floor=0.05,
+                  sigma_rel=0.1, k_sigma=2.5, threshold=3, max_counter=10)
+    timed = RelationConfig(name="timed", window_s=2.0, **common)
+    travel = RelationConfig(name="travel", window_s=60.0, window_travel=2.0, **common)
+    for window, offline in (("centred", True), ("trailing", False)):
+        log = run_observers(streams, [timed, travel], t, window=window, offline=offline)
+        crawl, fast = (t > 85) & (t < 90), (t > 105) & (t < 119)
+        assert not log.relations["timed"].no_match[crawl].any()
+        assert log.relations["travel"].no_match[crawl].all() and log.relations["travel"].no_match[fast].all()
+        right = (t < 50) | (t > 170)  # a trailing window holds the slip for 2 m after it
+        assert not log.relations["travel"].no_match[right].any()
+
+
+def test_travel_window_only_where_it_means_travel():
+    for bad, match in ((dict(kind="trend", boundary=0.1), "window_travel"),
+                       (dict(kind="residual", sigma_floor=0.05, rate_offset=0.1), "rate_offset")):
+        with pytest.raises(ValueError, match=match):
+            RelationConfig(name="r", stream_a="odo_distance", stream_b="sm_distance", window_s=30.0,
+                           window_travel=2.0, threshold=3, **bad)
 
 
 def test_residual_config_needs_its_noise():

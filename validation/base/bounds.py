@@ -190,6 +190,9 @@ fast its level may move."""
 GAIN = within(-1000.0, 1000.0, "", "one stream changing by a thousand times the other's (or against it) measures "
               "another motion", "one stream changing by a thousand times the other's measures another motion")
 """Stream b's change as a multiple of stream a's, in a residual or offset relation."""
+TRAVEL = within(None, 1e6, "(m or rad)", high="a window of more than 1000 km or a million radians of travel "
+                "holds a whole run")
+"""A length of a stream's travel a relation's window spans (m of path, rad of turn)."""
 CUSUM_DRIFT = within(None, 100.0, "sigmas", high="a sum that forgets 100 sigmas a step never grows: no mismatch "
                      "would be seen")
 """How much a CUSUM forgets each step (in sigmas of its residual)."""

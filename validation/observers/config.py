@@ -50,6 +50,14 @@ class RelationConfig(StrictFrozen):
     cannot: a scan matcher reporting 20 m/s while the odometry says 0.4 m/s
     has the same ``+`` trend.
 
+    ``window_travel`` (residual and cusum): the window spans this much of
+    stream a's travel, the sum of its absolute changes (m for a distance,
+    rad for a yaw), rather than ``window_s`` of time; ``window_s`` is then
+    the longest the window may last (a robot standing still makes no
+    window). A scale error shows the same over every metre of travel, however
+    slowly the robot moves and however seldom its sensors report, so a
+    window of travel holds the same evidence at every speed.
+
     ``kind: cusum`` takes the residual relation's normalised residual and
     accumulates it in a two-sided CUSUM that forgets ``cusum_drift`` sds a
     step; a step is a mismatch while the sum exceeds ``k_sigma`` (its
@@ -93,6 +101,7 @@ class RelationConfig(StrictFrozen):
     stream_b: str
     boundary: Annotated[float, bounds.BOUNDARY] | None = Field(None, gt=0.0)
     window_s: bounds.Window_s = Field(gt=0.0)
+    window_travel: Annotated[float, bounds.TRAVEL] | None = Field(None, gt=0.0)
     gain: Annotated[float, bounds.GAIN] = 1.0
     rate_offset: Annotated[float, bounds.STREAM_RATE] = 0.0
     sigma_floor: Annotated[float, bounds.SIGMA_FLOOR] | None = Field(None, gt=0.0)
@@ -131,6 +140,10 @@ class RelationConfig(StrictFrozen):
             raise ValueError(f"relation {self.name!r}: a {self.kind} relation needs sigma_floor")
         if self.mismatch_margin is not None and self.kind != "trend":
             raise ValueError(f"relation {self.name!r}: mismatch_margin is for trend relations only")
+        if self.window_travel is not None and self.kind not in ("residual", "cusum"):
+            raise ValueError(f"relation {self.name!r}: window_travel is for residual and cusum relations only")
+        if self.window_travel is not None and self.rate_offset != 0.0:
+            raise ValueError(f"relation {self.name!r}: rate_offset needs a window of time, not window_travel")
         if self.level_max_rate is not None and (self.kind != "offset" or self.level_window_s is None):
             raise ValueError(f"relation {self.name!r}: level_max_rate needs an offset relation with a level_window_s")
         return self

@@ -74,6 +74,47 @@ def window_changes(t: np.ndarray, v: np.ndarray, valid: np.ndarray, window_s: fl
     return change, whole
 
 
+def travel_windows(
+    t: np.ndarray, a: np.ndarray, valid: np.ndarray, travel: float, max_s: float, window: Window,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(start, end, whole)``: each step's window spanning ``travel`` of
+    stream ``a``'s travel (the sum of its absolute changes), centred on the
+    step in travel (offline) or ending at it (causal), and whether it is
+    whole: inside the data, every step in it with data, no longer than
+    ``max_s``."""
+    m = len(t)
+    step = np.zeros(m)
+    step[1:] = np.abs(np.diff(np.where(valid, a, 0.0)))
+    step[1:][~(valid[1:] & valid[:-1])] = 0.0
+    run = np.cumsum(step)
+    eps = _TOL * travel
+    if window == "trailing":
+        back, ahead = travel, 0.0
+    else:
+        back = ahead = 0.5 * travel
+    start = np.searchsorted(run, run - back + eps, side="right") - 1
+    end = np.searchsorted(run, run + ahead - eps, side="left") if ahead > 0 else np.arange(m)
+    inside = (start >= 0) & (end < m)
+    start, end = np.clip(start, 0, m - 1), np.clip(end, 0, m - 1)
+    bad = np.concatenate(([0], np.cumsum(~valid)))
+    whole = inside & (bad[end + 1] - bad[start] == 0) & (end > start)
+    whole &= t[end] - t[start] <= max_s + _TOL * max_s
+    return start, end, whole
+
+
+def travel_changes(
+    t: np.ndarray, a: np.ndarray, b: np.ndarray, valid_a: np.ndarray, valid_b: np.ndarray, travel: float,
+    max_s: float, window: Window,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(da, db, whole)``: the two streams' changes over each step's window
+    of ``travel`` of stream a (:func:`travel_windows`)."""
+    valid = valid_a & valid_b
+    start, end, whole = travel_windows(t, a, valid, travel, max_s, window)
+    da = np.where(whole, a[end] - a[start], 0.0)
+    db = np.where(whole, b[end] - b[start], 0.0)
+    return da, db, whole
+
+
 def residual_test(rel: RelationConfig, da: np.ndarray, db: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(z, mismatch)``: the normalised residual of each step and whether it
     exceeds ``k_sigma``."""
@@ -106,6 +147,33 @@ class WindowChange:
         if t - t0 < self.window_s - 2 * eps:
             return None
         return float(np.angle(np.exp(1j * (v - v0)))) if self.angular else v - v0
+
+
+class TravelChange:
+    """The changes of two streams over a trailing window of ``travel`` of
+    stream a's travel, one step at a time (:func:`travel_windows`)."""
+
+    def __init__(self, travel: float, max_s: float, angular: tuple[bool, bool] = (False, False)) -> None:
+        self.travel, self.max_s, self.angular = travel, max_s, angular
+        self._buf: deque[tuple[float, float, float, float]] = deque()  # (t, a, b, travel so far)
+
+    def update(self, t: float, a: float | None, b: float | None) -> tuple[float, float] | None:
+        """Add the step; ``(da, db)``, or None where either value is missing
+        or the window does not hold ``travel`` within ``max_s``."""
+        if a is None or b is None or not (np.isfinite(a) and np.isfinite(b)):
+            self._buf.clear()
+            return None
+        run = self._buf[-1][3] + abs(a - self._buf[-1][1]) if self._buf else 0.0
+        self._buf.append((t, a, b, run))
+        eps = _TOL * self.travel
+        # Keep the last step at least ``travel`` back as the window's start.
+        while len(self._buf) > 1 and self._buf[1][3] <= run - self.travel + eps:
+            self._buf.popleft()
+        t0, a0, b0, run0 = self._buf[0]
+        if run0 > run - self.travel + eps or len(self._buf) < 2 or t - t0 > self.max_s + _TOL * self.max_s:
+            return None
+        return tuple(float(np.angle(np.exp(1j * d))) if ang else d
+                     for d, ang in ((a - a0, self.angular[0]), (b - b0, self.angular[1])))
 
 
 def _trailing_level(t: np.ndarray, d: np.ndarray, now: float, window_s: float) -> float:

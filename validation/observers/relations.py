@@ -54,7 +54,16 @@ from validation.observers.config import (
     RelationConfig,
 )
 from validation.observers.log import ObserverLog, RelationTrace, UnaryTrace
-from validation.observers.quantitative import RunningLevel, WindowChange, offset_test, residual_test, running_level, window_changes
+from validation.observers.quantitative import (
+    RunningLevel,
+    TravelChange,
+    WindowChange,
+    offset_test,
+    residual_test,
+    running_level,
+    travel_changes,
+    window_changes,
+)
 from validation.base.geometry import wrap_angle
 from validation.observers.sequential import Cusum, cusum
 from validation.streams import StepStreams, Stream, is_angular, resample_streams
@@ -213,6 +222,11 @@ def observe_steps(
         a, b = rel.streams
         if a not in steps.values or b not in steps.values:
             return np.zeros(m), np.zeros(m, dtype=bool), missing
+        if rel.window_travel is not None:
+            da, db, ok = travel_changes(steps.t, steps.values[a], steps.values[b], steps.valid[a], steps.valid[b],
+                                        rel.window_travel, rel.window_s, window)
+            z, mismatch = residual_test(rel, da, db)
+            return z, mismatch & ok, ok
         da, ok_a = window_changes(steps.t, steps.values[a], steps.valid[a], rel.window_s, window)
         db, ok_b = window_changes(steps.t, steps.values[b], steps.valid[b], rel.window_s, window)
         z, mismatch = residual_test(rel, da, db)
@@ -358,6 +372,7 @@ class ObserverBank:
         self._run_start: dict[str, float | None] = {c.name: None for c in self.unary}
         self._present_since: dict[str, float | None] = {s: None for r in self.relations for s in r.streams}
         self._changes: dict[tuple[str, float], WindowChange] = {}
+        self._travels: dict[str, TravelChange] = {}
         self._levels: dict[str, RunningLevel] = {}
         self._last_offset: dict[str, float] = {}
         self._cusums: dict[str, Cusum] = {}
@@ -384,6 +399,13 @@ class ObserverBank:
         changes: dict[tuple[str, float], float | None] = {}
         for rel in self.relations:
             if rel.kind == "offset":
+                continue
+            if rel.kind in ("residual", "cusum") and rel.window_travel is not None:
+                a, b = rel.streams
+                tracker = self._travels.setdefault(rel.name, TravelChange(
+                    rel.window_travel, rel.window_s, (self.angular.get(a, False), self.angular.get(b, False))))
+                changes[(rel.name, None)] = tracker.update(
+                    t, float(values[a]) if present(a) else None, float(values[b]) if present(b) else None)
                 continue
             if rel.kind in ("residual", "cusum"):
                 for name in rel.streams:
@@ -416,7 +438,10 @@ class ObserverBank:
         symbols, counters, observations = {}, {}, {}
         for rel in self.relations:
             if rel.kind in ("residual", "cusum"):
-                da, db = (changes[(name, rel.window_s)] for name in rel.streams)
+                if rel.window_travel is not None:
+                    da, db = changes[(rel.name, None)] or (None, None)
+                else:
+                    da, db = (changes[(name, rel.window_s)] for name in rel.streams)
                 valid = da is not None and db is not None
                 z, mismatch = residual_test(rel, np.array(da), np.array(db)) if valid else (None, False)
                 if rel.kind == "cusum":
