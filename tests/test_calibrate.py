@@ -84,6 +84,23 @@ def test_calibrated_relation_meets_its_target_and_sees_a_fault_elsewhere():
     assert log.no_match[(t < 99.0) | (t > 115.0)].mean() < 0.005
 
 
+def test_a_window_of_travel_is_calibrated_in_travel():
+    """A relation over windows of travel keeps them: its window is chosen
+    among lengths of travel (not seconds, which would cut every 2 m window
+    short), its gain is the scan matcher's 0.9 of the odometry, and a fault
+    on a run not learnt from is seen there and nowhere else."""
+    travel = RESIDUAL.model_copy(update={"name": "t", "window_s": 30.0, "window_travel": 2.0})
+    choice = calibrate_relation([distance_run(3), distance_run(4)], travel, vcfg(travel), target=0.002)
+    rel = choice.relation
+    assert choice.met and rel.window_travel in (1.0, 2.0, 4.0) and rel.window_s == 30.0
+    assert rel.gain == pytest.approx(0.9, abs=0.01) and rel.rate_offset == 0.0
+    test = distance_run(5, [(100.0, 130.0)])
+    log = observe_steps(test.steps, [rel], (), "trailing", "project", False).relations[rel.name]
+    t = test.steps.t
+    assert log.no_match[(t > 110.0) & (t < 130.0)].all()
+    assert log.no_match[(t < 95.0) | (t > 150.0)].mean() < 0.005
+
+
 def test_cusum_relation_is_calibrated_like_a_residual_one():
     cus = RESIDUAL.model_copy(update={"name": "c", "kind": "cusum"})
     choice = calibrate_relation([distance_run(3), distance_run(4)], cus, vcfg(cus), target=0.002)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from slam.commands.calibrate.runs import CalibrationRun
-from validation.observers.quantitative import running_level, window_changes
+from validation.observers.quantitative import running_level, travel_changes, window_changes
 from validation.base.geometry import wrap_angle
 from validation.trends import Window, derive_stream
 
@@ -101,6 +101,29 @@ def changes(run: CalibrationRun, name: str, window_s: float, window: Window) -> 
     return window_changes(s.t, values, s.valid[name], window_s, window)
 
 
+def pair_changes(run: CalibrationRun, a: str, b: str, window_s: float, window: Window,
+                 travel: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(da, db, whole)``: both streams' changes over each step's window,
+    of ``window_s`` or, with ``travel``, of that much of stream a's travel
+    lasting at most ``window_s`` (a relation's ``window_travel``)."""
+    if travel is None:
+        da, ok_a = changes(run, a, window_s, window)
+        db, ok_b = changes(run, b, window_s, window)
+        return da, db, ok_a & ok_b
+    s = run.steps
+    va, vb = (np.where(s.valid[n], s.values[n], 0.0) for n in (a, b))
+    return travel_changes(s.t, va, vb, s.valid[a], s.valid[b], travel, window_s, window)
+
+
+def _ratio(x: np.ndarray, y: np.ndarray, prior_gain: float) -> tuple[float, float, bool]:
+    """The median of ``y / x`` as the gain, through 0; ``prior_gain`` where
+    ``x`` never moves."""
+    moved = np.abs(x) > 0
+    if not moved.any():
+        return prior_gain, 0.0, False
+    return float(np.median(y[moved] / x[moved])), 0.0, True
+
+
 def _line(x: np.ndarray, y: np.ndarray, prior_gain: float) -> tuple[float, float, bool]:
     """Huber line, or ``prior_gain`` and a robust intercept where ``x``
     hardly moves (module docstring); and whether the gain was fitted."""
@@ -129,17 +152,18 @@ def _noise_model(r: np.ndarray, da: np.ndarray, keep: np.ndarray) -> tuple[float
 
 
 def fit_rates(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, window: Window,
-              rate_hz: float, prior_gain: float = 1.0) -> RateFit | None:
+              rate_hz: float, prior_gain: float = 1.0, travel: float | None = None) -> RateFit | None:
     """The fit of the module docstring over every run holding both streams;
-    None when no step has both."""
+    None when no step has both. With ``travel``, over windows of that much
+    of stream a's travel lasting at most ``window_s`` (:func:`pair_changes`):
+    the line then goes through 0, a rate offset having no time to act on."""
     per_run = []
     for run in runs:
         if a not in run.streams or b not in run.streams:
             per_run.append(None)
             continue
-        da, ok_a = changes(run, a, window_s, window)
-        db, ok_b = changes(run, b, window_s, window)
-        per_run.append((da, db, ok_a & ok_b & run.clean))
+        da, db, ok = pair_changes(run, a, b, window_s, window, travel)
+        per_run.append((da, db, ok & run.clean))
     used = [p for p in per_run if p is not None]
     if not used or not any(m.any() for _, _, m in used):
         return None
@@ -147,8 +171,11 @@ def fit_rates(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, w
     db = np.concatenate([d[m] for _, d, m in used])
     keep = np.ones(len(da), dtype=bool)
     declared = all(r.declared for r in runs)
+    # Windows of travel all hold about the same change of stream a: a line
+    # through them is ill-posed, their ratio is not.
+    line = _ratio if travel is not None else _line
     for _ in range(1 if declared else 3):
-        gain, intercept, _ = _line(da[keep], db[keep], prior_gain)
+        gain, intercept, _ = line(da[keep], db[keep], prior_gain)
         r = db - gain * da - intercept
         if not declared:
             # The band grows with the motion: a sensor whose error is a
@@ -156,7 +183,7 @@ def fit_rates(runs: Sequence[CalibrationRun], a: str, b: str, window_s: float, w
             noise, sigma_rel, spread = _noise_model(r, da, keep)
             band = np.maximum(spread, np.sqrt(noise**2 + (sigma_rel * da) ** 2))
             keep = np.abs(r - np.median(r[keep])) <= OUTLIER_SIGMAS * band
-    gain, intercept, fitted = _line(da[keep], db[keep], prior_gain)
+    gain, intercept, fitted = line(da[keep], db[keep], prior_gain)
     r = db - gain * da - intercept
     noise, sigma_rel, spread = _noise_model(r, da, keep)
     corr = float(np.corrcoef(da[keep], db[keep])[0, 1]) if keep.sum() > 2 and np.std(da[keep]) > 0 and np.std(db[keep]) > 0 else 0.0

@@ -156,6 +156,8 @@ def candidate_windows(runs: Sequence[CalibrationRun], rel: RelationConfig, rate_
     """Half, once and twice ``rel.window_s``, none shorter than four samples
     of the sparser stream, each a whole number of step pairs (a centred
     window reaches the same whole number of steps either side)."""
+    if rel.window_travel is not None:  # lengths of travel: no sample period bounds them
+        return sorted({round(f * rel.window_travel, 6) for f in (0.5, 1.0, 2.0)})
     period = max((run.steps.period.get(s, 0.0) for run in runs for s in rel.streams if s in run.streams), default=0.0)
     shortest = 4.0 * period if np.isfinite(period) else rel.window_s
     pair = 2.0 / rate_hz
@@ -180,10 +182,12 @@ def _learn(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg: Validation
     """The fit of ``rel`` over windows of ``w`` on ``runs``; None when no
     step has both its streams."""
     a, b = rel.streams
-    fit = fit_rates(runs, a, b, w, vcfg.window, vcfg.rate_hz, rel.gain)
+    travel = rel.window_travel is not None
+    fit = fit_rates(runs, a, b, rel.window_s if travel else w, vcfg.window, vcfg.rate_hz, rel.gain,
+                    travel=w if travel else None)
     if fit is None:
         return None
-    base = dict(window_s=w, warmup_s=None)
+    base = dict(window_travel=w, warmup_s=rel.warmup_s) if travel else dict(window_s=w, warmup_s=None)
     scale_stream = _moving_stream(a)
     if rel.kind == "trend":
         sd, median = fit_slopes(runs, a, b, w, vcfg.window, fit.inliers)
@@ -196,14 +200,15 @@ def _learn(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg: Validation
 
         return _Learnt(fit, noise, make, slope_offset=median, resolution=floor > sd)
     if rel.kind in ("residual", "cusum"):
-        floor = RESOLUTION * abs(fit.gain) * motion_scale(runs, scale_stream, w, vcfg.window, fit.inliers)
+        moved = w if travel else motion_scale(runs, scale_stream, w, vcfg.window, fit.inliers)
+        floor = RESOLUTION * abs(fit.gain) * moved
         noise = max(fit.noise, floor)
         # Streams that do not move together fit a relative sigma of up to
         # 1e9: any change passes at MAX_SIGMA_REL already, so the config
         # holds the bound (the support test then drops the relation).
 
         def make(m: float, th: int) -> RelationConfig:
-            return _updated(rel, **base, gain=sig(fit.gain), rate_offset=sig(fit.rate_offset),
+            return _updated(rel, **base, gain=sig(fit.gain), rate_offset=0.0 if travel else sig(fit.rate_offset),
                             sigma_floor=sig(noise), sigma_rel=sig(min(fit.sigma_rel, MAX_SIGMA_REL)), k_sigma=m,
                             threshold=th, max_counter=th + COUNTER_HEADROOM)
 
@@ -266,7 +271,9 @@ def calibrate_relation(runs: Sequence[CalibrationRun], rel: RelationConfig, vcfg
             folds.append(Fold(runs[judged_run], make, steps & pooled.fit.inliers[judged_run]))
         multiples = CUSUM_LIMITS if rel.kind == "cusum" else MULTIPLES
         chosen, multiple, alarm, met = _search(folds, pooled.make, vcfg, target, max(rel.threshold, 1), multiples)
-        visible = multiple * pooled.noise * (w if rel.kind == "trend" else 1.0)
+        # The smallest error seen: over a trend's window, in the stream's own
+        # units, or as a share of a window of travel.
+        visible = multiple * pooled.noise * (w if rel.kind == "trend" else 1.0 / w if rel.window_travel else 1.0)
         choice = Choice(chosen, pooled.fit, pooled.noise, multiple, alarm, visible, met, pooled.bias,
                         pooled.slope_offset, pooled.resolution)
         if best is None or (met and not best.met) or (met == best.met and visible < best.visible / TIE):

@@ -19,8 +19,8 @@ from slam.commands.calibrate.propose import Proposal
 from slam.commands.calibrate.select import RESOLUTION, CheckChoice, Choice, FieldGyroChoice
 from slam.commands.calibrate.support import Support
 from slam.config import PipelineConfig
-from slam.results.outdir import result_file_mark
 from validation.observers.config import RelationConfig
+from slam.results.outdir import result_file_mark
 
 _PLACEHOLDER = "__relations__"
 _INDENT = "    "
@@ -46,7 +46,8 @@ def _relation_comment(c: Choice, target: float, runs: int) -> list[str]:
                  f"robust sd {c.noise:.3g} {unit} over {steps} steps of {of_runs}; band k_sigma = {c.multiple:g} sds"]
     else:
         lines = [
-            f"{rel.name} ({rel.kind}): {rel.stream_b} against {rel.stream_a} over {fit.window_s:g} s windows: "
+            f"{rel.name} ({rel.kind}): {rel.stream_b} against {rel.stream_a} over "
+            f"{_window_words(rel, fit.window_s)}: "
             f"gain {fit.gain:.4f}, offset {fit.rate_offset:.3g} {unit}/s, residual noise {fit.noise:.3g} {unit} "
             f"(robust sd over {fit.steps} steps of {of_runs}, correlation {fit.corr:.3f})",
         ]
@@ -196,3 +197,10 @@ def _noise_comment(noise: CompassNoise, runs: int) -> list[str]:
             f"({runs} run{'s' if runs > 1 else ''}): robust sd {np.degrees(noise.sd_rad):.3g} deg, autocorrelation",
             f"below 1/e after {noise.correlation_s:.3g} s: priors at keyframes dt apart carry "
             f"sigma_yaw_deg * sqrt(2 * correlation_s / dt)."]
+
+
+def _window_words(rel: RelationConfig, window_s: float) -> str:
+    """How long a relation's windows are, in words."""
+    if rel.window_travel is None:
+        return f"{window_s:g} s windows"
+    return f"windows of {rel.window_travel:g} of {rel.stream_a}'s travel (at most {rel.window_s:g} s)"
