@@ -74,6 +74,10 @@ def _relation_reason(rel: RelationConfig, steps: StepStreams, streams: Mapping[s
         return "; ".join(found)
     if rel.kind == "trend":
         return f"the warm-up of {rel.warmup:g} s after each start or gap of its streams"
+    if rel.kind in ("residual", "cusum") and rel.window_travel is not None:
+        return (f"its window of {rel.window_travel:g} of {rel.stream_a}'s travel within {rel.window_s:g} s: "
+                f"the robot stands or moves slower than {rel.window_travel / rel.window_s:.3g} a second, "
+                "or its streams have gaps")
     if rel.kind in ("residual", "cusum"):
         return f"its window of {rel.window_s:g} s rarely fits between the gaps of its streams"
     return "its streams rarely have data at the same steps"
