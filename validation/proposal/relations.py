@@ -6,8 +6,7 @@ Each rule pairs streams of different sensors that measure one quantity
 (:mod:`validation.proposal` lists them); a relation is named after the
 quantity and its two sources, as the shipped models name theirs
 (``yaw_compass_gyro``, ``yaw_odo_gyro``, ``distance_odo_sm``), ``_res`` for
-its residual observer, ``_scale`` for a residual over windows of travel
-and ``_off`` for its offset observer.
+its residual observer and ``_off`` for its offset observer.
 """
 
 from __future__ import annotations
@@ -38,9 +37,6 @@ _RES_LATERAL = (0.05, 0.0)
 _OFF_YAW = 0.05            # rad about the running level
 _OFF_COURSE = 0.2          # rad about 0
 _WINDOW_S = 2.0
-# A scale error (wheels that slip) over windows of travel: the CARMEN
-# config's (configs/datasets/carmen.yaml, dist_scale_odo_sm).
-_SCALE_TRAVEL_M, _SCALE_MAX_S, _SCALE_NOISE, _SCALE_K = 3.0, 30.0, (0.05, 0.1), 2.5
 _SPEED_WINDOW_S = 4.0
 _TREND_TH, _QUANT_TH, _HEADROOM = 10, 5, 20
 
@@ -95,13 +91,6 @@ def _residual(name: str, a: str, b: str, noise: tuple[float, float], window_s: f
     return RelationConfig(name=name, kind="residual", stream_a=a, stream_b=b, sigma_floor=noise[0],
                           sigma_rel=noise[1], window_s=window_s, threshold=_QUANT_TH,
                           max_counter=_QUANT_TH + _HEADROOM)
-
-
-def _scale(name: str, a: str, b: str, window_s: float) -> RelationConfig:
-    return RelationConfig(name=name, kind="residual", stream_a=a, stream_b=b, window_travel=_SCALE_TRAVEL_M,
-                          window_s=max(_SCALE_MAX_S, window_s), warmup_s=0.0, sigma_floor=_SCALE_NOISE[0],
-                          sigma_rel=_SCALE_NOISE[1], k_sigma=_SCALE_K, threshold=_TREND_TH,
-                          max_counter=_TREND_TH + _HEADROOM)
 
 
 def _offset(name: str, a: str, b: str, sigma: float, window_s: float, level_window_s: float | None) -> RelationConfig:
@@ -165,10 +154,6 @@ def travel_relations(movers: Sequence[Source]) -> list[ProposedRelation]:
                                     s(second, "forward"), _TREND_DISTANCE, w), f"forward travel: {pair} (trends)"),
             ProposedRelation(_residual(f"distance_{first.name}_{second.name}_res", s(ref, "forward"),
                                        s(other, "forward"), _RES_FORWARD, w), f"forward travel: {pair}, its size"),
-            ProposedRelation(_scale(f"distance_{first.name}_{second.name}_scale", s(ref, "forward"),
-                                    s(other, "forward"), w),
-                             f"forward travel: {pair}, its size over every {_SCALE_TRAVEL_M:g} m of it (a slip, at "
-                             "any speed)"),
             # Sideways travel stays flat on wheels and tracks: a trend would compare the
             # symbols of two noises, so only its size is watched.
             ProposedRelation(_residual(f"lateral_{first.name}_{second.name}_res", s(ref, "lateral"),
