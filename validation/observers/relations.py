@@ -225,8 +225,7 @@ def observe_steps(
         if rel.window_travel is not None:
             da, db, ok = travel_changes(steps.t, steps.values[a], steps.values[b], steps.valid[a], steps.valid[b],
                                         rel.window_travel, rel.window_s, window)
-            z, mismatch = residual_test(rel, da, db)
-            return z, mismatch & ok, ok
+            return *residual_test(rel, da, db), ok
         da, ok_a = window_changes(steps.t, steps.values[a], steps.valid[a], rel.window_s, window)
         db, ok_b = window_changes(steps.t, steps.values[b], steps.valid[b], rel.window_s, window)
         z, mismatch = residual_test(rel, da, db)

@@ -113,8 +113,7 @@ def pair_changes(run: CalibrationRun, a: str, b: str, window_s: float, window: W
         db, ok_b = changes(run, b, window_s, window)
         return da, db, ok_a & ok_b
     s = run.steps
-    va, vb = (np.where(s.valid[n], s.values[n], 0.0) for n in (a, b))
-    return travel_changes(s.t, va, vb, s.valid[a], s.valid[b], travel, window_s, window)
+    return travel_changes(s.t, s.values[a], s.values[b], s.valid[a], s.valid[b], travel, window_s, window)
 
 
 def _ratio(x: np.ndarray, y: np.ndarray, prior_gain: float) -> tuple[float, float, bool]:

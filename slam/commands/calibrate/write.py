@@ -19,8 +19,8 @@ from slam.commands.calibrate.propose import Proposal
 from slam.commands.calibrate.select import RESOLUTION, CheckChoice, Choice, FieldGyroChoice
 from slam.commands.calibrate.support import Support
 from slam.config import PipelineConfig
-from validation.observers.config import RelationConfig
 from slam.results.outdir import result_file_mark
+from validation.observers.config import RelationConfig
 
 _PLACEHOLDER = "__relations__"
 _INDENT = "    "
