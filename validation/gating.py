@@ -120,6 +120,11 @@ class GatingConfig(StrictFrozen):
     step are checked again over ``baseline_m`` of path and kept over that
     baseline where they agree: a scan matcher that is wrong step by step but
     right over metres still contributes.
+
+    ``inflate``: components a diagnosis inflates whatever ``single`` says.
+    A fault of degree (a slipping wheel still says the robot moved, by too
+    much) leaves a measurement worth keeping at a wider sigma, where
+    leaving it out would leave the graph to a weaker witness.
     """
 
 
@@ -135,6 +140,7 @@ class GatingConfig(StrictFrozen):
     baseline_factors: tuple[str, ...] = ("scan_matching",)
     baseline_m: Annotated[float, bounds.PATH_DELTA_M] = Field(5.0, gt=0.0)
     factors: dict[str, dict[str, list[str]]] = Field(default_factory=_default_factors)
+    inflate: tuple[str, ...] = ()
 
     @field_validator("factors", mode="before")
     @classmethod
@@ -178,6 +184,9 @@ def check_components(config: GatingConfig, model: SystemModel) -> None:
                 if c not in model.components:
                     where = factor if dof == ALL_DOFS else f"{factor}.{dof}"
                     raise ValidationError(f"gating.factors.{where}: unknown component {c!r}")
+    for c in config.inflate:
+        if c not in model.components:
+            raise ValidationError(f"gating.inflate: unknown component {c!r}")
     gated = config.gated_components()
     for sensor, parts in model.sensors.items():
         used = [p for p in parts if p in gated]
@@ -218,9 +227,14 @@ def suspicion(config: GatingConfig, result: DiagnosisResult) -> Actions:
     if not result.diagnoses:
         raise ValueError("suspicion() needs a consistent diagnosis result")
     if len(result.diagnoses) == 1 or config.ambiguous is AmbiguousPolicy.MOST_PROBABLE:
-        return {c: single for c in result.diagnoses[0]}
-    action = GatingAction.EXCLUDE if config.ambiguous is AmbiguousPolicy.EXCLUDE_ALL else GatingAction.INFLATE
-    return {c: action for d in result.diagnoses for c in d}
+        actions = {c: single for c in result.diagnoses[0]}
+    else:
+        action = GatingAction.EXCLUDE if config.ambiguous is AmbiguousPolicy.EXCLUDE_ALL else GatingAction.INFLATE
+        actions = {c: action for d in result.diagnoses for c in d}
+    for c in config.inflate:
+        if c in actions:
+            actions[c] = GatingAction.INFLATE
+    return actions
 
 
 def offline_actions(config: GatingConfig, results: Sequence[DiagnosisResult]) -> list[Actions]:

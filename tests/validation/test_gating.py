@@ -93,6 +93,17 @@ def test_ambiguous_most_probable(single):
     assert Gate(cfg).step(0.0, result({"IMU_YAW"}, {"SM_YAW"})) == {"IMU_YAW": single}
 
 
+def test_a_component_named_to_inflate_is_inflated_while_its_partners_are_excluded():
+    cfg = config(inflate=["ODO_DIST"], inflation=5.0)
+    out = Gate(cfg).step(0.0, result({"ODO_DIST", "SM_YAW"}))
+    assert out == {"ODO_DIST": INF, "SM_YAW": EXC}
+    s = scales(cfg, out)
+    assert s["odometry"] == [5.0, 5.0, 1.0] and s["scan_matching"] == [1.0, 1.0, math.inf]
+    assert offline_actions(cfg, [result({"ODO_DIST"}), CLEAN]) == [{"ODO_DIST": INF}, {}]
+    with pytest.raises(ValidationError, match="gating.inflate: unknown component 'WHEEL'"):
+        Gate(config(inflate=["WHEEL"]), load_model(TELEMAX))
+
+
 def test_degree_of_freedom_takes_the_strongest_action_of_its_components():
     cfg = config(factors={"heading": {"yaw": ["IMU_GYRO", "IMU_YAW"]}, "sm": ["SM"]})
     s = factor_scales(cfg, {"IMU_YAW": EXC, "IMU_GYRO": INF}, {"heading": ("yaw",), "sm": ("x", "yaw")})
