@@ -210,6 +210,33 @@ def test_a_failing_figure_is_an_error_of_the_map_and_leaves_no_process(tmp_path,
     assert _children() <= before
 
 
+@needs_fork
+@pytest.mark.parametrize("concurrent", [True, False])
+def test_the_self_check_made_aside_is_the_one_made_here_and_its_error_reaches_the_caller(concurrent, monkeypatch):
+    import slam.outputs.result_writer as result_writer
+    import slam.outputs.self_check as self_check
+
+    est = Trajectory(t=np.arange(3.0), x=np.zeros(3), y=np.arange(3.0), yaw=np.zeros(3))
+    checker = result_writer.SelfChecker(concurrent)
+    checker.submit({"trajectory": est, "blame_share": 0.25})
+    made = checker.wait()
+    checker.close()
+    here = self_check.check_map(est, blame_share=0.25)
+    assert made.as_dict() == here.as_dict() and made.as_dict()["blame_share"] == 0.25
+
+    def broken(*args, **kwargs):
+        raise ValueError("no neighbours")
+
+    monkeypatch.setattr(self_check, "check_map", broken)  # the forked child inherits it
+    before = _children()
+    checker = result_writer.SelfChecker(concurrent)
+    checker.submit({"trajectory": est})
+    with pytest.raises(ValueError, match="no neighbours"):
+        checker.wait()
+    checker.close()
+    assert _children() <= before
+
+
 def _children() -> set[int]:
     return {int(p) for p in os.listdir("/proc") if p.isdigit() and _parent_of(int(p)) == os.getpid()}
 

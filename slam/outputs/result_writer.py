@@ -18,7 +18,12 @@ the occupancy grid (:mod:`slam.outputs.occupancy`), writes ``map.pgm`` and
 (:mod:`slam.outputs.run_mcap`), all while the parent evaluates and writes the
 numbers. :meth:`ResultWriter.wait` returns once every file is in the
 result folder (before the folder is renamed into place). The files are the
-same bytes as made in the parent (``concurrent=False``)."""
+same bytes as made in the parent (``concurrent=False``).
+
+:class:`SelfChecker` makes the map's self-check (:mod:`slam.outputs.self_check`)
+in a child of its own the same way: open3d, whose nearest neighbours it
+uses, takes half a second to import, which the child spends while the
+parent reads and maps; the figures are the same as made in the parent."""
 
 from __future__ import annotations
 
@@ -207,6 +212,50 @@ def _renice(niceness: int) -> None:
         os.setpriority(os.PRIO_PROCESS, 0, niceness)
     except OSError:
         pass
+
+
+def _check_when_given(inbox: Inbox, concurrent: bool) -> Any:
+    """The self-check's child: import open3d and the check at the lower
+    priority while the parent works, then check the map it is given (None:
+    nothing to check)."""
+    niceness = os.nice(0)
+    if concurrent:
+        os.nice(IMPORT_NICENESS)
+    from slam.outputs.pointcloud import import_open3d
+    from slam.outputs.self_check import check_map
+
+    import_open3d()
+    inputs = inbox()
+    if inputs is None:
+        return None
+    if concurrent:
+        _renice(niceness)
+    return check_map(**inputs)
+
+
+class SelfChecker:
+    """Makes the map's self-check in a second process when ``concurrent``,
+    else in this one at :meth:`wait`: :meth:`submit` what
+    :func:`~slam.outputs.self_check.check_map` reads, then :meth:`wait`
+    for its :class:`~slam.outputs.self_check.SelfCheck`."""
+
+    def __init__(self, concurrent: bool = True):
+        self.worker = start("self-check", _check_when_given, concurrent, concurrent=concurrent)
+        self.sent = False
+
+    def submit(self, inputs: dict[str, Any] | None) -> None:
+        """``check_map``'s keyword arguments (None: nothing to check); once."""
+        if not self.sent:
+            self.worker.send(inputs)
+            self.sent = True
+
+    def wait(self) -> Any:
+        """The self-check (None if nothing was submitted); raise what making it raised."""
+        self.submit(None)
+        return self.worker.result()
+
+    def close(self) -> None:
+        self.worker.close()
 
 
 class ResultWriter:

@@ -369,17 +369,15 @@ class Mapping:
         m.update(self.extra_metrics)
         self.metrics = m
 
-    def check_self(self) -> None:
-        """The map's self-check without ground truth (:mod:`slam.outputs.self_check`)
-        into ``metrics['self_check']``; it only reads the estimate. Not part
-        of :meth:`run`: the result folder runs it while the figures are drawn."""
+    def self_check_inputs(self) -> dict[str, Any]:
+        """What the map's self-check (:func:`slam.outputs.self_check.check_map`)
+        reads: the estimate, the keyframes' scans, the kept loops, the odometry."""
         from slam.outputs.pointcloud import beam_limits
-        from slam.outputs.self_check import check_map
 
         rec, meas = self.recording, self.measurements
         on_scans = rec.scans is not None and meas.scan_index is not None
-        check = check_map(
-            self.backend.trajectory,
+        return dict(
+            trajectory=self.backend.trajectory,
             scans=rec.scans if on_scans else None,
             scan_index=meas.scan_index if on_scans else None,
             beam_limits=beam_limits(self.config.frontend, rec.scans) if on_scans else None,
@@ -388,6 +386,17 @@ class Mapping:
             stamps_synthesised=rec.stamps_synthesised,
             blame_share=self.metrics.get("alarm_fraction"),
         )
+
+    def check_self(self, check: Any = None) -> None:
+        """The map's self-check without ground truth (:mod:`slam.outputs.self_check`)
+        into ``metrics['self_check']``; it only reads the estimate. ``check``:
+        its result, made elsewhere from :meth:`self_check_inputs` (None: made
+        here). Not part of :meth:`run`: the result folder has it made while
+        the figures are drawn."""
+        if check is None:
+            from slam.outputs.self_check import check_map
+
+            check = check_map(**self.self_check_inputs())
         self.timings.self_check_s = check.time_s
         self.metrics["self_check"] = check.as_dict()
 

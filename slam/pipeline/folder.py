@@ -11,7 +11,8 @@ default): KISS-ICP registers the scans while the other topics are read and
 the next steps prepared (:mod:`slam.frontend.worker`); the submaps' walk
 follows their local SLAM scan by scan (:mod:`slam.submaps.build`); and the
 figures, the occupancy grid and ``run.mcap`` are made while the numeric
-results are written (:mod:`slam.outputs.result_writer`). Each is the same
+results are written, and the map's self-check beside them, in a process
+that imported open3d while the run was mapped (:mod:`slam.outputs.result_writer`). Each is the same
 code on the same data as in the plain order (``concurrent=False``), so the
 results are the same bytes. gtsam and validation are imported while the scans are
 matched, not before.
@@ -30,7 +31,7 @@ from typing import Any
 from slam.config import PipelineConfig, dump_config
 from slam.frontend.kiss import FrontendResult
 from slam.frontend.worker import BackgroundScanMatching
-from slam.outputs.result_writer import FinalEstimate, MapInputs, ResultWriter
+from slam.outputs.result_writer import FinalEstimate, MapInputs, ResultWriter, SelfChecker
 from slam.pipeline.core import Mapping, matches_scans
 from slam.recording import Recording, Trajectory
 from slam.results.outdir import result_folder
@@ -95,6 +96,7 @@ class MappingPipeline:
         self.shared_s = shared_s
         self.scan_matching: BackgroundScanMatching | None = None
         self.outputs: ResultWriter | None = None
+        self.checker: SelfChecker | None = None
         self.core: Mapping | None = None
         self.points = None  # the map's points, for map.ply
         self._start = time.perf_counter()
@@ -114,7 +116,7 @@ class MappingPipeline:
                 core.run(self.scan_matching)
                 self.frontend = core.frontend
                 self.start_figures(tmp)
-                core.check_self()  # while the second process draws
+                self.checker.submit(core.self_check_inputs())
                 self.write(tmp)
             finally:  # before a failed result's folder is removed
                 self.close_helpers()
@@ -123,18 +125,19 @@ class MappingPipeline:
     # -- around the core ------------------------------------------------------
 
     def start_helpers(self) -> None:
-        """The second process's work: scan matching (unless it is reused)
-        and the result files made from the estimate; both wait for their
-        data."""
+        """The second process's work: scan matching (unless it is reused),
+        the result files made from the estimate and the map's self-check;
+        each waits for its data."""
         cfg = self.config
         out = cfg.output
+        self.checker = SelfChecker(self.concurrent)
         if out.plots or out.grid or out.mcap:
             self.outputs = ResultWriter(self.concurrent, out.plots, out.mcap)
         if self.recording is None and self.frontend is None and matches_scans(cfg):
             self.scan_matching = BackgroundScanMatching(cfg.frontend, self.progress, self.concurrent)
 
     def close_helpers(self) -> None:
-        for helper in (self.scan_matching, self.outputs):
+        for helper in (self.scan_matching, self.outputs, self.checker):
             if helper is not None:
                 helper.close()
 
@@ -247,6 +250,7 @@ class MappingPipeline:
         if self.points is not None:
             write_ply(folder / "map.ply", self.points)
         tm.write_s += time.perf_counter() - t
+        core.check_self(self.checker.wait())
         if self.outputs is not None:
             t = time.perf_counter()
             made = self.outputs.wait()
@@ -298,9 +302,6 @@ def import_next_steps(submaps: bool) -> None:
     import slam.outputs.tum  # noqa: F401
     import slam.outputs.validation_status  # noqa: F401
     import validation.validator  # noqa: F401
-    from slam.outputs.pointcloud import import_open3d
-
-    import_open3d()  # the self-check's nearest neighbours; a second or more to load
 
 
 def run_map(
