@@ -122,6 +122,26 @@ def test_the_shipped_configs_as_bases_keep_their_other_sections(tmp_path, short_
     assert vcfg.observers.rule == "paper" and gating.holdoff_s == 5.0 and vcfg.observers.scan.enabled
 
 
+SHIPPED = [CONFIGS / "telemax.yaml", *sorted((CONFIGS / "datasets").glob("*.yaml"))]
+
+
+@pytest.mark.parametrize("base", SHIPPED, ids=lambda p: p.stem)
+@pytest.mark.parametrize("sources", [TELEMAX, [Source("odometry", "odo"), Source("scan", "sm")]], ids=["telemax", "laser"])
+def test_the_proposal_over_each_shipped_config_is_a_config_that_loads(base, sources, tmp_path):
+    """Each check the proposal writes replaces the base's (a key given twice
+    is an error of the loader), and the result loads as a config."""
+    from slam.commands.inspect.starter import replace_sections, validation_sections as proposed_sections
+
+    text = base.read_text()
+    tree = yaml.safe_load(text)
+    sections = proposed_sections(propose_model(sources), tree.get("validation"), tree.get("gating"))
+    path = tmp_path / base.name
+    path.write_text(replace_sections(text, sections))
+    config = load_config(path)
+    vcfg, _ = validation_sections(config)
+    assert [r.name for r in vcfg.observers.relations] == [r.config.name for r in propose_model(sources).relations]
+
+
 def test_inspect_says_in_one_line_when_nothing_can_be_validated(tmp_path, capsys):
     bag = sensor_bag(["odom"], duration_s=20.0).write(tmp_path / "odom.bag")
     out = tmp_path / "starter.yaml"

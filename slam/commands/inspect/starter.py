@@ -35,8 +35,10 @@ from validation.proposal import ModelProposal, Source
 
 _COLUMN = 40
 MODEL_KEYS = ("model",)
-OBSERVER_KEYS = ("relations", "magnetometer", "gps", "scan")
-"""The keys of ``validation.observers`` the proposal writes; the base keeps its others."""
+OBSERVER_KEYS = ("relations", "magnetometer", "gps", "scan", "scan_ceiling")
+"""The keys of ``validation.observers`` the proposal writes (its relations
+and every check of :attr:`~validation.proposal.ModelProposal.checks`); the
+base keeps its others."""
 
 
 def _period(t: np.ndarray) -> float | None:
@@ -144,7 +146,13 @@ def _model_lines(p: ModelProposal, indent: str) -> list[str]:
 def _observer_lines(p: ModelProposal, base: Mapping[str, Any], indent: str) -> list[str]:
     i2 = indent + "  "
     lines = [f"{indent}observers:"]
-    lines += _block({k: v for k, v in base.items() if k not in OBSERVER_KEYS}, i2)
+    written = {*OBSERVER_KEYS, *p.checks}  # a check the proposal writes is never written twice
+    kept = {k: v for k, v in base.items() if k not in written}
+    field_gyro = kept.get("field_gyro")
+    if isinstance(field_gyro, Mapping) and field_gyro.get("enabled") \
+            and field_gyro.get("name", "mag_field_gyro") not in p.unary_checks:
+        kept["field_gyro"] = {**field_gyro, "enabled": False}  # the proposed model has no magnetometer and gyro
+    lines += _block(kept, i2)
     lines.append(f"{i2}# Starting parameters, generic: gslam calibrate learns them from the recording.")
     lines.append(f"{i2}relations:" + ("" if p.relations else " []"))
     for r in p.relations:
