@@ -142,6 +142,26 @@ def test_the_ceiling_check_flags_cut_scans_and_bridges_short_gaps():
     assert _ceiling_check(max_ceiling_m=20.0).flags(q).tolist() == [False, True, False, True, True, False]
 
 
+def test_a_laser_whose_reach_ends_in_the_gaps_is_not_cut_off():
+    """The room five times larger, seen by a laser of 10 m range: its far
+    walls lie beyond the laser's reach, so every scan ends in gaps at about
+    10 m, as a cut one does. The laser sees what it can: no cut. The same
+    scans cut at 8.5 m are cut off, and so is the room seen by a 30 m laser
+    and cut at 9.5 m, far short of that laser's reach (unless a cut must
+    be within 0.3 of the reach, 9 m)."""
+    scans = _scans(["room"] * 4)
+    big = np.where(5.0 * scans.ranges >= 10.0, np.inf, 5.0 * scans.ranges)
+    q = scan_quality(Scans(scans.t, big, scans.angles, 0.1, 10.0), FrontendConfig(max_range_m=30.0))
+    assert q.reach_m == 10.0 and np.all(q.no_return > 0.1) and np.all(q.edges_at_ceiling == 1.0)
+    assert not _ceiling_check().flags(q).any()
+    cut = np.where(big > 8.5, np.inf, big)
+    q = scan_quality(Scans(scans.t, cut, scans.angles, 0.1, 10.0), FrontendConfig(max_range_m=30.0))
+    assert _ceiling_check().flags(q).all()
+    cut = np.where(5.0 * scans.ranges > 9.5, np.inf, 5.0 * scans.ranges)
+    q = scan_quality(Scans(scans.t, cut, scans.angles, 0.1, 30.0), FrontendConfig(max_range_m=30.0))
+    assert _ceiling_check().flags(q).all() and not _ceiling_check(reach_share=0.3).flags(q).any()
+
+
 def test_the_ceiling_check_names_the_whole_scan_matcher_in_the_model():
     from validation.config import parse_sections
 

@@ -264,7 +264,8 @@ class ScanQuality:
     without a return ``no_return`` (n,), the returns bordering a gap
     ``gap_edges`` (n,), the share of those near the farthest return
     ``edges_at_ceiling`` (n,) and that return ``farthest`` (n,) m
-    (:mod:`slam.frontend.scan_geometry`)."""
+    (:mod:`slam.frontend.scan_geometry`); ``reach_m``, the farthest a
+    return may lie (the laser's range or the front-end's limit, the nearer)."""
 
     t: np.ndarray
     returns: np.ndarray
@@ -274,6 +275,7 @@ class ScanQuality:
     gap_edges: np.ndarray
     edges_at_ceiling: np.ndarray
     farthest: np.ndarray
+    reach_m: float = np.inf
 
 
 def scan_quality(scans: Scans, config: FrontendConfig, chunk: int = 512) -> ScanQuality:
@@ -284,4 +286,4 @@ def scan_quality(scans: Scans, config: FrontendConfig, chunk: int = 512) -> Scan
     parts = [(*scan_geometry(scans.ranges[i : i + chunk], scans.angles, config.min_range_m, max_range),
               *range_ceiling(scans.ranges[i : i + chunk], config.min_range_m, max_range))
              for i in range(0, len(scans), chunk)]
-    return ScanQuality(scans.t.copy(), *(np.concatenate(p) for p in zip(*parts)))
+    return ScanQuality(scans.t.copy(), *(np.concatenate(p) for p in zip(*parts)), reach_m=float(max_range))

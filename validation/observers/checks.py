@@ -92,7 +92,7 @@ class ScanGeometrySeries(Protocol):
     the share of beams without a return ``no_return`` (n,), the returns
     bordering a gap ``gap_edges`` (n,), the share of those within a tenth
     of the farthest return ``edges_at_ceiling`` (n,) and that return
-    ``farthest`` (n,) m."""
+    ``farthest`` (n,) m; ``reach_m``, the farthest a return may lie."""
 
     t: np.ndarray
     returns: np.ndarray
@@ -102,6 +102,7 @@ class ScanGeometrySeries(Protocol):
     gap_edges: np.ndarray
     edges_at_ceiling: np.ndarray
     farthest: np.ndarray
+    reach_m: float
 
 
 @dataclass(frozen=True)
@@ -158,14 +159,18 @@ class ScanCeilingCheck:
     hold_s: float
     settle_s: float = 0.0
     settle_after_s: float = 0.0
+    reach_share: float = 0.9
     streams: tuple[str, ...] = ("scan_ceiling",)
 
     def flags(self, geometry: ScanGeometrySeries) -> np.ndarray:
-        """True for each scan cut off at a range ceiling."""
+        """True for each scan cut off at a range ceiling short of the
+        laser's reach."""
+        farthest = np.asarray(geometry.farthest, dtype=float)
         cut = ((np.asarray(geometry.no_return) >= self.min_no_return)
                & (np.asarray(geometry.gap_edges) >= self.min_edges)
                & (np.asarray(geometry.edges_at_ceiling) >= self.min_edge_share)
-               & (np.asarray(geometry.farthest) <= self.max_ceiling_m))
+               & (farthest <= self.max_ceiling_m)
+               & (farthest <= self.reach_share * geometry.reach_m))
         t = np.asarray(geometry.t, dtype=float)
         return settled(t, bridged(t, cut, self.fill_s), self.settle_s, self.settle_after_s)
 
@@ -237,7 +242,8 @@ def unary_checks(config: ObserversConfig, reference: MagneticReference | None = 
     if ceiling.enabled:
         checks.append(ScanCeilingCheck(ceiling.name, ceiling.component, ceiling.min_no_return, ceiling.min_edges,
                                        ceiling.min_edge_share, ceiling.max_ceiling_m, ceiling.fill_s,
-                                       ceiling.hold_s, ceiling.settle_s, ceiling.settle_after_s))
+                                       ceiling.hold_s, ceiling.settle_s, ceiling.settle_after_s,
+                                       ceiling.reach_share))
     return checks
 
 

@@ -288,7 +288,11 @@ class ScanCeilingConfig(StrictFrozen):
     within a tenth of its farthest return, and that return, the ceiling, is
     at most ``max_ceiling_m`` away: a laser that sees 25 m of a hall still
     holds the matcher, one that sees 3 m of it does not (the laser blind
-    altogether is the scan check's, ``scan.min_returns``). A range limit does not come and go
+    altogether is the scan check's, ``scan.min_returns``). A cut is a ceiling
+    short of the laser's reach, so the ceiling must also be at most
+    ``reach_share`` of the farthest a return may lie (the laser's range, or
+    the front-end's ``max_range_m`` if nearer): a 10 m laser in an open yard
+    ends in gaps at 10 m and sees what it can. A range limit does not come and go
     from scan to scan: scans between two cut-off ones at most ``fill_s``
     apart count as cut off too. Nor does the scan matcher recover at once
     when the laser sees again: its local map still holds the cut scans'
@@ -304,6 +308,7 @@ class ScanCeilingConfig(StrictFrozen):
     min_edges: bounds.Count = Field(2, ge=1)
     min_edge_share: float = Field(0.5, gt=0.0, le=1.0)
     max_ceiling_m: Annotated[float, bounds.LASER_RANGE_M] = Field(10.0, gt=0.0)
+    reach_share: float = Field(0.9, gt=0.0, le=1.0)
     fill_s: Annotated[float, bounds.SPAN_S] = Field(0.0, ge=0.0)
     settle_s: Annotated[float, bounds.SPAN_S] = Field(0.0, ge=0.0)
     settle_after_s: Annotated[float, bounds.SPAN_S] = Field(0.0, ge=0.0)
