@@ -4,8 +4,8 @@ The file is byte for byte what open3d's ``write_point_cloud`` writes for a
 cloud of points only (its header, little-endian float64 x, y, z), so any
 PLY reader, open3d included, reads it; writing it needs no open3d.
 :func:`import_open3d` is for the map's self-check
-(:mod:`slam.outputs.self_check`, imported while the scans are matched:
-it costs a second or more) and for readers of the files (tests,
+(:mod:`slam.outputs.self_check`, in a process of its own that imports it
+while the run is mapped: it costs half a second) and for readers of the files (tests,
 notebooks); on Debian open3d's wheel links against libusb-1.0, which a
 bare system lacks, so the ``libusb-package`` wheel's copy is loaded first
 and open3d imports anywhere.
