@@ -35,10 +35,6 @@ from validation.proposal import ModelProposal, Source
 
 _COLUMN = 40
 MODEL_KEYS = ("model",)
-OBSERVER_KEYS = ("relations", "magnetometer", "gps", "scan", "scan_ceiling")
-"""The keys of ``validation.observers`` the proposal writes (its relations
-and every check of :attr:`~validation.proposal.ModelProposal.checks`); the
-base keeps its others."""
 
 
 def _period(t: np.ndarray) -> float | None:
@@ -146,8 +142,9 @@ def _model_lines(p: ModelProposal, indent: str) -> list[str]:
 def _observer_lines(p: ModelProposal, base: Mapping[str, Any], indent: str) -> list[str]:
     i2 = indent + "  "
     lines = [f"{indent}observers:"]
-    written = {*OBSERVER_KEYS, *p.checks}  # a check the proposal writes is never written twice
-    kept = {k: v for k, v in base.items() if k not in written}
+    # The proposal writes its relations and every check it knows (on or
+    # off); the base keeps its other keys, so none is written twice.
+    kept = {k: v for k, v in base.items() if k not in {"relations", *p.checks}}
     field_gyro = kept.get("field_gyro")
     if isinstance(field_gyro, Mapping) and field_gyro.get("enabled") \
             and field_gyro.get("name", "mag_field_gyro") not in p.unary_checks:
