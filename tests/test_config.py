@@ -407,3 +407,14 @@ def test_the_validation_and_gating_sections_name_a_bad_value_by_its_key_path():
         with pytest.raises(GslamError) as e:
             load_config(TELEMAX, [override])
         assert says in str(e.value)
+
+
+def test_a_misspelt_gated_factor_type_names_it():
+    """A factor type ``gating.factors`` names must be one the graph has (or
+    the submap constraints): a misspelt one would gate nothing."""
+    with pytest.raises(GslamError) as e:
+        load_config(TELEMAX, ["gating.factors.scan_matchin=[SM]"])
+    msg = one_line(e)
+    assert "gating.factors.scan_matchin: unknown factor type 'scan_matchin'" in msg and "submaps" in msg
+    config = load_config(TELEMAX, ["gating.factors.submaps=[SM]"])
+    assert validation_sections(config)[1].factors["submaps"] == {"*": ["SM"]}

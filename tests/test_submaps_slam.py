@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from validation.base.geometry import between, compose
+from slam.errors import GslamError
 from slam.recording import Scans
 from slam.sim.scenario import Region, RegionKind
 from slam.sim.world import World
@@ -139,6 +140,30 @@ def test_the_graph_estimate_holds_the_map_together(run):
     final = np.hypot(*(est[-1, :2] - truth[-1, :2]))
     assert final < 0.2 < np.hypot(*(odometry[-1, :2] - truth[-1, :2]))
     assert np.sqrt(np.mean(np.sum((est[:, :2] - truth[:, :2]) ** 2, axis=1))) < 0.15
+
+
+def test_local_slam_as_a_witness_keeps_the_heading_where_the_chain_over_turns():
+    """The ``sub`` witness (slam.submaps.build.local_witness): the chain
+    turns a fifth more than the robot (a wheel slipping in the turns; the
+    path turns its corners in one step, 90 deg then 108), and local SLAM's
+    headings still follow the walls."""
+    from slam.submaps.build import local_witness
+
+    rng = np.random.default_rng(11)
+    truth = ring_path(0.7, 1.0)
+    scans = simulate(building(), truth, rng)
+    steps, cov = drifting_odometry(truth, rng)
+    steps[1:, 2] *= 1.2
+    t = np.arange(len(truth), dtype=float) * 0.5
+    wit = local_witness(scans, np.arange(len(truth)), t, steps, cov, FrontendConfig(max_range_m=50.0),
+                        SubmapsConfig(enabled=True))
+    nodes = np.round(wit.t / 0.5).astype(int)
+    assert nodes[0] == 0 and np.all(np.diff(nodes) > 0)
+    turned = np.diff(np.unwrap(wit.yaw))
+    true_turn = np.diff(np.unwrap(truth[nodes, 2]))
+    chain_turn = np.add.reduceat(steps[1:, 2], nodes[:-1])[: len(true_turn)]
+    assert np.degrees(np.abs(chain_turn - true_turn)).max() > 15.0
+    assert np.degrees(np.abs(turned - true_turn)).max() < 3.0
 
 
 def test_nodes_are_taken_by_motion():
@@ -416,3 +441,72 @@ def test_choose_keeps_the_map_whose_returns_take_fewer_cells(short_run, monkeypa
     assert np.array_equal(chosen.backend.trajectory.x, alone.backend.trajectory.x)
     assert np.array_equal(chosen.backend.trajectory.yaw, alone.backend.trajectory.yaw)
     assert len(chosen.constraints) == len(alone.constraints)
+
+
+def test_the_submap_constraints_take_their_own_gating_where_given():
+    """``gating.factors.submaps``: the submap constraints' degrees of freedom
+    gated apart from scan matching's (slam.pipeline.core.submap_factors);
+    without it they take scan matching's."""
+    from types import SimpleNamespace
+
+    from slam.pipeline.core import submap_factors
+
+    c = SimpleNamespace(kind="intra", anchor=0, scan=3, submap=0, delta=np.array([1.0, 0.0, 0.1]),
+                        information=np.diag([100.0, 100.0, 400.0]))
+    submaps = SimpleNamespace(of_kind=lambda *kinds: [c], submap_keyframes=lambda s: np.arange(0, 3))
+    n = 4
+    sm = np.ones((n, 3))
+    sm[1, 2] = np.inf  # the scan matcher's yaw excluded at keyframe 1 (the odometry's slip it followed)
+    plain = submap_factors(submaps, {"scan_matching": sm}, n)
+    assert plain[0].information[2, 2] == 0.0 and plain[0].information[0, 0] == 100.0
+    own = submap_factors(submaps, {"scan_matching": sm}, n, own=np.ones((n, 3)))
+    assert np.array_equal(own[0].information, c.information)
+    blamed_own = np.ones((n, 3))
+    blamed_own[2] = np.inf  # the whole scan out: nothing of the constraint is left
+    assert submap_factors(submaps, {"scan_matching": sm}, n, own=blamed_own) == []
+
+
+def _witness_config(tmp_path, *overrides):
+    """configs/telemax.yaml with one more relation: the odometry's turns
+    against local SLAM's (``sub_yaw``), in a model that names it."""
+    import yaml
+
+    from slam.config import load_config
+    from tests.conftest import CONFIGS, TELEMAX_CONFIG
+
+    model = yaml.safe_load((CONFIGS / "validation" / "telemax_model.yaml").read_text())
+    model["components"].append("SUB_YAW")
+    model["relations"]["yaw_odo_sub"] = ["ODO_YAW", "SUB_YAW"]
+    (tmp_path / "model.yaml").write_text(yaml.safe_dump(model))
+    tree = yaml.safe_load(TELEMAX_CONFIG.read_text())
+    tree["validation"]["model"] = str(tmp_path / "model.yaml")
+    tree["validation"]["observers"]["relations"].append(
+        {"name": "yaw_odo_sub", "stream_a": "odo_yaw", "stream_b": "sub_yaw", "boundary": 0.05, "window_s": 2.0,
+         "threshold": 10})
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(tree))
+    return load_config(tmp_path / "c.yaml", ["output.plots=false", "validation.mode=on", *overrides])
+
+
+def test_the_validator_weighs_local_slam_as_a_sensor_where_an_observer_asks(short_run, tmp_path):
+    """A relation on a ``sub_*`` stream makes local SLAM run before the
+    validation (slam.pipeline.core.Mapping.witness), along the ungated
+    chain; its turns agree with the odometry's on a healthy stretch. A run
+    without the front-end cannot make it: one line says so."""
+    from slam.pipeline.core import Mapping
+    from slam.readers.read import read_recording
+
+    config = _witness_config(tmp_path)
+    core = Mapping(read_recording(short_run.run_dir, config.input), config, source=short_run.run_dir)
+    core.match_scans()
+    core.build_measurements()
+    core.validate()
+    trace = core.validation.observer_log.relations["yaw_odo_sub"]
+    assert trace.valid.mean() > 0.8
+    assert trace.no_match[trace.valid].mean() < 0.1
+
+    blind = _witness_config(tmp_path, "frontend.enabled=false", "backend.factors.scan_matching.enabled=false")
+    core = Mapping(read_recording(short_run.run_dir, blind.input), blind, source=short_run.run_dir)
+    core.match_scans()
+    core.build_measurements()
+    with pytest.raises(GslamError, match=r"compare stream sub_\*, local SLAM's submap match, which needs the scans"):
+        core.validate()

@@ -629,6 +629,7 @@ def load_config(path: str | Path | None, overrides: list[str] | tuple[str, ...] 
         in_model = model_file is not None and (key + ".").startswith("validation.model.")
         raise GslamError(f"{model_file if in_model else _blame(source, applied, key)}: {e}") from None
     _check_sources(vcfg, config.input, lambda key: _blame(source, applied, key))
+    _check_gated_factors(gcfg, lambda key: _blame(source, applied, key))
     # The checked sections, every default spelled out (validate_assignment
     # checks them as mappings).
     config.validation = vcfg.model_dump(mode="json", by_alias=True)
@@ -655,6 +656,18 @@ def _check_sources(vcfg, inputs: InputConfig, blame) -> None:
             where = f"validation.observers.relations.{i}.{key}"
             raise GslamError(f"{blame(where)}: {where}: stream {stream!r} is odometry source {split[0]!r}, which "
                              f"input.extra_odometry does not declare (declared: {declared})")
+
+
+def _check_gated_factors(gcfg, blame) -> None:
+    """Every factor type ``gating.factors`` names must be one the graph has
+    (or ``submaps``, the scan-to-submap constraints): a misspelt one would
+    gate nothing."""
+    known = (*FactorsConfig.model_fields, "submaps")
+    for name in gcfg.factors:
+        if name not in known:
+            where = f"gating.factors.{name}"
+            raise GslamError(f"{blame(where)}: {where}: unknown factor type {name!r}; expected one of "
+                             f"{', '.join(known)}")
 
 
 def enabled_factors(config: PipelineConfig) -> list[str]:

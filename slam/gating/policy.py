@@ -6,6 +6,8 @@ Every step of a run that depends on the mode asks its policy
 * :meth:`Gating.weigh`: the weight of every factor's degrees of freedom per
   keyframe (1 kept, > 1 inflated, inf excluded), with what the validator
   logged;
+* :meth:`Gating.witnesses`: the sensors the pipeline makes for the
+  validator to weigh (local SLAM's submap match, ``sub``);
 * :attr:`Gating.learns_scale`: whether the odometry's distance scale is
   learnt where validation keeps the scan matcher (:mod:`slam.gating.odometry_scale`);
 * :meth:`Gating.recheck`: offline validation's recheck of the blamed
@@ -20,6 +22,7 @@ The four policies: :class:`Ungated` (``off``), :class:`Validated` (``on``),
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,7 +32,7 @@ import numpy as np
 
 from slam.config import PipelineConfig, validation_sections
 from slam.errors import GslamError
-from slam.graph.measurements import FACTOR_DOFS, Measurements
+from slam.graph.measurements import FACTOR_DOFS, SUBMAP_DOFS, Measurements
 from slam.recording import Recording, Trajectory
 from validation.base.modes import GatingMode
 
@@ -43,12 +46,16 @@ log = logging.getLogger(__name__)
 class Weighing:
     """What a policy decided for a run: the weights per factor type
     (keyframes, degrees of freedom), the validator's outcome where it ran,
-    metrics, and ``validation.csv`` (text, or a function that writes it)."""
+    metrics, and ``validation.csv`` (text, or a function that writes it).
+    ``submaps``: the weights of the submap constraints where
+    ``gating.factors.submaps`` gates them apart from scan matching, else
+    None (they take scan matching's)."""
 
     weights: dict[str, np.ndarray]
     validation: Any = None
     metrics: dict[str, Any] = field(default_factory=dict)
     csv: str | Callable[[], str] | None = None
+    submaps: np.ndarray | None = None
 
 
 class Gating:
@@ -60,10 +67,17 @@ class Gating:
     def __init__(self, config: PipelineConfig, validation: ValidationConfig, gating: GatingConfig):
         self.config, self.validation, self.gating = config, validation, gating
 
-    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path) -> Weighing:
+    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path,
+              witnesses: dict[str, Trajectory] | None = None) -> Weighing:
+        """``witnesses``: the sensors :meth:`witnesses` asked for, by name."""
         from slam.graph.backend import unit_weights
 
         return Weighing(unit_weights(len(meas)))
+
+    def witnesses(self) -> list[str]:
+        """The odometry-like sources the pipeline makes for this policy to
+        weigh: ``sub`` where an observer compares one of its streams."""
+        return []
 
     def recheck(self, meas: Measurements, weights: dict[str, np.ndarray], pose0: np.ndarray):
         """The recheck's result (:class:`slam.gating.recheck.Recheck`), or
@@ -83,12 +97,17 @@ class _ByValidator(Gating):
 
     learns_scale = True
 
-    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path) -> Weighing:
+    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path,
+              witnesses: dict[str, Trajectory] | None = None) -> Weighing:
         from validation.validator import run_validation
 
-        outcome = run_validation(rec, scan_poses, meas.t, self.validation, self.gating, FACTOR_DOFS, rec.faults,
+        sensors = dataclasses.replace(rec, extra_odometry={**rec.extra_odometry, **witnesses}) if witnesses else rec
+        own = "submaps" in self.gating.factors
+        dofs = {**FACTOR_DOFS, "submaps": SUBMAP_DOFS} if own else FACTOR_DOFS
+        outcome = run_validation(sensors, scan_poses, meas.t, self.validation, self.gating, dofs, rec.faults,
                                  rec.magnetic_reference, self.scan_quality(rec, scan_poses))
-        return Weighing(outcome.weights, outcome, csv=outcome.csv_text)
+        weights = {f: w for f, w in outcome.weights.items() if f != "submaps"}
+        return Weighing(weights, outcome, csv=outcome.csv_text, submaps=outcome.weights.get("submaps"))
 
     def scan_quality(self, rec: Recording, scan_poses: Trajectory | None):
         return None
@@ -98,6 +117,10 @@ class Validated(_ByValidator):
     """``on``: sensor validation gates the factors (offline or causal)."""
 
     mode = GatingMode.ON
+
+    def witnesses(self) -> list[str]:
+        relations = self.validation.observers.relations
+        return ["sub"] if any(s.startswith("sub_") for r in relations for s in (r.stream_a, r.stream_b)) else []
 
     def scan_quality(self, rec: Recording, scan_poses: Trajectory | None):
         obs = self.validation.observers
@@ -128,10 +151,11 @@ class IntervalOracle(_ByValidator):
 
     mode = GatingMode.INTERVAL_ORACLE
 
-    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path) -> Weighing:
+    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path,
+              witnesses: dict[str, Trajectory] | None = None) -> Weighing:
         if not any(rec.faults.values()):
             log.info("oracle gating without true fault intervals: nothing will be gated")
-        return super().weigh(rec, scan_poses, meas, source)
+        return super().weigh(rec, scan_poses, meas, source, witnesses)
 
 
 class TightOracle(Gating):
@@ -142,7 +166,8 @@ class TightOracle(Gating):
     mode = GatingMode.ORACLE
     learns_scale = True
 
-    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path) -> Weighing:
+    def weigh(self, rec: Recording, scan_poses: Trajectory | None, meas: Measurements, source: Path,
+              witnesses: dict[str, Trajectory] | None = None) -> Weighing:
         from slam.gating.truth import tight_oracle_weights
 
         if rec.groundtruth is None:

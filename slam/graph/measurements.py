@@ -30,6 +30,10 @@ FACTOR_DOFS: dict[str, tuple[str, ...]] = {
 its noise model: a between factor's x (along the keyframe's heading), y
 (to its left) and yaw in the frame of keyframe k-1; a prior's world x, y or
 yaw."""
+SUBMAP_DOFS: tuple[str, ...] = FACTOR_DOFS["scan_matching"]
+"""The degrees of freedom of the scan-to-submap constraints (between factors,
+as scan matching's), which ``gating.factors.submaps`` may gate apart from
+scan matching (:func:`slam.pipeline.core.submap_factors`)."""
 
 
 # --- keyframes -------------------------------------------------------------

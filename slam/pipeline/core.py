@@ -25,7 +25,7 @@ from slam.errors import GslamError
 from slam.frontend.kiss import FrontendResult, run_frontend
 from slam.gating.policy import Weighing, gating_policy
 from slam.graph.measurements import Measurements, RelativeConstraint, build_measurements, select_keyframes
-from slam.recording import Recording, interpolate_poses
+from slam.recording import Recording, Trajectory, interpolate_poses
 
 if TYPE_CHECKING:
     from slam.frontend.worker import BackgroundScanMatching
@@ -140,13 +140,34 @@ class Mapping:
         """The weight of every factor's degrees of freedom per keyframe, as
         the gating policy decides (``validation.mode``)."""
         sm = self.frontend.poses if self.frontend is not None else None
-        self.weighing = w = self.policy.weigh(self.recording, sm, self.measurements, self.source)
+        t = time.perf_counter()
+        witnesses = {name: self.witness(name) for name in self.policy.witnesses()}
+        witness_s = time.perf_counter() - t
+        self.weighing = w = self.policy.weigh(self.recording, sm, self.measurements, self.source, witnesses)
         self.weights, self.validation = w.weights, w.validation
         self.extra_metrics.update(w.metrics)
         if w.validation is not None:
-            self.timings.validation_s = w.validation.time_s
+            self.timings.validation_s = w.validation.time_s + witness_s
         if w.csv is not None:
             self.extra_outputs["validation.csv"] = w.csv  # written while the figures are drawn
+
+    def witness(self, name: str) -> Trajectory:
+        """A sensor the validator weighs that this run makes: ``sub``, local
+        SLAM over the keyframes' scans along the ungated dead-reckoning
+        chain (:func:`slam.submaps.build.local_witness`)."""
+        if name != "sub":
+            raise ValueError(f"unknown witness {name!r}")
+        meas = self.measurements
+        if self.frontend is None or meas.scan_index is None:
+            raise GslamError(f"{self.source}: validation.observers.relations compare stream sub_*, local SLAM's "
+                             "submap match, which needs the scans and the front-end (frontend.enabled); "
+                             "this run has neither")
+        from slam.loops.chain import fuse_steps
+        from slam.submaps.build import local_witness
+
+        steps, step_cov = fuse_steps(meas, None)
+        return local_witness(self.recording.scans, meas.scan_index, meas.t, steps, step_cov, self.config.frontend,
+                             self.config.submaps)
 
     def learn_odometry_scale(self) -> None:
         """With ``backend.factors.odometry.learn_scale`` and a policy that
@@ -271,7 +292,8 @@ class Mapping:
             self.recording.scans, meas.scan_index, steps, step_cov, self.config.frontend, cfg, before_judging, blamed,
             self.progress, self.concurrent,
         )
-        self.constraints = [*self.constraints, *submap_factors(self.submaps, self.weights, len(meas), blamed)]
+        own = self.weighing.submaps if self.weighing is not None else None
+        self.constraints = [*self.constraints, *submap_factors(self.submaps, self.weights, len(meas), blamed, own)]
         self.timings.submaps_s += time.perf_counter() - t
 
     def find_loops(self):
@@ -477,16 +499,18 @@ def blamed_scans(weights: dict[str, np.ndarray], n: int) -> np.ndarray:
     return np.isinf(dof_weights(sm, "scan_matching")).all(axis=1)
 
 
-def submap_factors(submaps, weights: dict[str, np.ndarray], n: int,
-                   blamed: np.ndarray | None = None) -> list[RelativeConstraint]:
+def submap_factors(submaps, weights: dict[str, np.ndarray], n: int, blamed: np.ndarray | None = None,
+                   own: np.ndarray | None = None) -> list[RelativeConstraint]:
     """The local and near submap constraints as between factors. A
     constraint rests on the scans of its submap and on its own: each degree
-    of freedom takes the largest scan-matching weight over those keyframes
-    (an excluded one drops that degree of freedom); a ``blamed`` keyframe's
-    scan was left out of the submaps, so the constraints do not rest on it."""
+    of freedom takes the largest weight over those keyframes (an excluded
+    one drops that degree of freedom), the constraints' ``own`` weights
+    (``gating.factors.submaps``) where given, else scan matching's; a
+    ``blamed`` keyframe's scan was left out of the submaps, so the
+    constraints do not rest on it."""
     from slam.graph.backend import dof_weights
 
-    sm = weights.get("scan_matching")
+    sm = own if own is not None else weights.get("scan_matching")
     w = dof_weights(sm, "scan_matching") if sm is not None else np.ones((n, 3))
     out = []
     for c in submaps.of_kind("intra", "near"):

@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from slam.config import FrontendConfig
-from slam.recording import Scans
+from slam.recording import Scans, Trajectory
 from slam.config.submaps import SubmapsConfig
 from slam.processes import background
 from slam.processes.background import Inbox
@@ -58,6 +58,44 @@ def select_nodes(steps: np.ndarray, spacing_m: float, turn_rad: float) -> np.nda
         if np.hypot(d[0], d[1]) >= spacing_m or abs(d[2]) >= turn_rad:
             nodes.append(k)
     return np.asarray(nodes)
+
+
+def node_chain(steps: np.ndarray, step_cov: np.ndarray,
+               config: SubmapsConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The submap nodes of the keyframe chain ``steps`` (K, 3) with its step
+    covariances ``step_cov`` (K, 3, 3): the nodes (:func:`select_nodes`),
+    the chain's poses (K, 3), and its steps (N, 3) and their covariances
+    (N, 3, 3) from node to node (row 0 unused)."""
+    nodes = select_nodes(steps, config.node_spacing_m, np.radians(config.node_turn_deg))
+    chain = integrate(np.zeros(3), steps)
+    node_steps = np.zeros((len(nodes), 3))
+    node_steps[1:] = between(chain[nodes[:-1]], chain[nodes[1:]])
+    cum = np.cumsum(step_cov, axis=0)
+    node_cov = np.zeros((len(nodes), 3, 3))
+    node_cov[1:] = cum[nodes[1:]] - cum[nodes[:-1]]
+    return nodes, chain, node_steps, node_cov
+
+
+def local_witness(scans: Scans, scan_index: np.ndarray, t: np.ndarray, steps: np.ndarray, step_cov: np.ndarray,
+                  frontend: FrontendConfig, config: SubmapsConfig) -> Trajectory:
+    """Local SLAM alone as a sensor of its own, for the validation (the
+    ``sub`` streams, :mod:`validation.streams.names`): the pose of every
+    keyframe (times ``t``, (K,)), each submap node where its scan's match
+    against the submap being built places it, the keyframes between two
+    nodes (less than ``node_spacing_m`` and ``node_turn_deg`` apart) hung
+    off the node before them by the chain. The chain ``steps`` only centres
+    each search; the search itself spans the chain's uncertainty, at least
+    ``local.angular_window_deg`` and ``local.linear_window_m``, so where the
+    chain turns or travels wrong (the odometry slipping, the scan matcher
+    it seeds following it) the match still finds the scan where the walls
+    it saw before put it."""
+    nodes, chain, node_steps, node_cov = node_chain(steps, step_cov, config)
+    points = ScanPoints(scans, frontend.min_range_m, frontend.max_range_m, config.voxel_m, index=scan_index[nodes],
+                        search_voxel_m=config.resolution_m)
+    local = run_local_slam(points, node_steps, node_cov, config).poses
+    owner = np.searchsorted(nodes, np.arange(len(steps)), side="right") - 1
+    p = compose(local[owner], between(chain[nodes[owner]], chain))
+    return Trajectory(np.asarray(t, dtype=float), p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy())
 
 
 def _walk(inbox: Inbox, points: ScanPoints, config: SubmapsConfig, steps: np.ndarray, step_cov: np.ndarray,
@@ -131,13 +169,7 @@ def build_submap_constraints(
     runs after it here); the same code on the same data either way, so the
     same result to the last bit."""
     start = time.perf_counter()
-    nodes = select_nodes(steps, config.node_spacing_m, np.radians(config.node_turn_deg))
-    chain = integrate(np.zeros(3), steps)
-    node_steps = np.zeros((len(nodes), 3))
-    node_steps[1:] = between(chain[nodes[:-1]], chain[nodes[1:]])
-    cum = np.cumsum(step_cov, axis=0)
-    node_cov = np.zeros((len(nodes), 3, 3))
-    node_cov[1:] = cum[nodes[1:]] - cum[nodes[:-1]]
+    nodes, chain, node_steps, node_cov = node_chain(steps, step_cov, config)
     points = ScanPoints(scans, frontend.min_range_m, frontend.max_range_m, config.voxel_m, index=scan_index[nodes],
                         search_voxel_m=config.resolution_m)
     if blamed is not None:

@@ -17,8 +17,11 @@ fix_speed    its speed derived as ``gps_speed`` is (the regression slope of
 ============ ================================================================
 
 The built-in sources are ``odo`` (the odometry, components ``ODO_DIST`` and
-``ODO_YAW``) and ``sm`` (scan matching: ``SM_DIST``, ``SM_LAT`` for its
-sideways travel, ``SM_YAW``). A further odometry source named ``vo`` (a
+``ODO_YAW``), ``sm`` (scan matching: ``SM_DIST``, ``SM_LAT`` for its
+sideways travel, ``SM_YAW``) and ``sub`` (local SLAM's scan-to-submap
+match, :func:`slam.submaps.build.local_witness`: ``SUB_YAW``, ``SUB_DIST``;
+a witness that does not start where the odometry says, made only when an
+observer compares one of its streams). A further odometry source named ``vo`` (a
 visual odometry, a second wheel odometry: ``input.extra_odometry``) gives
 ``vo_yaw`` ... ``vo_fix_speed``, components ``VO_YAW`` and ``VO_DIST``, as
 the odometry's do.
@@ -42,7 +45,7 @@ QualityStreamName = Literal[
 ODOMETRY_QUANTITIES: tuple[str, ...] = ("yaw", "distance", "forward", "lateral", "speed", "fix_speed")
 """The streams of every odometry-like source, ``{source}_{quantity}``."""
 INTEGRATED_QUANTITIES: frozenset[str] = frozenset({"yaw", "distance", "forward", "lateral"})
-BUILTIN_SOURCES: dict[str, str] = {"odo": "ODO", "sm": "SM"}
+BUILTIN_SOURCES: dict[str, str] = {"odo": "ODO", "sm": "SM", "sub": "SUB"}
 """The odometry-like sources every run may have, and their sensor's component prefix."""
 RESERVED_SOURCE_NAMES: frozenset[str] = frozenset({*BUILTIN_SOURCES, "gyro", "compass", "gps", "mag", "scan", "imu",
                                                     "loop"})
