@@ -504,6 +504,12 @@ def test_the_validator_weighs_local_slam_as_a_sensor_where_an_observer_asks(shor
     assert trace.valid.mean() > 0.8
     assert trace.no_match[trace.valid].mean() < 0.1
 
+    from slam.commands.calibrate.runs import load_run
+    from slam.config import validation_sections
+
+    calibrated = load_run(short_run.run_dir, config, validation_sections(config)[0], None)
+    assert "sub_yaw" in calibrated.streams  # gslam calibrate learns its relations too
+
     blind = _witness_config(tmp_path, "frontend.enabled=false", "backend.factors.scan_matching.enabled=false")
     core = Mapping(read_recording(short_run.run_dir, blind.input), blind, source=short_run.run_dir)
     core.match_scans()

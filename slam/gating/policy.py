@@ -101,7 +101,7 @@ class _ByValidator(Gating):
               witnesses: dict[str, Trajectory] | None = None) -> Weighing:
         from validation.validator import run_validation
 
-        sensors = dataclasses.replace(rec, extra_odometry={**rec.extra_odometry, **witnesses}) if witnesses else rec
+        sensors = with_witnesses(rec, witnesses or {})
         own = "submaps" in self.gating.factors
         dofs = {**FACTOR_DOFS, "submaps": SUBMAP_DOFS} if own else FACTOR_DOFS
         outcome = run_validation(sensors, scan_poses, meas.t, self.validation, self.gating, dofs, rec.faults,
@@ -119,8 +119,7 @@ class Validated(_ByValidator):
     mode = GatingMode.ON
 
     def witnesses(self) -> list[str]:
-        relations = self.validation.observers.relations
-        return ["sub"] if any(s.startswith("sub_") for r in relations for s in (r.stream_a, r.stream_b)) else []
+        return witness_names(self.validation)
 
     def scan_quality(self, rec: Recording, scan_poses: Trajectory | None):
         obs = self.validation.observers
@@ -183,6 +182,20 @@ class TightOracle(Gating):
             return
         ev = self.config.evaluation
         oracle_loops(obs, truth, ev.sm_fault_trans_m, np.radians(ev.sm_fault_yaw_deg))
+
+
+def witness_names(validation: ValidationConfig) -> list[str]:
+    """The sensors the pipeline makes for ``validation``'s observers:
+    ``sub`` (local SLAM, :meth:`slam.pipeline.core.Mapping.witness`) where a
+    relation compares one of its streams."""
+    relations = validation.observers.relations
+    return ["sub"] if any(s.startswith("sub_") for r in relations for s in (r.stream_a, r.stream_b)) else []
+
+
+def with_witnesses(rec: Recording, witnesses: dict[str, Trajectory]) -> Recording:
+    """``rec`` with ``witnesses`` among its further odometry sources, as the
+    validator reads them (the recording itself unchanged)."""
+    return dataclasses.replace(rec, extra_odometry={**rec.extra_odometry, **witnesses}) if witnesses else rec
 
 
 POLICIES: dict[GatingMode, type[Gating]] = {

@@ -18,6 +18,7 @@ import numpy as np
 
 from slam.config import PipelineConfig
 from slam.errors import GslamError
+from slam.gating.policy import with_witnesses, witness_names
 from slam.pipeline.config_fit import check_fit
 from slam.pipeline.core import Mapping
 from slam.readers.read import read_recording
@@ -77,7 +78,8 @@ def load_run(path: str | Path, config: PipelineConfig, vcfg: ValidationConfig, c
     pipe.build_measurements()
     kt = pipe.measurements.t
     obs = vcfg.observers
-    streams = validation_streams(rec, pipe.frontend.poses if pipe.frontend is not None else None,
+    sensors = with_witnesses(rec, {name: pipe.witness(name) for name in witness_names(vcfg)})
+    streams = validation_streams(sensors, pipe.frontend.poses if pipe.frontend is not None else None,
                                  obs.gps_speed_window_s, vcfg.window, field_gyro_stream(obs),
                                  gps_course_limits(obs))
     step_t = fixed_rate_steps(float(kt[0]), float(kt[-1]), vcfg.rate_hz)
