@@ -188,8 +188,11 @@ def witness_names(validation: ValidationConfig) -> list[str]:
     """The sensors the pipeline makes for ``validation``'s observers:
     ``sub`` (local SLAM, :meth:`slam.pipeline.core.Mapping.witness`) where a
     relation compares one of its streams."""
-    relations = validation.observers.relations
-    return ["sub"] if any(s.startswith("sub_") for r in relations for s in (r.stream_a, r.stream_b)) else []
+    from validation.streams.names import split_source_stream
+
+    sources = {(split_source_stream(s) or ("",))[0] for r in validation.observers.relations
+               for s in (r.stream_a, r.stream_b)}
+    return ["sub"] if "sub" in sources else []
 
 
 def with_witnesses(rec: Recording, witnesses: dict[str, Trajectory]) -> Recording:

@@ -76,6 +76,22 @@ def node_chain(steps: np.ndarray, step_cov: np.ndarray,
     return nodes, chain, node_steps, node_cov
 
 
+def node_points(scans: Scans, scan_index: np.ndarray, nodes: np.ndarray, frontend: FrontendConfig,
+                config: SubmapsConfig) -> ScanPoints:
+    """The scans of the submap nodes (keyframes ``nodes`` of the keyframes
+    whose scans are ``scans[scan_index]``), as the submaps read them."""
+    return ScanPoints(scans, frontend.min_range_m, frontend.max_range_m, config.voxel_m, index=scan_index[nodes],
+                      search_voxel_m=config.resolution_m)
+
+
+def hang_off_nodes(node_poses: np.ndarray, nodes: np.ndarray, chain: np.ndarray) -> np.ndarray:
+    """Every keyframe's pose (K, 3): each hangs off the node before it
+    (``node_poses`` (N, 3) of keyframes ``nodes``) by the chain's poses
+    ``chain`` (K, 3)."""
+    owner = np.searchsorted(nodes, np.arange(len(chain)), side="right") - 1
+    return compose(node_poses[owner], between(chain[nodes[owner]], chain))
+
+
 def local_witness(scans: Scans, scan_index: np.ndarray, t: np.ndarray, steps: np.ndarray, step_cov: np.ndarray,
                   frontend: FrontendConfig, config: SubmapsConfig) -> Trajectory:
     """Local SLAM alone as a sensor of its own, for the validation (the
@@ -90,11 +106,8 @@ def local_witness(scans: Scans, scan_index: np.ndarray, t: np.ndarray, steps: np
     it seeds following it) the match still finds the scan where the walls
     it saw before put it."""
     nodes, chain, node_steps, node_cov = node_chain(steps, step_cov, config)
-    points = ScanPoints(scans, frontend.min_range_m, frontend.max_range_m, config.voxel_m, index=scan_index[nodes],
-                        search_voxel_m=config.resolution_m)
-    local = run_local_slam(points, node_steps, node_cov, config).poses
-    owner = np.searchsorted(nodes, np.arange(len(steps)), side="right") - 1
-    p = compose(local[owner], between(chain[nodes[owner]], chain))
+    local = run_local_slam(node_points(scans, scan_index, nodes, frontend, config), node_steps, node_cov, config)
+    p = hang_off_nodes(local.poses, nodes, chain)
     return Trajectory(np.asarray(t, dtype=float), p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy())
 
 
@@ -170,8 +183,7 @@ def build_submap_constraints(
     same result to the last bit."""
     start = time.perf_counter()
     nodes, chain, node_steps, node_cov = node_chain(steps, step_cov, config)
-    points = ScanPoints(scans, frontend.min_range_m, frontend.max_range_m, config.voxel_m, index=scan_index[nodes],
-                        search_voxel_m=config.resolution_m)
+    points = node_points(scans, scan_index, nodes, frontend, config)
     if blamed is not None:
         points.leave_out(np.flatnonzero(np.asarray(blamed)[nodes]))
     walk = _WalkBeside(concurrent, points, config, node_steps, node_cov, before_judging)
@@ -181,8 +193,7 @@ def build_submap_constraints(
     finally:
         walk.close()
     # Back to keyframes: every keyframe hangs off the node before it by the chain.
-    owner = np.searchsorted(nodes, np.arange(len(steps)), side="right") - 1
-    estimate = compose(found.poses[owner], between(chain[nodes[owner]], chain))
+    estimate = hang_off_nodes(found.poses, nodes, chain)
 
     def to_keyframes(c: Constraint) -> Constraint:
         return replace(c, anchor=int(nodes[c.anchor]), scan=int(nodes[c.scan]))
