@@ -62,14 +62,22 @@ def csv_text(rows: Sequence[dict], fieldnames: Sequence[str] | None = None) -> s
 
 
 def machine() -> str:
-    """One line: CPU, cores, memory, Python and the main packages' versions."""
+    """One line: CPU (with its family, model and widest vector unit: two
+    machines both called "AMD EPYC" can be a generation apart, and numpy
+    and the compiled kernels then take other code paths, which round
+    differently; a map that hangs on one weak match can then differ),
+    cores, memory, Python and the main packages' versions."""
     cpu = platform.processor() or platform.machine()
     mem_kib = 0
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
+        info = dict(line.split(":", 1) for line in Path("/proc/cpuinfo").read_text().split("\n\n")[0].splitlines()
+                    if ":" in line)
+        info = {k.strip(): v.strip() for k, v in info.items()}
+        cpu = info.get("model name", cpu)
+        if "cpu family" in info and "model" in info:
+            flags = set(info.get("flags", "").split())
+            vector = next((v for v, f in (("AVX-512", "avx512f"), ("AVX2", "avx2")) if f in flags), "no AVX2")
+            cpu += f" (family {info['cpu family']} model {info['model']}, {vector})"
         mem_kib = int(Path("/proc/meminfo").read_text().split()[1])
     except (OSError, ValueError, IndexError):
         pass
