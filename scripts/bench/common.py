@@ -61,6 +61,16 @@ def csv_text(rows: Sequence[dict], fieldnames: Sequence[str] | None = None) -> s
     return buf.getvalue()
 
 
+def cpu_info() -> dict[str, str]:
+    """The first processor's fields of /proc/cpuinfo (empty where there is none)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return {}
+    pairs = (line.split(":", 1) for line in text.split("\n\n")[0].splitlines() if ":" in line)
+    return {k.strip(): v.strip() for k, v in pairs}
+
+
 def machine() -> str:
     """One line: CPU (with its family, model and widest vector unit: two
     machines both called "AMD EPYC" can be a generation apart, and numpy
@@ -70,9 +80,7 @@ def machine() -> str:
     cpu = platform.processor() or platform.machine()
     mem_kib = 0
     try:
-        info = dict(line.split(":", 1) for line in Path("/proc/cpuinfo").read_text().split("\n\n")[0].splitlines()
-                    if ":" in line)
-        info = {k.strip(): v.strip() for k, v in info.items()}
+        info = cpu_info()
         cpu = info.get("model name", cpu)
         if "cpu family" in info and "model" in info:
             flags = set(info.get("flags", "").split())
