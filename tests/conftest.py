@@ -16,11 +16,15 @@ from pathlib import Path
 
 from typing import TYPE_CHECKING
 
-import pytest
-import yaml
+try:  # first, so numpy's BLAS kernels are pinned as gslam pins them (slam/host.py)
+    import slam  # noqa: F401
+except ImportError:  # validation's own tests (tests/validation/) run without slam
+    pass
 
-# slam is imported by the fixtures that need it, not here: validation's own
-# tests (tests/validation/) run without it.
+import pytest  # noqa: E402
+import yaml  # noqa: E402
+
+# slam's modules are imported by the fixtures that need them, not here.
 if TYPE_CHECKING:
     from slam.pipeline.folder import MapResult
     from slam.sim import Scenario, SimulationResult

@@ -112,7 +112,7 @@ def test_no_import_cycles():
 
 LAYERS = (
     ("validation",),  # the method, and its shared basics (validation.base): imports nothing of slam
-    ("slam", "slam.errors", "slam.recording", "slam.resources", "slam.config", "slam.processes", "slam.results"),
+    ("slam", "slam.host", "slam.errors", "slam.recording", "slam.resources", "slam.config", "slam.processes", "slam.results"),
     ("slam.readers", "slam.matching"),
     ("slam.frontend", "slam.graph"),
     ("slam.gating", "slam.submaps", "slam.loops", "slam.sim"),

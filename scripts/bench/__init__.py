@@ -9,3 +9,5 @@ Each benchmark is a module here with a ``main(argv)``; what they share
 (paths, the robust-kernel list, config building) is in :mod:`.common`, and
 the judges of a real recording's own faults in :mod:`.judges`.
 """
+
+import slam  # noqa: E402,F401  (first: numpy's BLAS kernels pinned as gslam pins them, slam/host.py)
