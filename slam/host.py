@@ -32,16 +32,20 @@ NEEDS = frozenset({"avx2", "fma"})
 """The CPU flags those kernels need (Linux's names in ``/proc/cpuinfo``)."""
 
 
-def cpu_flags(path: str = "/proc/cpuinfo") -> frozenset[str]:
-    """The first processor's flags; empty where ``path`` cannot be read."""
+def cpu_info(path: str = "/proc/cpuinfo") -> dict[str, str]:
+    """The first processor's fields of ``path`` (empty where it cannot be read)."""
     try:
         with open(path, encoding="ascii", errors="replace") as f:
-            for line in f:
-                if line.startswith("flags"):
-                    return frozenset(line.partition(":")[2].split())
+            first = f.read().split("\n\n")[0]
     except OSError:
-        pass
-    return frozenset()
+        return {}
+    pairs = (line.split(":", 1) for line in first.splitlines() if ":" in line)
+    return {k.strip(): v.strip() for k, v in pairs}
+
+
+def cpu_flags(path: str = "/proc/cpuinfo") -> frozenset[str]:
+    """The first processor's flags; empty where ``path`` cannot be read."""
+    return frozenset(cpu_info(path).get("flags", "").split())
 
 
 def pin_blas_kernels() -> str | None:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import yaml
 
+from slam.host import cpu_info
 from slam.results.atomic import write_text
 
 REPO = Path(__file__).resolve().parents[2]
@@ -59,16 +60,6 @@ def csv_text(rows: Sequence[dict], fieldnames: Sequence[str] | None = None) -> s
     writer.writeheader()
     writer.writerows(rows)
     return buf.getvalue()
-
-
-def cpu_info() -> dict[str, str]:
-    """The first processor's fields of /proc/cpuinfo (empty where there is none)."""
-    try:
-        text = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return {}
-    pairs = (line.split(":", 1) for line in text.split("\n\n")[0].splitlines() if ":" in line)
-    return {k.strip(): v.strip() for k, v in pairs}
 
 
 def machine() -> str:
