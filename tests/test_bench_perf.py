@@ -54,3 +54,21 @@ def test_carmen_inputs_come_from_the_data_folder(tmp_path, monkeypatch):
     monkeypatch.setenv("GSLAM_DATA", str(tmp_path))
     with pytest.raises(GslamError, match=str(tmp_path / "carmen")):
         carmen_inputs()
+
+
+def test_timed_programs_keep_their_bytecode_in_the_bench_folder(tmp_path, monkeypatch):
+    # A host that forbids bytecode caches would have every timed gslam
+    # process compile the project again; the bench times them as a user's
+    # machine runs them, with the caches kept in its own folder.
+    import subprocess
+    import sys
+
+    from scripts.bench.perf import speed
+
+    monkeypatch.setenv("PYTHONDONTWRITEBYTECODE", "1")
+    monkeypatch.setitem(speed.BYTECODE_ENV, "PYTHONPYCACHEPREFIX", str(tmp_path / "pycache"))
+    code = "import sys; print(sys.flags.dont_write_bytecode, sys.pycache_prefix)"
+    out = subprocess.run([sys.executable, "-c", code], env=speed._env(), capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["0", str(tmp_path / "pycache")]
+    monkeypatch.delitem(speed.BYTECODE_ENV, "PYTHONPYCACHEPREFIX")
+    assert speed._env()["PYTHONDONTWRITEBYTECODE"] == "1"  # untouched outside the speed section
