@@ -32,9 +32,10 @@ them. Programs, each a fresh interpreter, compared like with like:
 
 Every program runs with Python's bytecode cached, as on a user's machine
 after the first run (the interpreter writes it unless told not to): the
-caches go to ``OUT/pycache`` (``PYTHONPYCACHEPREFIX``, so nothing is
-written beside the code), ``PYTHONDONTWRITEBYTECODE`` is dropped, and each
-program runs once, untimed, on the first input before the rounds. A host
+caches go to the bench's ``--out``/pycache (``PYTHONPYCACHEPREFIX``, so
+nothing is written beside the code), ``PYTHONDONTWRITEBYTECODE`` is
+dropped, and each program runs once, untimed, on the first input before
+the rounds. A host
 that forbids the caches otherwise has every gslam process compile the
 project's modules again: 0.7 s of 9.9 s on telemax_lab on a 2-core EPYC.
 
@@ -111,7 +112,8 @@ def data_span(run: Path) -> float:
 
 
 BYTECODE_ENV: dict[str, str] = {}
-"""Set by :func:`speed_section`: where the timed programs keep their bytecode."""
+"""Where the timed programs keep their bytecode (``PYTHONPYCACHEPREFIX``),
+set by the perf bench for all its sections; empty: as this process."""
 
 
 def _env(extra: dict[str, str] | None = None) -> dict[str, str]:
@@ -384,7 +386,7 @@ def speed_section(out: Path, repeats: int, inputs: list[str], laps: int, config:
     samples: list[Sample] = []
     identity: dict[str, list[str]] = {}
     programs_seen: list[str] = []
-    BYTECODE_ENV["PYTHONPYCACHEPREFIX"] = str((out / "pycache").resolve())
+    BYTECODE_ENV.setdefault("PYTHONPYCACHEPREFIX", str((out / "pycache").resolve()))
     warm_up(todo[0], kiss_threads, code, gslam_sets, out)
     loads_start = os.getloadavg()
     for item in todo:
