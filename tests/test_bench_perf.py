@@ -68,7 +68,7 @@ def test_timed_programs_keep_their_bytecode_in_the_bench_folder(tmp_path, monkey
     monkeypatch.setenv("PYTHONDONTWRITEBYTECODE", "1")
     monkeypatch.setitem(speed.BYTECODE_ENV, "PYTHONPYCACHEPREFIX", str(tmp_path / "pycache"))
     code = "import sys; print(sys.flags.dont_write_bytecode, sys.pycache_prefix)"
-    out = subprocess.run([sys.executable, "-c", code], env=speed._env(), capture_output=True, text=True, check=True)
+    out = subprocess.run([sys.executable, "-c", code], env=speed.timed_env(), capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["0", str(tmp_path / "pycache")]
     monkeypatch.delitem(speed.BYTECODE_ENV, "PYTHONPYCACHEPREFIX")
-    assert speed._env()["PYTHONDONTWRITEBYTECODE"] == "1"  # untouched outside the speed section
+    assert speed.timed_env()["PYTHONDONTWRITEBYTECODE"] == "1"  # untouched outside the perf bench

@@ -35,9 +35,9 @@ after the first run (the interpreter writes it unless told not to): the
 caches go to the bench's ``--out``/pycache (``PYTHONPYCACHEPREFIX``, so
 nothing is written beside the code), ``PYTHONDONTWRITEBYTECODE`` is
 dropped, and each program runs once, untimed, on the first input before
-the rounds. A host
-that forbids the caches otherwise has every gslam process compile the
-project's modules again: 0.7 s of 9.9 s on telemax_lab on a 2-core EPYC.
+the rounds. A host that forbids the caches otherwise has every gslam
+process compile the project's modules again: 0.7 s of 9.9 s on
+telemax_lab on a 2-core EPYC.
 
 The programs take turns within each round, so load from elsewhere hits
 them alike, and each round gives its own ratio of a gslam program to its
@@ -116,7 +116,7 @@ BYTECODE_ENV: dict[str, str] = {}
 set by the perf bench for all its sections; empty: as this process."""
 
 
-def _env(extra: dict[str, str] | None = None) -> dict[str, str]:
+def timed_env(extra: dict[str, str] | None = None) -> dict[str, str]:
     """The timed programs' environment: this one, with bytecode cached
     (:data:`BYTECODE_ENV`), and ``extra``."""
     env = {k: v for k, v in os.environ.items() if not (BYTECODE_ENV and k == "PYTHONDONTWRITEBYTECODE")}
@@ -127,7 +127,7 @@ def _timed(cmd: list[str], env: dict[str, str] | None = None, cwd: Path = ROOT) 
     """Wall and CPU seconds (user + sys of the child and its children) of ``cmd``."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=cwd, env=env if env is not None else _env(), capture_output=True, text=True)
+    proc = subprocess.run(cmd, cwd=cwd, env=env if env is not None else timed_env(), capture_output=True, text=True)
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode != 0:
@@ -211,7 +211,7 @@ def run_kiss_slam(name: str, executable: str, scans: Path, work: Path, rnd: int,
 
 def run_gslam(name: str, program: str, code: Path, run: Path, config: Path, out: Path, rnd: int, keep: Path | None,
               sets: tuple[str, ...] = (), args: tuple[str, ...] = ("--gating", "on")) -> Sample:
-    env = _env({"PYTHONPATH": str(code)})
+    env = timed_env({"PYTHONPATH": str(code)})
     cmd = [sys.executable, "-m", "slam.cli", "-q", "map", str(run), "--config", str(config), "--out", str(out),
            *args, *(a for s in sets for a in ("--set", s))]
     load = os.getloadavg()[0]
@@ -386,7 +386,6 @@ def speed_section(out: Path, repeats: int, inputs: list[str], laps: int, config:
     samples: list[Sample] = []
     identity: dict[str, list[str]] = {}
     programs_seen: list[str] = []
-    BYTECODE_ENV.setdefault("PYTHONPYCACHEPREFIX", str((out / "pycache").resolve()))
     warm_up(todo[0], kiss_threads, code, gslam_sets, out)
     loads_start = os.getloadavg()
     for item in todo:

@@ -51,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from scripts.bench.common import simulated, table
+from scripts.bench.perf.speed import timed_env
 from slam.config import load_config
 
 log = logging.getLogger(__name__)
@@ -169,15 +170,13 @@ def bench_cli(report: Report, cache: Path, out: Path, repeats: int) -> None:
     """``gslam map`` as a command in a fresh process: imports included, the
     bytecode cached (:data:`scripts.bench.perf.speed.BYTECODE_ENV`) by an
     untimed run first."""
-    from scripts.bench.perf.speed import _env
-
     run = simulated(cache, "telemax_lab", SEED)
     walls = []
     for k in range(repeats + 1):
         cmd = [sys.executable, "-m", "slam.cli", "map", str(run), "--config", str(CONFIG),
                "--out", str(out / f"cli{k}"), "--gating", "on"]
         t = time.perf_counter()
-        subprocess.run(cmd, check=True, cwd=ROOT, env=_env(), capture_output=True)
+        subprocess.run(cmd, check=True, cwd=ROOT, env=timed_env(), capture_output=True)
         if k:
             walls.append(time.perf_counter() - t)
     duration = json.loads((out / "cli1" / "metrics.json").read_text())["duration_s"]
@@ -207,9 +206,7 @@ def map_in_child(run: Path, out: Path) -> dict:
     peak resident memory (MiB, that child's ``ru_maxrss``)."""
     cmd = [sys.executable, "-m", "scripts.bench", "perf", "--child-map", str(run), str(out)]
     t = time.perf_counter()
-    from scripts.bench.perf.speed import _env
-
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=timed_env(), stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     stdout = proc.stdout.read()
     _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
