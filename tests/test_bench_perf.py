@@ -72,3 +72,19 @@ def test_timed_programs_keep_their_bytecode_in_the_bench_folder(tmp_path, monkey
     assert out.stdout.split() == ["0", str(tmp_path / "pycache")]
     monkeypatch.delitem(speed.BYTECODE_ENV, "PYTHONPYCACHEPREFIX")
     assert speed.timed_env()["PYTHONDONTWRITEBYTECODE"] == "1"  # untouched outside the perf bench
+
+
+def test_a_run_of_some_sections_leaves_the_published_page_alone(tmp_path, monkeypatch):
+    # docs/results/perf.md holds every section; a run of one section must
+    # not replace it with that section alone.
+    from scripts.bench import common
+    from scripts.bench.perf import SECTIONS, write_page
+
+    monkeypatch.setattr(common, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(common, "commit", lambda: "abc")
+    written = write_page("ratio figures\n", ["--sections", "ratio"], ["ratio"], tmp_path / "out")
+    assert written == tmp_path / "out" / "perf.md"
+    assert not (tmp_path / "results").exists()
+    assert "ratio figures" in written.read_text() and "--sections ratio" in written.read_text()
+    monkeypatch.setattr(common, "REPO", tmp_path)
+    assert write_page("every figure\n", [], list(SECTIONS), tmp_path / "out") == tmp_path / "results" / "perf.md"

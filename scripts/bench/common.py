@@ -106,16 +106,23 @@ def publish(name: str, title: str, body: str, argv: Sequence[str] | None, bench:
     """Write ``docs/results/NAME.md``: ``title``, a header naming the
     command (``python -m scripts.bench BENCH ARGV``, BENCH defaulting to
     NAME), commit, machine and date, then ``body`` (Markdown)."""
-    command = " ".join(["python -m scripts.bench", bench or name, *map(shlex.quote, argv or [])])
+    path = RESULTS / f"{name}.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text(path, stamped(title, body, argv, bench or name))
+    print(f"wrote {path.relative_to(REPO)}")
+    return path
+
+
+def stamped(title: str, body: str, argv: Sequence[str] | None, bench: str) -> str:
+    """A results page: ``title``, the header naming the command
+    (``python -m scripts.bench BENCH ARGV``), commit, machine and date,
+    then ``body``."""
+    command = " ".join(["python -m scripts.bench", bench, *map(shlex.quote, argv or [])])
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     header = (f"# {title}\n\n"
               f"Written by `{command}` at commit {commit()}, {date}, on {machine()}. "
               "Generated: run the command again rather than editing this page.\n\n")
-    path = RESULTS / f"{name}.md"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_text(path, header + body.rstrip("\n") + "\n")
-    print(f"wrote {path.relative_to(REPO)}")
-    return path
+    return header + body.rstrip("\n") + "\n"
 
 
 ROWS_MEASURED = "These rows were measured by an earlier run"

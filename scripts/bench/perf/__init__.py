@@ -18,6 +18,8 @@ Sections:
 
 ``--quick`` runs fewer repeats and shorter runs (what ``python -m
 scripts.bench all --quick`` uses); the page says which command wrote it.
+The page holds every section: a run of some of them writes its own page
+to ``--out`` and leaves ``docs/results/perf.md`` as it was.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ import os
 import time
 from pathlib import Path
 
-from scripts.bench.common import REPO, publish
+from scripts.bench.common import REPO, publish, stamped
 from scripts.bench.perf.speed import BYTECODE_ENV, speed_section
 from scripts.bench.perf.stages import (
     Report,
@@ -40,6 +42,7 @@ from scripts.bench.perf.stages import (
     bench_ratio,
 )
 from slam.errors import GslamError
+from slam.results.atomic import write_text
 
 log = logging.getLogger(__name__)
 SECTIONS = ("speed", "ratio", "growth", "isam2", "diagnosis")
@@ -102,8 +105,21 @@ def main(argv: list[str] | None = None) -> int:
         sections[name]()
     report.markdown.append(f"Benchmark wall time {time.perf_counter() - started:.0f} s; load average "
                            f"{os.getloadavg()[0]:.1f} at the end.")
-    (args.out / "perf.csv").write_text(report.csv_text())
+    write_text(args.out / "perf.csv", report.csv_text())
     text = "\n".join(report.markdown) + "\n"
-    publish("perf", "Performance of gslam map", text, argv)
+    write_page(text, argv, args.sections, args.out)
     print(text)
     return 0
+
+
+def write_page(text: str, argv: list[str] | None, sections: list[str], out: Path) -> Path:
+    """docs/results/perf.md when every section ran; otherwise OUT/perf.md,
+    so that a run of one section does not replace the others' figures."""
+    title = "Performance of gslam map"
+    if set(sections) >= set(SECTIONS):
+        return publish("perf", title, text, argv)
+    path = out / "perf.md"
+    write_text(path, stamped(title, text, argv, "perf"))
+    log.info("wrote %s (sections %s only; docs/results/perf.md holds every section and is left as it was)",
+             path, " ".join(sections))
+    return path
