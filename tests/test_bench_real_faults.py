@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pytest
 
+from scripts.bench.common import ROWS_MEASURED
 from scripts.bench.real_faults import (
     BROAD_REPORT, BROAD_TUNING, HUSKY, KERNELS, METHODS, fault_specs, injected_specs, injected_stretches, log_faults,
     log_source, stretch_faults, summarise,
@@ -174,14 +175,14 @@ def test_the_readme_table_of_a_page_summarised_from_earlier_rows_says_where_they
     (tmp_path / "results").mkdir()
     (tmp_path / "results" / "real_faults.md").write_text(
         "# Title\n\nWritten by `python -m scripts.bench real_faults --rows r.csv` at commit abc, 2026-01-01 00:00 UTC, "
-        f"on a machine.\n\n{common.ROWS_MEASURED} of this bench at commit 123 and read back.\n\n| a |\n|---|\n| 1 |\n\nmore\n")
+        f"on a machine.\n\n{common.ROWS_MEASURED} an earlier run of this bench at commit 123 and read back.\n\n| a |\n|---|\n| 1 |\n\nmore\n")
     (tmp_path / "README.md").write_text("before\n<!-- results/real_faults -->\nold\n<!-- /results/real_faults -->\nafter\n")
     monkeypatch.setattr(common, "RESULTS", tmp_path / "results")
     monkeypatch.setattr(common, "REPO", tmp_path)
     common.include_in_readme("real_faults")
     readme = (tmp_path / "README.md").read_text()
     assert "| 1 |\n\nWritten by `python -m scripts.bench real_faults --rows r.csv` at commit abc, 2026-01-01 00:00 UTC.\n" \
-           f"{common.ROWS_MEASURED} of this bench at commit 123 and read back.\n<!-- /results/real_faults -->" in readme
+           f"{common.ROWS_MEASURED} an earlier run of this bench at commit 123 and read back.\n<!-- /results/real_faults -->" in readme
     assert "old" not in readme and readme.startswith("before\n") and readme.endswith("after\n")
 
 
@@ -193,6 +194,26 @@ def test_rows_read_back_say_at_which_commit_each_log_was_measured():
     assert measured_where(rows) == " at commits aaa (intel, aces); bbb (husky), one run per commit, their rows put together,"
     assert measured_where(rows[:1]) == " at commit aaa"
     assert measured_where([{"log": "intel"}]) == ""
+
+
+def test_runs_of_some_logs_each_make_one_page_and_a_row_in_two_runs_is_refused(tmp_path):
+    from scripts.bench.common import csv_text
+    from scripts.bench.real_faults import read_back
+
+    a = _rows("intel", "cut3", {"gated": 0.5, "cauchy": 0.8})
+    b = _rows("aces", "cut3", {"gated": 2.0, "huber": 1.0})
+    for name, rows in (("a.csv", a), ("b.csv", b)):
+        rows = [{**r, "commit": "abc", "placements": "0.2 0.5 0.8"} for r in rows]
+        (tmp_path / name).write_text(csv_text(rows, sorted({k for r in rows for k in r})))
+    rows, said = read_back([tmp_path / "a.csv", tmp_path / "b.csv"])
+    assert summarise(rows) == summarise([{**r, "commit": "abc", "placements": "0.2 0.5 0.8"} for r in a + b])
+    assert said.startswith(f"{ROWS_MEASURED} 2 earlier runs of this bench, their rows put together: "
+                           f"intel at commit abc (`{tmp_path / 'a.csv'}`); aces at commit abc (`{tmp_path / 'b.csv'}`)")
+    with pytest.raises(SystemExit, match="intel cut3 ungated at placements 0.2 0.5 0.8 is also in"):
+        read_back([tmp_path / "a.csv", tmp_path / "b.csv", tmp_path / "a.csv"])
+    rows, said = read_back([tmp_path / "a.csv"])
+    assert said == f"{ROWS_MEASURED} an earlier run of this bench at commit abc and read back from its `a.csv`; " \
+                   "this command summarised them."
 
 
 def test_a_blame_of_the_husky_bags_own_compass_fault_is_right_but_not_an_injected_stretch_found():

@@ -125,7 +125,7 @@ def stamped(title: str, body: str, argv: Sequence[str] | None, bench: str) -> st
     return header + body.rstrip("\n") + "\n"
 
 
-ROWS_MEASURED = "These rows were measured by an earlier run"
+ROWS_MEASURED = "These rows were measured by"
 """How a page summarised from an earlier run's rows begins to say so."""
 
 

@@ -533,6 +533,31 @@ def measured_where(rows: list[dict]) -> str:
             + ", one run per commit, their rows put together,")
 
 
+def read_back(paths: list[Path]) -> tuple[list[dict], str]:
+    """The rows of the CSVs earlier runs wrote, put together, and the
+    sentence that says where they were measured (each run's logs and
+    commit): runs of some logs each, on one machine or several, make one
+    page."""
+    runs = [(path, read_rows(path)) for path in paths]
+    if len(runs) == 1:
+        path, rows = runs[0]
+        return rows, (f"{ROWS_MEASURED} an earlier run of this bench{measured_where(rows)}"
+                      f" and read back from its `{path.name}`; this command summarised them.")
+    seen = {}
+    for path, rows in runs:
+        for r in rows:
+            key = (r["log"], r["fault"], r["method"], str(r.get("placements")))
+            if key in seen:
+                raise SystemExit(f"{path}: {' '.join(key[:3])} at placements {key[3]} is also in {seen[key]}; "
+                                 "expected each row in one run")
+            seen[key] = path
+    each = "; ".join(f"{', '.join(dict.fromkeys(r['log'] for r in rows))}{measured_where(rows)} (`{path}`)"
+                     for path, rows in runs)
+    return ([r for _, rows in runs for r in rows],
+            f"{ROWS_MEASURED} {len(runs)} earlier runs of this bench, their rows put together: {each}; "
+            "this command summarised them.")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=None, help="the data folder (default: GSLAM_DATA or ../shared/data)")
@@ -552,9 +577,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--config", type=Path, default=ROOT / "configs/datasets/carmen.yaml")
     ap.add_argument("--out", type=Path, default=ROOT / "runs/bench_real_faults")
     ap.add_argument("--jobs", type=int, default=1, help="processes, one log and fault kind each (default 1)")
-    ap.add_argument("--rows", type=Path, default=None,
-                    help="summarise the rows an earlier run wrote (its real_faults.csv or real_faults_tuning.csv) "
-                         "rather than mapping again; the page says so")
+    ap.add_argument("--rows", type=Path, nargs="+", default=None,
+                    help="summarise the rows earlier runs wrote (their real_faults.csv or real_faults_tuning.csv, "
+                         "e.g. one run per log) rather than mapping again; the page says so")
     args = ap.parse_args(argv)
     placement_sets = args.placements or [list(ps) for ps in PLACEMENT_SETS]
     args.placements = placement_sets[0]
@@ -563,7 +588,7 @@ def main(argv: list[str] | None = None) -> int:
     quiet_logging()
     t_all = time.perf_counter()
     if args.rows is not None:
-        rows = read_rows(args.rows)
+        rows, read_from = read_back(args.rows)
     else:
         data = args.data or data_root()
         units = [(name, log_source(name, data), kind, placements)
@@ -580,8 +605,7 @@ def main(argv: list[str] | None = None) -> int:
         rows = [{**r, "commit": measured_at} for r in rows]
     text, _ = summarise(rows)
     if args.rows is not None:
-        text = (f"{ROWS_MEASURED} of this bench{measured_where(rows)}"
-                + f" and read back from its `{args.rows.name}`; this command summarised them.\n\n") + text
+        text = read_from + "\n\n" + text
     page = "real_faults_tuning" if args.tuning else "real_faults"
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / f"{page}.md", text)
