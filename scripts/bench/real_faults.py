@@ -5,6 +5,7 @@ kernel and the oracles, per log and fault kind.
                                         [--faults cut2 cut3 cut4 slip yaw_slip gyro_bias dipole]
                                         [--placements 0.2 0.5 0.8 [--placements ...]] [--length 0.1]
                                         [--config configs/datasets/carmen.yaml] [--out runs/bench_real_faults] [--jobs N]
+    python -m scripts.bench real_faults --rows RUN1/real_faults.csv [RUN2/real_faults.csv ...]
 
 The CARMEN report logs (intel, freiburg-079, aces, csail: the config was
 chosen on the others, docs/loops.md; ``--tuning`` runs those, fhw,
@@ -78,6 +79,10 @@ span); the mean detection delay (s). For the logs as recorded:
 the gated ATE against the ungated and the alarm fraction. A summary line
 holds each figure against its target. Writes ``real_faults.md`` (and
 ``docs/results/real_faults.md``) and ``real_faults.csv``.
+
+A whole run takes hours: runs of some logs each (``--logs``, each with its
+own ``--out``, side by side or on several machines) make one page with
+``--rows`` and their CSVs, which names each run's logs and commit.
 """
 
 from __future__ import annotations
