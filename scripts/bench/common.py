@@ -126,7 +126,7 @@ def stamped(title: str, body: str, argv: Sequence[str] | None, bench: str) -> st
 
 
 ROWS_MEASURED = "These rows were measured by"
-"""How a page summarised from an earlier run's rows begins to say so."""
+"""How a page summarised from earlier runs' rows (one run or several) begins to say so."""
 
 
 def include_in_readme(name: str) -> None:
