@@ -209,11 +209,34 @@ def test_runs_of_some_logs_each_make_one_page_and_a_row_in_two_runs_is_refused(t
     assert summarise(rows) == summarise([{**r, "commit": "abc", "placements": "0.2 0.5 0.8"} for r in a + b])
     assert said.startswith(f"{ROWS_MEASURED} 2 earlier runs of this bench, their rows put together: "
                            f"intel at commit abc (`{tmp_path / 'a.csv'}`); aces at commit abc (`{tmp_path / 'b.csv'}`)")
-    with pytest.raises(SystemExit, match="intel cut3 ungated at placements 0.2 0.5 0.8 is also in"):
+    with pytest.raises(SystemExit, match="a.csv: given twice"):
         read_back([tmp_path / "a.csv", tmp_path / "b.csv", tmp_path / "a.csv"])
     rows, said = read_back([tmp_path / "a.csv"])
     assert said == f"{ROWS_MEASURED} an earlier run of this bench at commit abc and read back from its `a.csv`; " \
                    "this command summarised them."
+
+
+def test_a_row_two_runs_both_mapped_counts_once_with_the_same_figures_and_is_refused_with_others(tmp_path):
+    from scripts.bench.common import csv_text
+    from scripts.bench.real_faults import read_back
+
+    def write(name: str, ate: float, seconds: float, commit: str) -> None:
+        rows = [{"log": "aces", "fault": "none", "method": m, "ate_m": ate, "seconds": seconds, "commit": commit}
+                for m in ("ungated", "gated")]
+        rows += [{**r, "fault": "cut3", "placements": name} for r in _rows("aces", "cut3", {"gated": 2.0})]
+        (tmp_path / f"{name}.csv").write_text(csv_text(rows, sorted({k for r in rows for k in r})))
+
+    write("first", 0.09, 12.0, "abc")
+    write("again", 0.09, 15.5, "def")
+    rows, said = read_back([tmp_path / "first.csv", tmp_path / "again.csv"])
+    recorded = [r for r in rows if r["fault"] == "none"]
+    assert [(r["method"], r["seconds"]) for r in recorded] == [("ungated", 12.0), ("gated", 12.0)]
+    assert len(rows) == 2 + 2 * len(METHODS)
+    assert said.endswith(" 2 rows mapped again by a later run, with the same figures (the time aside), are counted once.")
+    write("other", 0.10, 12.0, "abc")
+    with pytest.raises(SystemExit, match="other.csv: aces none ungated at placements None is also in .*first.csv "
+                                         "with other figures"):
+        read_back([tmp_path / "first.csv", tmp_path / "other.csv"])
 
 
 def test_a_blame_of_the_husky_bags_own_compass_fault_is_right_but_not_an_injected_stretch_found():

@@ -82,7 +82,9 @@ holds each figure against its target. Writes ``real_faults.md`` (and
 
 A whole run takes hours: runs of some logs each (``--logs``, each with its
 own ``--out``, side by side or on several machines) make one page with
-``--rows`` and their CSVs, which names each run's logs and commit.
+``--rows`` and their CSVs, which names each run's logs and commit. So do
+runs of further placement sets of the same logs: each maps the logs as
+recorded again, and those rows count once where both runs measured the same.
 """
 
 from __future__ import annotations
@@ -542,25 +544,43 @@ def read_back(paths: list[Path]) -> tuple[list[dict], str]:
     """The rows of the CSVs earlier runs wrote, put together, and the
     sentence that says where they were measured (each run's logs and
     commit): runs of some logs each, on one machine or several, make one
-    page."""
+    page. A row two runs both mapped (a log as recorded, which every run
+    maps once) is kept once where its figures are the same in both, the
+    time and commit aside: the same measurement made again. With other
+    figures, or a file given twice, it is refused: it would count twice."""
+    if len(set(paths)) < len(paths):
+        twice = next(p for p in paths if paths.count(p) > 1)
+        raise SystemExit(f"{twice}: given twice; expected each run's rows once")
     runs = [(path, read_rows(path)) for path in paths]
     if len(runs) == 1:
         path, rows = runs[0]
         return rows, (f"{ROWS_MEASURED} an earlier run of this bench{measured_where(rows)}"
                       f" and read back from its `{path.name}`; this command summarised them.")
-    seen = {}
+    seen: dict[tuple, tuple[Path, dict]] = {}
+    kept, again = [], 0
     for path, rows in runs:
         for r in rows:
             key = (r["log"], r["fault"], r["method"], str(r.get("placements")))
             if key in seen:
-                raise SystemExit(f"{path}: {' '.join(key[:3])} at placements {key[3]} is also in {seen[key]}; "
-                                 "expected each row in one run")
-            seen[key] = path
+                first_path, first = seen[key]
+                if _figures(first) != _figures(r):
+                    raise SystemExit(f"{path}: {' '.join(key[:3])} at placements {key[3]} is also in {first_path} "
+                                     "with other figures; expected each row in one run")
+                again += 1
+                continue
+            seen[key] = path, r
+            kept.append(r)
     each = "; ".join(f"{', '.join(dict.fromkeys(r['log'] for r in rows))}{measured_where(rows)} (`{path}`)"
                      for path, rows in runs)
-    return ([r for _, rows in runs for r in rows],
-            f"{ROWS_MEASURED} {len(runs)} earlier runs of this bench, their rows put together: {each}; "
-            "this command summarised them.")
+    repeated = (f" {again} rows mapped again by a later run, with the same figures (the time aside), are counted "
+                "once." if again else "")
+    return kept, (f"{ROWS_MEASURED} {len(runs)} earlier runs of this bench, their rows put together: {each}; "
+                  f"this command summarised them.{repeated}")
+
+
+def _figures(row: dict) -> dict:
+    """A row's figures: all but how long it took and the commit it ran at."""
+    return {k: v for k, v in row.items() if k not in ("seconds", "commit")}
 
 
 def main(argv: list[str] | None = None) -> int:
