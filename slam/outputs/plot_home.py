@@ -11,11 +11,15 @@ removes it). gslam then gives it a temporary folder of its own, removed
 when the command ends; a home that holds or can hold them is used as every
 matplotlib program uses it, and ``MPLCONFIGDIR`` set by the user is kept
 where it can hold them (the temporary folder stands in for one that names a
-file, a folder beneath a file, or a folder that cannot be written).
+file, a folder beneath a file, or a folder that cannot be written). In the
+temporary folder matplotlib builds its font cache afresh each run and, on
+a busy machine where that takes over 5 s, says so in a warning line: gslam's
+own doing, so that line alone is not shown.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import sys
@@ -78,11 +82,19 @@ def _settings_folder() -> Iterator[None]:
     # the temporary folder.
     folder = tempfile.mkdtemp(prefix="gslam-matplotlib-")
     os.environ["MPLCONFIGDIR"] = folder
+    fonts = logging.getLogger("matplotlib.font_manager")
+    fonts.addFilter(_no_cache_notice)
     try:
         yield
     finally:
+        fonts.removeFilter(_no_cache_notice)
         if given:
             os.environ["MPLCONFIGDIR"] = given
         else:
             del os.environ["MPLCONFIGDIR"]
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def _no_cache_notice(record: logging.LogRecord) -> bool:
+    """Not matplotlib's notice that it is building its font cache."""
+    return "building the font cache" not in record.getMessage()
